@@ -1,0 +1,1 @@
+"""Lights in Cycles's units: sampling, selection, intersection for MIS."""

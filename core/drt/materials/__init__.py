@@ -1,0 +1,1 @@
+"""BSDF lobes and the material table."""

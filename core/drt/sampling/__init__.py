@@ -1,0 +1,1 @@
+"""Sample generators, warps and the pixel filter."""
