@@ -1,0 +1,255 @@
+"""Command line: ``python -m drt render | merge | export | bench``.
+
+Bad input ends with a one-line message on stderr and a non-zero exit code, never a traceback
+(exit 2: bad arguments or scene; 1: a failure while rendering; 130: interrupted, the partial
+image is still written). The progress bar is shown only on a terminal.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+import threading
+import time
+
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+class CliError(Exception):
+    """A user-facing error: printed as one line, exit code ``code``."""
+
+    def __init__(self, message: str, code: int = EXIT_USAGE):
+        super().__init__(message)
+        self.code = code
+
+
+def _resolution(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 640x480, got {text!r}") from None
+    if not (1 <= w <= 65536 and 1 <= h <= 65536):
+        raise argparse.ArgumentTypeError(f"resolution must be between 1x1 and 65536x65536, got {text}")
+    return w, h
+
+
+def _positive(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
+    return v
+
+
+def _non_negative(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m drt", description="DRT distribution ray tracer")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("render", help="render a scene (.npz export or .blend) to an EXR")
+    r.add_argument("scene", help="scene file: .npz (DRT export) or .blend (needs the bpy module)")
+    r.add_argument("-o", "--output", required=True, help="output EXR path")
+    r.add_argument("--spp", type=_positive, help="samples per pixel (default: the scene's)")
+    r.add_argument("--seed", type=_non_negative, help="random seed (default: the scene's)")
+    r.add_argument("--threads", type=_positive, help="worker threads (default: all cores)")
+    r.add_argument("--resolution", type=_resolution, help="override WIDTHxHEIGHT (keeps the camera's framing)")
+    r.add_argument("--sampler", choices=["SOBOL", "STRATIFIED", "RANDOM"], help="sample generator")
+    r.add_argument("--sample-offset", type=_non_negative, default=0, help="first sample number (farm splitting)")
+    r.add_argument("--sample-count", type=_positive, help="number of samples to render from --sample-offset")
+    r.add_argument("--frame", type=int, help="frame to render (.blend only)")
+    r.add_argument("--png", help="also write an sRGB PNG preview here (needs Pillow)")
+
+    m = sub.add_parser("merge", help="merge EXRs of disjoint sample ranges into one image")
+    m.add_argument("inputs", nargs="+", help="EXR files written by `drt render --sample-offset/--sample-count`")
+    m.add_argument("-o", "--output", required=True)
+
+    e = sub.add_parser("export", help="export a .blend to a DRT scene file (needs the bpy module)")
+    e.add_argument("scene", help=".blend file")
+    e.add_argument("-o", "--output", required=True, help="output .npz")
+    e.add_argument("--frame", type=int)
+    return p
+
+
+# ------------------------------------------------------------------------- progress display
+
+
+class Progress:
+    """A one-line progress bar on a terminal; silent otherwise."""
+
+    def __init__(self, stream=sys.stderr):
+        self.stream = stream
+        self.enabled = stream.isatty()
+        self.last = 0.0
+
+    def __call__(self, fraction, stats):
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self.last < 0.1 and fraction < 1:
+            return
+        self.last = now
+        eta = stats.seconds * (1 - fraction) / fraction if fraction > 0 else float("nan")
+        bar = "#" * int(fraction * 30)
+        self.stream.write(
+            f"\r[{bar:<30}] {fraction * 100:5.1f}%  ETA {eta:6.1f}s  {stats.rays_per_second / 1e6:6.2f} Mrays/s "
+        )
+        self.stream.flush()
+
+    def done(self):
+        if self.enabled:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+# ------------------------------------------------------------------------- commands
+
+
+def _load(args):
+    from .scene import SceneError
+
+    path = args.scene
+    if not os.path.exists(path):
+        raise CliError(f"scene file not found: {path}")
+    if path.lower().endswith(".blend"):
+        from .blend_bridge import scene_from_blend
+
+        return scene_from_blend(path, frame=args.frame)
+    try:
+        from .scene_file import load_scene
+
+        return load_scene(path)
+    except SceneError as e:
+        raise CliError(f"invalid scene {path}: {e}") from None
+
+
+def _check_output(path: str, ext: str = ".exr"):
+    d = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(d):
+        raise CliError(f"output directory does not exist: {d}")
+    if not path.lower().endswith(ext):
+        raise CliError(f"output must end in {ext}: {path}")
+
+
+def cmd_render(args) -> int:
+    from dataclasses import replace
+
+    from .exr import write_exr
+    from .render import render
+    from .scene import SceneError
+
+    _check_output(args.output)
+    scene = _load(args)
+    if args.resolution:
+        scene.render = replace(scene.render, width=args.resolution[0], height=args.resolution[1])
+    spp = args.spp or scene.render.spp
+    if args.sample_offset >= spp:
+        raise CliError(f"--sample-offset {args.sample_offset} must be below the sample count {spp}")
+    count = args.sample_count if args.sample_count is not None else spp - args.sample_offset
+    if args.sample_offset + count > spp:
+        raise CliError(f"--sample-offset + --sample-count ({args.sample_offset + count}) exceeds --spp {spp}")
+
+    stop = threading.Event()
+    previous = signal.getsignal(signal.SIGINT)
+
+    def on_sigint(signum, frame):
+        if stop.is_set():  # a second Ctrl-C: give up at once
+            raise KeyboardInterrupt
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_sigint)
+    bar = Progress()
+    try:
+        film = render(
+            scene, spp=spp, seed=args.seed, threads=args.threads, sampler=args.sampler,
+            sample_offset=args.sample_offset, sample_count=count, tick=bar, cancel=stop.is_set,
+        )
+    except SceneError as e:
+        raise CliError(f"invalid scene {args.scene}: {e}") from None
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        bar.done()
+    write_exr(args.output, film)
+    if args.png:
+        from .preview import write_png
+
+        write_png(args.png, film.combined)
+    st = film.stats
+    w, h = scene.render.width, scene.render.height
+    nan_note = f", {st.nan_samples} NaN/Inf samples dropped" if st.nan_samples else ""
+    state = "cancelled after" if st.cancelled else "rendered"
+    print(
+        f"drt: {state} {w}x{h} at {st.samples_done} spp in {st.seconds:.2f}s: "
+        f"{st.camera_paths / max(st.seconds, 1e-9) / 1e3:.1f} k samples/s, {st.rays_per_second / 1e6:.2f} Mrays/s, "
+        f"{100 * st.embree_seconds / max(st.seconds * st.threads, 1e-9):.0f}% of thread time in Embree{nan_note} -> {args.output}"
+    )
+    return EXIT_INTERRUPTED if st.cancelled else EXIT_OK
+
+
+def cmd_merge(args) -> int:
+    from .exr import film_from_exr, write_exr
+    from .render import merge_films
+
+    _check_output(args.output)
+    films = []
+    for path in args.inputs:
+        if not os.path.exists(path):
+            raise CliError(f"input not found: {path}")
+        try:
+            films.append(film_from_exr(path))
+        except Exception as e:  # any unreadable file is a user error here
+            raise CliError(f"cannot read {path} as a DRT EXR: {e}") from None
+    ranges = sorted((int(f.meta.get("sample_offset", 0)), int(f.meta.get("sample_count", 0)), p) for f, p in zip(films, args.inputs))
+    for (o1, c1, p1), (o2, _, p2) in zip(ranges, ranges[1:]):
+        if o1 + c1 > o2:
+            raise CliError(f"sample ranges of {p1} and {p2} overlap: merging would count samples twice")
+    try:
+        merged = merge_films(films)
+    except ValueError as e:
+        raise CliError(str(e)) from None
+    write_exr(args.output, merged)
+    print(f"drt: merged {len(films)} renders ({merged.meta['sample_count']} samples per pixel) -> {args.output}")
+    return EXIT_OK
+
+
+def cmd_export(args) -> int:
+    from .blend_bridge import export_blend
+
+    if not os.path.exists(args.scene):
+        raise CliError(f"scene file not found: {args.scene}")
+    _check_output(args.output, ".npz")
+    export_blend(args.scene, args.output, frame=args.frame)
+    print(f"drt: exported {args.scene} -> {args.output}")
+    return EXIT_OK
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handlers = {"render": cmd_render, "merge": cmd_merge, "export": cmd_export}
+    try:
+        return handlers[args.command](args)
+    except CliError as e:
+        print(f"drt: error: {e}", file=sys.stderr)
+        return e.code
+    except KeyboardInterrupt:
+        print("drt: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except MemoryError:
+        print("drt: error: out of memory (try a smaller --resolution or fewer --threads)", file=sys.stderr)
+        return EXIT_FAILURE
+    except OSError as e:
+        print(f"drt: error: {e}", file=sys.stderr)
+        return EXIT_FAILURE

@@ -1,0 +1,68 @@
+"""EXR output and input through OpenEXR (scene-linear float32, top row first).
+
+Channels written: R, G, B, A (combined); Z (depth along the view axis; inf where nothing was
+hit); Normal.X/Y/Z (world-space shading normal); Albedo.R/G/B; SampleCount.Y (samples taken by
+each pixel); Variance.Y (variance of the pixel mean's luminance). The header carries
+``drt:sample_offset``, ``drt:sample_count``, ``drt:seed`` and ``drt:version`` so that renders of
+disjoint sample ranges can be merged exactly (``python -m drt merge``).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import OpenEXR
+
+from .film import Film
+
+
+def film_channels(film: Film) -> dict[str, np.ndarray]:
+    rgba = film.combined
+    ch = {"R": rgba[..., 0], "G": rgba[..., 1], "B": rgba[..., 2], "A": rgba[..., 3], "Z": film.depth}
+    for i, axis in enumerate("XYZ"):
+        ch[f"Normal.{axis}"] = film.normal[..., i]
+    for i, c in enumerate("RGB"):
+        ch[f"Albedo.{c}"] = film.albedo[..., i]
+    ch["SampleCount.Y"] = film.sample_count
+    ch["Variance.Y"] = film.variance
+    return {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in ch.items()}
+
+
+def write_exr(path: str | os.PathLike, film: Film, metadata: dict | None = None) -> None:
+    """Write ``film`` to ``path`` (ZIP-compressed scanline EXR). Metadata values become strings."""
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for k, v in {**film.meta, **(metadata or {})}.items():
+        header[f"drt:{k}"] = str(v)
+    tmp = f"{os.fspath(path)}.tmp.exr"
+    with OpenEXR.File(header, film_channels(film)) as f:
+        f.write(tmp)
+    os.replace(tmp, path)  # a reader never sees half a file
+
+
+def read_exr(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict]:
+    """Channels by name (each (H, W) float32) and the header's ``drt:`` metadata (strings)."""
+    with OpenEXR.File(os.fspath(path), separate_channels=True) as f:
+        channels = {k: np.array(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
+        meta = {k[4:]: v for k, v in f.header().items() if isinstance(k, str) and k.startswith("drt:")}
+    return channels, meta
+
+
+def film_from_exr(path: str | os.PathLike) -> Film:
+    """Rebuild a ``Film`` (its sums) from a DRT EXR, for merging sample ranges."""
+    ch, meta = read_exr(path)
+    h, w = ch["R"].shape
+    count = ch["SampleCount.Y"].astype(np.float64).reshape(-1)
+    film = Film(w, h)
+    rgba = np.stack([ch[c] for c in "RGBA"], axis=-1).reshape(-1, 4).astype(np.float64)
+    film.sum_rgba = rgba * count[:, None]
+    film.sum_normal = np.stack([ch[f"Normal.{a}"] for a in "XYZ"], -1).reshape(-1, 3) * count[:, None]
+    film.sum_albedo = np.stack([ch[f"Albedo.{c}"] for c in "RGB"], -1).reshape(-1, 3) * count[:, None]
+    film.min_depth = ch["Z"].astype(np.float64).reshape(-1)
+    film.count = np.rint(count).astype(np.int64)
+    # recover Σ L² from the stored variance of the mean: var·(N−1) + mean² = E[L²]
+    lum = rgba[:, :3] @ np.array([0.2126, 0.7152, 0.0722])
+    var = ch["Variance.Y"].astype(np.float64).reshape(-1)
+    film.sum_lum2 = (var * np.maximum(count - 1, 0) + lum**2) * count
+    film.meta = dict(meta)
+    return film

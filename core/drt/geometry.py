@@ -1,0 +1,142 @@
+"""Scene geometry prepared for tracing: world-space triangle arrays plus moving objects.
+
+Static objects are flattened into one world-space triangle set (instances are expanded; the file
+stores each mesh once). Objects with rigid motion keep their local-space triangles and a
+``RigidMotion``; deforming meshes also keep their shutter-close positions.
+
+Every position is translated by ``-origin_shift`` (the camera position) in float64 before it
+becomes float32 for Embree: float32 has ~7 digits, so a scene 10⁵ m from Blender's origin would
+otherwise lose centimetres. Everything downstream (lights, camera) works in this shifted frame.
+
+Triangles get global ids: static ones first (in object order), then each moving object's.
+Per-triangle tables (material, shading normals, uvs) are indexed by that global id.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .motion import RigidMotion
+from .scene import Scene
+
+
+@dataclass
+class MovingMesh:
+    """One object that moves or deforms during the shutter. Positions are in the object's local
+    space; ``motion`` maps local → shifted world at shutter fraction τ (None: static matrix)."""
+
+    name: str
+    prim_offset: int
+    positions: np.ndarray  # (V, 3) float64, local, at shutter open
+    positions_close: np.ndarray | None  # (V, 3) float64 for deforming meshes
+    triangles: np.ndarray  # (T, 3) int64
+    motion: RigidMotion
+
+
+@dataclass
+class SceneGeometry:
+    origin_shift: np.ndarray  # (3,) float64: subtract from Blender world positions
+    static_positions: np.ndarray  # (V, 3) float32, shifted world space
+    static_triangles: np.ndarray  # (T, 3) int32
+    moving: list[MovingMesh] = field(default_factory=list)
+    material: np.ndarray = None  # (T_all,) int32 per global triangle
+    normals: np.ndarray | None = None  # (T_all, 3, 3) float32 shading normals (world for static, local for moving)
+    has_normals: np.ndarray = None  # (T_all,) bool; False: flat shading
+    uvs: np.ndarray | None = None  # (T_all, 3, 2) float32
+    triangle_count: int = 0
+    scene_radius: float = 1.0  # radius of the bounding sphere of all geometry (scene units)
+
+    @property
+    def static_count(self) -> int:
+        return len(self.static_triangles)
+
+
+def _shift_matrix(m: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    out = np.array(m, dtype=np.float64)
+    out[:3, 3] -= shift
+    return out
+
+
+def _transform_normals(n: np.ndarray, m: np.ndarray) -> np.ndarray:
+    inv_t = np.linalg.inv(m[:3, :3]).T
+    out = n.reshape(-1, 3).astype(np.float64) @ inv_t.T
+    length = np.linalg.norm(out, axis=1, keepdims=True)
+    out = np.where(length > 0, out / np.where(length > 0, length, 1), 0.0)
+    return out.reshape(n.shape)
+
+
+def build_geometry(scene: Scene) -> SceneGeometry:
+    """Flatten ``scene`` into tracer-ready arrays (see the module docstring)."""
+    shift = np.asarray(scene.camera.matrix, dtype=np.float64)[:3, 3].copy()
+    motion_on = scene.has_motion
+    static_pos, static_tri, moving = [], [], []
+    mats_static, nrm_static, hasn_static, uv_static = [], [], [], []
+    mats_moving, nrm_moving, hasn_moving, uv_moving = [], [], [], []
+    v_offset = 0
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    any_normals = any(m.normals is not None for m in scene.meshes)
+    any_uvs = any(m.uvs is not None for m in scene.meshes)
+
+    def per_tri(mesh, normals_world):
+        t = len(mesh.triangles)
+        nrm = normals_world if normals_world is not None else np.zeros((t, 3, 3), np.float32)
+        uv = mesh.uvs.astype(np.float32) if mesh.uvs is not None else np.zeros((t, 3, 2), np.float32)
+        return mesh.material_index.astype(np.int32), nrm.astype(np.float32), np.full(t, mesh.normals is not None), uv
+
+    for obj in scene.objects:
+        mesh = scene.meshes[obj.mesh]
+        if len(mesh.triangles) == 0:
+            continue
+        moves = motion_on and (obj.motion is not None or mesh.positions_close is not None)
+        if moves:
+            m_open, m_close = obj.motion if obj.motion is not None else (obj.matrix, obj.matrix)
+            rm = RigidMotion(_shift_matrix(m_open, shift), _shift_matrix(m_close, shift))
+            moving.append(MovingMesh(obj.name, 0, mesh.positions, mesh.positions_close, mesh.triangles, rm))
+            m, n, h, u = per_tri(mesh, mesh.normals)
+            mats_moving.append(m), nrm_moving.append(n), hasn_moving.append(h), uv_moving.append(u)
+            for mat in (m_open, m_close):
+                for pos in (mesh.positions, mesh.positions_close if mesh.positions_close is not None else mesh.positions):
+                    w = pos @ np.asarray(mat)[:3, :3].T + np.asarray(mat)[:3, 3] - shift
+                    lo, hi = np.minimum(lo, w.min(0)), np.maximum(hi, w.max(0))
+            continue
+        m = _shift_matrix(obj.matrix, shift)
+        world = mesh.positions @ m[:3, :3].T + m[:3, 3]
+        lo, hi = np.minimum(lo, world.min(0)), np.maximum(hi, world.max(0))
+        static_pos.append(world.astype(np.float32))
+        static_tri.append((mesh.triangles + v_offset).astype(np.int32))
+        v_offset += len(world)
+        nw = _transform_normals(mesh.normals, m) if mesh.normals is not None else None
+        a, b, c, d = per_tri(mesh, nw)
+        mats_static.append(a), nrm_static.append(b), hasn_static.append(c), uv_static.append(d)
+
+    geom = SceneGeometry(
+        origin_shift=shift,
+        static_positions=np.concatenate(static_pos) if static_pos else np.zeros((0, 3), np.float32),
+        static_triangles=np.concatenate(static_tri) if static_tri else np.zeros((0, 3), np.int32),
+    )
+    offset = geom.static_count
+    for mm in moving:
+        mm.prim_offset = offset
+        offset += len(mm.triangles)
+    geom.moving = moving
+
+    def cat(parts, empty):
+        return np.concatenate(parts) if parts else empty
+
+    geom.material = cat(mats_static + mats_moving, np.zeros(0, np.int32))
+    geom.has_normals = cat(hasn_static + hasn_moving, np.zeros(0, bool))
+    geom.normals = cat(nrm_static + nrm_moving, np.zeros((0, 3, 3), np.float32)) if any_normals else None
+    geom.uvs = cat(uv_static + uv_moving, np.zeros((0, 3, 2), np.float32)) if any_uvs else None
+    geom.triangle_count = offset
+    if np.all(np.isfinite(lo)):
+        center = 0.5 * (lo + hi)
+        geom.scene_radius = float(max(np.linalg.norm(hi - center), 1e-3))
+    return geom
+
+
+def static_triangle_vertices(geom: SceneGeometry, prims: np.ndarray) -> np.ndarray:
+    """World (shifted) corner positions (n, 3, 3) float64 of static triangles ``prims``."""
+    return geom.static_positions[geom.static_triangles[prims]].astype(np.float64)

@@ -1,0 +1,329 @@
+"""The wavefront distribution ray tracer: every camera sample integrates, by Monte Carlo, over
+pixel area (filter), lens area (depth of field), shutter time (motion blur), light area (soft
+shadows: next-event estimation) and the BSDF (glossy, transmission, diffuse interreflection),
+each from its own well-stratified sample dimension (Cook 1984; estimators from Veach 1997).
+
+A batch of paths is a set of numpy arrays; each loop iteration is one bounce for all live paths
+(Python overhead per batch, not per ray). Per bounce:
+
+1. trace closest hits; add emission of what the rays hit (lights, emissive triangles, the world),
+   MIS-weighted against the light sampling done at the previous vertex;
+2. next-event estimation: sample a light, evaluate the BSDF, trace a shadow ray; weight by the
+   power heuristic against BSDF sampling;
+3. sample the BSDF to continue; count bounces the way Cycles does (a path exceeding a limit
+   still collects emission at its next hit, then stops); Russian roulette after
+   ``RR_START_BOUNCE`` bounces ("sample less with greater depth of recursion").
+
+Sample dimensions (each a 2-D point from ``Sampler.sample_2d``):
+
+| dim | use |
+|---|---|
+| 0 | pixel filter offset |
+| 1 | lens position |
+| 2 | (shutter time, unused) |
+| 3 + 4b | (light selection, BSDF lobe selection) at bounce b |
+| 4 + 4b | light sample position |
+| 5 + 4b | BSDF direction |
+| 6 + 4b | (Russian roulette, unused) |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .camera import Camera
+from .film import SampleBatch
+from .geometry import SceneGeometry
+from .lights import LightSet
+from .materials import LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, MaterialTable
+from .sampling.pixel_filter import PixelFilter
+from .sampling.sequences import Sampler
+from .sampling.warps import build_frame, to_local, to_world
+from .scene import RenderSettings
+from .trace import Tracer, offset_origin
+
+D_PIXEL, D_LENS, D_TIME, D_BOUNCE0, DIMS_PER_BOUNCE = 0, 1, 2, 3, 4
+RR_START_BOUNCE = 3
+SHADOW_EPSILON = 1e-4  # relative shortening of shadow rays so they stop before the light's surface
+
+
+def power_heuristic(pdf_a: np.ndarray, pdf_b: np.ndarray) -> np.ndarray:
+    """Veach's power heuristic (β = 2) weight of strategy a; 0 where both pdfs are 0."""
+    a2 = pdf_a * pdf_a
+    denom = a2 + pdf_b * pdf_b
+    return np.where(denom > 0, a2 / np.where(denom > 0, denom, 1.0), 0.0)
+
+
+def _dot(a, b):
+    return np.einsum("ij,ij->i", a, b)
+
+
+@dataclass
+class PathState:
+    """Live paths of a batch (all arrays indexed alike). ``path`` maps to the batch slot."""
+
+    path: np.ndarray
+    o: np.ndarray
+    d: np.ndarray
+    tmax: np.ndarray
+    tau: np.ndarray
+    throughput: np.ndarray
+    prev_pdf: np.ndarray  # solid-angle pdf of the BSDF sample that made this ray (for MIS)
+    prev_delta: np.ndarray  # the ray came from the camera or a specular bounce: no MIS
+    prev_p: np.ndarray
+    prev_n: np.ndarray
+    bounce: np.ndarray
+    diffuse: np.ndarray
+    glossy: np.ndarray
+    transmission: np.ndarray
+    terminate_next: np.ndarray  # only collect emission at the next hit (a bounce limit is reached)
+
+    def select(self, keep: np.ndarray) -> "PathState":
+        return PathState(**{k: v[keep] for k, v in self.__dict__.items()})
+
+
+class Integrator:
+    """Renders batches of camera samples. Thread-safe: holds only read-only scene data."""
+
+    def __init__(
+        self,
+        settings: RenderSettings,
+        geom: SceneGeometry,
+        tracer: Tracer,
+        materials: MaterialTable,
+        lights: LightSet,
+        camera: Camera,
+        sampler: Sampler,
+        pixel_filter: PixelFilter,
+    ):
+        self.s = settings
+        self.geom = geom
+        self.tracer = tracer
+        self.materials = materials
+        self.lights = lights
+        self.camera = camera
+        self.sampler = sampler
+        self.filter = pixel_filter
+        self.motion = bool(geom.moving) or camera.motion is not None
+        self.max_depth = settings.max_bounces + 1
+
+    # ------------------------------------------------------------------ helpers
+    def _shading_normal(self, prim, b1, b2, ng, linear) -> np.ndarray:
+        g = self.geom
+        ns = ng.copy()
+        if g.normals is None:
+            return ns
+        smooth = g.has_normals[prim]
+        if not np.any(smooth):
+            return ns
+        nc = g.normals[prim[smooth]].astype(np.float64)  # (m, 3, 3) per-corner
+        w1, w2 = b1[smooth, None], b2[smooth, None]
+        n = (1 - w1 - w2) * nc[:, 0] + w1 * nc[:, 1] + w2 * nc[:, 2]
+        if linear is not None:
+            inv_t = np.linalg.inv(linear[smooth])
+            n = np.einsum("nji,nj->ni", inv_t, n)
+        length = np.linalg.norm(n, axis=1)
+        ok = length > 1e-12
+        n[ok] /= length[ok, None]
+        n[~ok] = ng[smooth][~ok]
+        # shading normals live on the geometric front side (inverted normals are flipped back)
+        flip = _dot(n, ng[smooth]) < 0
+        n[flip] = -n[flip]
+        ns[smooth] = n
+        return ns
+
+    def _clamp(self, contrib: np.ndarray, indirect: np.ndarray) -> np.ndarray:
+        limits = np.where(indirect, self.s.clamp_indirect, self.s.clamp_direct)
+        if not np.any(limits > 0):
+            return contrib
+        peak = contrib.max(axis=1)
+        scale = np.where((limits > 0) & (peak > limits), limits / np.where(peak > 0, peak, 1.0), 1.0)
+        return contrib * scale[:, None]
+
+    # ------------------------------------------------------------------ main entry
+    def render_batch(self, x: np.ndarray, row: np.ndarray, index: np.ndarray) -> SampleBatch:
+        """Trace one camera path per entry. x: (n,) pixel column from the left; row: (n,) pixel
+        row from the TOP; index: (n,) sample number within the pixel. Returns per-path results."""
+        s, W, H = self.s, self.s.width, self.s.height
+        n = len(x)
+        pixel = (row.astype(np.int64) * W + x).astype(np.int64)
+        pid = pixel.astype(np.uint32)
+        idx = index.astype(np.uint32)
+        off = self.filter.sample(self.sampler.sample_2d(pid, idx, D_PIXEL))
+        px = x + 0.5 + off[:, 0]
+        py = (H - 1 - row) + 0.5 + off[:, 1]  # camera wants v from the bottom
+        u_lens = self.sampler.sample_2d(pid, idx, D_LENS)
+        tau = self.sampler.sample_2d(pid, idx, D_TIME)[:, 0] if self.motion else np.zeros(n)
+        rays = self.camera.generate(px, py, u_lens, tau)
+
+        radiance = np.zeros((n, 3))
+        alpha = np.ones(n)
+        depth = np.full(n, np.inf)
+        normal = np.zeros((n, 3))
+        albedo = np.zeros((n, 3))
+
+        st = PathState(
+            path=np.arange(n),
+            o=rays.o,
+            d=rays.d,
+            tmax=rays.tmax,
+            tau=tau,
+            throughput=np.ones((n, 3)),
+            prev_pdf=np.zeros(n),
+            prev_delta=np.ones(n, dtype=bool),
+            prev_p=rays.o.copy(),
+            prev_n=np.zeros((n, 3)),
+            bounce=np.zeros(n, dtype=np.int32),
+            diffuse=np.zeros(n, dtype=np.int32),
+            glossy=np.zeros(n, dtype=np.int32),
+            transmission=np.zeros(n, dtype=np.int32),
+            terminate_next=np.zeros(n, dtype=bool),
+        )
+
+        for depth_i in range(self.max_depth + 1):
+            if len(st.path) == 0:
+                break
+            camera_ray = depth_i == 0
+            hits = self.tracer.intersect(st.o, st.d, st.tau, st.tmax)
+            t_geom = hits.t
+
+            # --- emitters hit by this ray: light shapes, emissive triangles, the world
+            lh = self.lights.intersect(st.o, st.d, t_geom)
+            light_hit = lh.hit.copy()
+            if camera_ray and np.any(light_hit):
+                light_hit &= self.lights.visible_to_camera[np.maximum(lh.light, 0)]
+            if np.any(light_hit):
+                w = np.where(st.prev_delta, 1.0, power_heuristic(st.prev_pdf, lh.pdf))[light_hit]
+                c = st.throughput[light_hit] * lh.radiance[light_hit] * w[:, None]
+                radiance[st.path[light_hit]] += self._clamp(c, ~np.full(len(c), camera_ray) & (st.bounce[light_hit] > 0))
+            miss = ~hits.hit & ~light_hit
+            if np.any(miss):
+                paths = st.path[miss]
+                if camera_ray and s.film_transparent:
+                    alpha[paths] = 0.0
+                else:
+                    le = self.lights.world_radiance(st.d[miss])
+                    wpdf = self.lights.world_pdf(st.prev_p[miss], st.prev_n[miss], st.d[miss])
+                    w = np.where(st.prev_delta[miss], 1.0, power_heuristic(st.prev_pdf[miss], wpdf))
+                    c = st.throughput[miss] * le * w[:, None]
+                    radiance[paths] += self._clamp(c, st.bounce[miss] > 0)
+
+            surf = hits.hit & ~light_hit
+            st = st.select(surf)
+            if len(st.path) == 0:
+                break
+            prim = hits.prim[surf]
+            p = hits.p[surf]
+            ng = hits.ng[surf]
+            linear = hits.moving_linear[surf] if hits.moving_linear is not None else None
+            ns = self._shading_normal(prim, hits.b1[surf], hits.b2[surf], ng, linear)
+            mat = self.geom.material[prim]
+            wo = -st.d
+
+            em = self.materials.has_emission[mat]
+            if np.any(em):
+                le = self.materials.emission[mat[em]]
+                lpdf = self.lights.emissive_pdf(prim[em], st.prev_p[em], p[em], ng[em])
+                w = np.where(st.prev_delta[em], 1.0, power_heuristic(st.prev_pdf[em], lpdf))
+                c = st.throughput[em] * le * w[:, None]
+                radiance[st.path[em]] += self._clamp(c, st.bounce[em] > 0)
+
+            if camera_ray:
+                paths = st.path
+                depth[paths] = np.maximum(_dot(p - rays.eye[paths], rays.forward[paths]), 0.0)
+                normal[paths] = ns
+                albedo[paths] = self.materials.albedo(mat)
+
+            # --- paths that reached a bounce limit stop here (after collecting emission)
+            go = ~st.terminate_next
+            st, p, ng, ns, mat, wo = st.select(go), p[go], ng[go], ns[go], mat[go], wo[go]
+            if len(st.path) == 0:
+                break
+            base = D_BOUNCE0 + DIMS_PER_BOUNCE * int(depth_i)
+            pid_b = pixel[st.path].astype(np.uint32)
+            idx_b = idx[st.path]
+            u_sel = self.sampler.sample_2d(pid_b, idx_b, base)
+
+            # local frame: z = shading normal on the front side
+            t_ax, b_ax = build_frame(ns)
+            wo_l = to_local(wo, t_ax, b_ax, ns)
+
+            # --- next-event estimation with MIS
+            can_nee = ~self.materials.is_delta_only(mat)
+            if np.any(can_nee) and self.lights.count > 0:
+                k = np.nonzero(can_nee)[0]
+                u_l = self.sampler.sample_2d(pid_b[k], idx_b[k], base + 1)
+                ls = self.lights.sample(p[k], ns[k], u_sel[k, 0], u_l)
+                wi = ls.wi
+                wi_l = to_local(wi, t_ax[k], b_ax[k], ns[k])
+                f, pdf_b = self.materials.eval(mat[k], wo_l[k], wi_l)
+                # the geometric and shading normals must agree on reflection vs transmission
+                same_geo = _dot(wi, ng[k]) * _dot(wo[k], ng[k]) > 0
+                same_sh = wi_l[:, 2] * wo_l[k, 2] > 0
+                ok = ls.valid & (ls.pdf > 0) & (same_geo == same_sh) & np.any(f > 0, axis=1)
+                if np.any(ok):
+                    k2 = k[ok]
+                    w = np.where(ls.is_delta[ok], 1.0, power_heuristic(ls.pdf[ok], pdf_b[ok]))
+                    contrib = st.throughput[k2] * f[ok] * ls.radiance[ok] * (w / ls.pdf[ok])[:, None]
+                    o_sh = offset_origin(p[k2], ng[k2], wi[ok])
+                    dist = ls.dist[ok]
+                    tmax = np.where(np.isfinite(dist), dist * (1 - SHADOW_EPSILON), np.inf)
+                    blocked = self.tracer.occluded(o_sh, wi[ok], tmax, st.tau[k2])
+                    vis = ~blocked
+                    c = self._clamp(contrib[vis], st.bounce[k2][vis] > 0)
+                    np.add.at(radiance, st.path[k2][vis], c)
+
+            # --- continue the path by sampling the BSDF
+            u_b = self.sampler.sample_2d(pid_b, idx_b, base + 2)
+            bs = self.materials.sample(mat, wo_l, u_sel[:, 1], u_b)
+            wi = to_world(bs.wi, t_ax, b_ax, ns)
+            refl_geo = _dot(wi, ng) * _dot(wo, ng) > 0
+            refl_sh = bs.wi[:, 2] * wo_l[:, 2] > 0
+            alive = bs.valid & (refl_geo == refl_sh) & np.any(bs.weight > 0, axis=1)
+            throughput = st.throughput * bs.weight
+
+            bounce = st.bounce + 1
+            diffuse = st.diffuse + (bs.lobe_kind == LOBE_DIFFUSE)
+            glossy = st.glossy + (bs.lobe_kind == LOBE_GLOSSY)
+            transmission = st.transmission + (bs.lobe_kind == LOBE_TRANSMISSION)
+            limit = (
+                (bounce > s.max_bounces)
+                | (diffuse > s.diffuse_bounces)
+                | (glossy > s.glossy_bounces)
+                | (transmission > s.transmission_bounces)
+            )
+
+            if depth_i + 1 >= RR_START_BOUNCE:
+                u_rr = self.sampler.sample_2d(pid_b, idx_b, base + 3)[:, 0]
+                q = np.clip(throughput.max(axis=1), 0.0, 1.0)
+                survive = u_rr < q
+                throughput = throughput / np.where(q > 0, q, 1.0)[:, None]
+                alive &= survive
+
+            st = PathState(
+                path=st.path,
+                o=offset_origin(p, ng, wi),
+                d=wi,
+                tmax=np.full(len(st.path), np.inf),
+                tau=st.tau,
+                throughput=throughput,
+                prev_pdf=bs.pdf,
+                prev_delta=bs.is_delta,
+                prev_p=p,
+                prev_n=ns,
+                bounce=bounce,
+                diffuse=diffuse.astype(np.int32),
+                glossy=glossy.astype(np.int32),
+                transmission=transmission.astype(np.int32),
+                terminate_next=limit,
+            ).select(alive)
+
+        # a NaN/Inf sample is counted, dropped (it does not enter its pixel's mean) and reported
+        good = np.all(np.isfinite(radiance), axis=1)
+        nan_count = int(n - good.sum())
+        if nan_count:
+            pixel, radiance, alpha, depth = pixel[good], radiance[good], alpha[good], depth[good]
+            normal, albedo = normal[good], albedo[good]
+        return SampleBatch(pixel, radiance, alpha, depth, normal, albedo, nan_count)

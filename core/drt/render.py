@@ -1,0 +1,254 @@
+"""The render loop: progressive passes of samples over the image, batches over threads.
+
+A *pass* adds a few samples to every pixel (1, 1, 2, 4, ... samples), so a viewer sees the whole
+image refine. A pass is cut into *batches* of about ``BATCH_PATHS`` camera paths; worker threads
+trace batches concurrently (Embree and large numpy operations release the GIL) and the film adds
+finished batches in their fixed order, so the image is bit-identical for a seed whatever the
+thread count or timing. Cancel is polled between batches (a batch takes well under a second).
+
+Samples are numbered per pixel. Rendering sample range [offset, offset + count) gives exactly the
+samples the full render would have made there, so disjoint ranges rendered on different machines
+merge into the full image (``merge_films``).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+import numpy as np
+
+from .camera import Camera
+from .film import Film
+from .geometry import build_geometry
+from .integrator import Integrator
+from .lights import EmissiveTriangles, LightSet
+from .materials import MaterialTable
+from .sampling.pixel_filter import PixelFilter
+from .sampling.sequences import Sampler
+from .scene import Scene, SceneError
+from .trace import Tracer
+
+BATCH_PATHS = 1 << 16
+
+
+class RenderCancelled(Exception):
+    """Raised by nothing: ``render`` returns the partial film instead (see ``RenderStats``)."""
+
+
+@dataclass
+class RenderStats:
+    seconds: float = 0.0
+    samples_done: int = 0  # per pixel, completed passes
+    samples_total: int = 0
+    camera_paths: int = 0
+    rays: int = 0
+    embree_seconds: float = 0.0
+    nan_samples: int = 0
+    cancelled: bool = False
+    threads: int = 1
+
+    @property
+    def rays_per_second(self) -> float:
+        return self.rays / self.seconds if self.seconds > 0 else 0.0
+
+
+@dataclass
+class RenderContext:
+    """Everything built once per scene (geometry, BVHs, tables); reusable across renders."""
+
+    scene: Scene
+    integrator: Integrator
+    tracer: Tracer
+    setup_seconds: float = 0.0
+    warnings: list = field(default_factory=list)
+
+
+def _emissive_triangles(scene: Scene, geom, materials: MaterialTable) -> EmissiveTriangles | None:
+    """Static emissive triangles become lights (sampled by NEE); moving ones are only hit."""
+    if geom.static_count == 0 or not np.any(materials.has_emission):
+        return None
+    mat = geom.material[: geom.static_count]
+    em = np.nonzero(materials.has_emission[mat])[0]
+    if len(em) == 0:
+        return None
+    verts = geom.static_positions[geom.static_triangles[em]].astype(np.float64)
+    return EmissiveTriangles(verts, materials.emission[mat[em]], em)
+
+
+def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None) -> RenderContext:
+    """Build the tracer, material table, lights and camera for ``scene``."""
+    t0 = time.perf_counter()
+    settings = scene.render
+    if seed is not None or sampler is not None:
+        settings = replace(settings, seed=settings.seed if seed is None else int(seed), sampler=sampler or settings.sampler)
+    geom = build_geometry(scene)
+    try:
+        materials = MaterialTable.from_scene(scene.materials)
+    except ValueError as e:
+        raise SceneError("materials", str(e)) from None
+    emissive = _emissive_triangles(scene, geom, materials)
+    try:
+        lights = LightSet(scene.lights, scene.world_color, emissive, origin_shift=geom.origin_shift, scene_radius=geom.scene_radius)
+    except ValueError as e:
+        raise SceneError("lights", str(e)) from None
+    tracer = Tracer(geom)
+    camera = Camera(scene.camera, settings, geom.origin_shift)
+    integ = Integrator(
+        settings, geom, tracer, materials, lights, camera,
+        Sampler(settings.sampler, settings.seed, settings.spp),
+        PixelFilter(settings.filter_type, settings.filter_width),
+    )
+    ctx = RenderContext(scene, integ, tracer, time.perf_counter() - t0)
+    if not scene.lights and not np.any(scene.world_color > 0) and emissive is None:
+        ctx.warnings.append("the scene has no lights, no emissive materials and a black world: the image will be black")
+    return ctx
+
+
+def _pixel_region(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Columns (from the left) and rows (from the top) of the pixels to render (border aware)."""
+    w, h = scene.render.width, scene.render.height
+    x0, y0, x1, y1 = 0, 0, w, h
+    if scene.render.border is not None:
+        bx0, by0, bx1, by1 = scene.render.border  # fractions, y up
+        x0, x1 = int(np.floor(bx0 * w)), max(int(np.ceil(bx1 * w)), int(np.floor(bx0 * w)) + 1)
+        r0, r1 = int(np.floor((1 - by1) * h)), max(int(np.ceil((1 - by0) * h)), int(np.floor((1 - by1) * h)) + 1)
+        y0, y1 = r0, r1
+    xs, ys = np.meshgrid(np.arange(x0, x1), np.arange(y0, y1))
+    return xs.reshape(-1).astype(np.int64), ys.reshape(-1).astype(np.int64)
+
+
+def pass_schedule(count: int) -> list[int]:
+    """Samples per pixel in each progressive pass: 1, 1, 2, 4, ... (at most 64), summing to count."""
+    out, step, done = [], 1, 0
+    while done < count:
+        k = min(step, count - done)
+        out.append(k)
+        done += k
+        if len(out) >= 2:
+            step = min(step * 2, 64)
+    return out
+
+
+def render(
+    scene: Scene,
+    *,
+    spp: int | None = None,
+    seed: int | None = None,
+    threads: int | None = None,
+    sample_offset: int = 0,
+    sample_count: int | None = None,
+    sampler: str | None = None,
+    progress: Callable[[Film, int, int], None] | None = None,
+    tick: Callable[[float, RenderStats], None] | None = None,
+    cancel: Callable[[], bool] | None = None,
+    context: RenderContext | None = None,
+) -> Film:
+    """Render ``scene`` and return its ``Film`` (``film.meta['stats']`` holds a ``RenderStats``).
+
+    spp: samples per pixel of the *whole* render (default: the scene's); the samples rendered
+    here are numbers [sample_offset, sample_offset + sample_count) (default: all of them).
+    progress(film, samples_done, samples_total) after each pass; tick(fraction, stats) after each
+    batch; cancel() -> bool polled between batches: when it returns True the partial film is
+    returned with ``stats.cancelled`` set.
+    """
+    t0 = time.perf_counter()
+    ctx = context or prepare(scene, seed=seed, sampler=sampler)
+    integ = ctx.integrator
+    spp = int(spp or scene.render.spp)
+    if spp < 1:
+        raise SceneError("spp", f"must be >= 1, got {spp}")
+    count = spp - sample_offset if sample_count is None else int(sample_count)
+    if sample_offset < 0 or count < 0 or sample_offset + count > spp:
+        raise SceneError("sample range", f"[{sample_offset}, {sample_offset + count}) is not within [0, {spp})")
+    # stratified sampling needs the total sample count, whatever range this render covers
+    integ.sampler = Sampler(integ.sampler.kind, integ.s.seed, spp) if integ.sampler.spp != spp else integ.sampler
+    threads = max(1, int(threads or os.cpu_count() or 1))
+    film = Film(scene.render.width, scene.render.height)
+    stats = RenderStats(samples_total=count, threads=threads)
+    xs, ys = _pixel_region(scene)
+    npix = len(xs)
+    rays0 = ctx.tracer.rays_traced
+    emb0 = ctx.tracer.embree_seconds
+    total_paths = max(npix * count, 1)
+
+    def batches(first: int, k: int):
+        """(x, row, sample index) arrays of one pass, cut into batches."""
+        per = max(1, BATCH_PATHS // max(k, 1))
+        for start in range(0, npix, per):
+            sl = slice(start, start + per)
+            bx, by = xs[sl], ys[sl]
+            m = len(bx)
+            yield (np.repeat(bx, k), np.repeat(by, k), np.tile(np.arange(first, first + k), m))
+
+    done = sample_offset
+    cancelled = False
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for k in pass_schedule(count):
+            pending = deque()
+            for b in batches(done, k):
+                if cancel is not None and cancel():
+                    cancelled = True
+                    break
+                pending.append(pool.submit(integ.render_batch, *b))
+                while len(pending) >= threads + 1:
+                    _collect(pending.popleft().result(), film, stats, tick, total_paths, ctx, rays0, emb0, t0)
+            while pending:
+                _collect(pending.popleft().result(), film, stats, tick, total_paths, ctx, rays0, emb0, t0)
+            if cancelled:
+                break
+            done += k
+            stats.samples_done = done - sample_offset
+            if progress is not None:
+                progress(film, stats.samples_done, count)
+            if cancel is not None and cancel():
+                cancelled = stats.samples_done < count
+                break
+    stats.cancelled = cancelled
+    stats.seconds = time.perf_counter() - t0
+    stats.rays = ctx.tracer.rays_traced - rays0
+    stats.embree_seconds = ctx.tracer.embree_seconds - emb0
+    stats.nan_samples = film.nan_samples
+    film.meta.update(
+        {
+            "version": __import__("drt").__version__,
+            "seed": integ.s.seed,
+            "sampler": integ.sampler.kind,
+            "spp": spp,
+            "sample_offset": sample_offset,
+            "sample_count": stats.samples_done,
+            "width": scene.render.width,
+            "height": scene.render.height,
+        }
+    )
+    film.stats = stats
+    return film
+
+
+def _collect(batch, film, stats, tick, total_paths, ctx, rays0, emb0, t0):
+    film.add(batch)
+    stats.camera_paths += len(batch.pixel) + batch.nan_count
+    if tick is not None:
+        stats.seconds = time.perf_counter() - t0
+        stats.rays = ctx.tracer.rays_traced - rays0
+        stats.embree_seconds = ctx.tracer.embree_seconds - emb0
+        tick(min(stats.camera_paths / total_paths, 1.0), stats)
+
+
+def merge_films(films: list[Film]) -> Film:
+    """Sum films of disjoint sample ranges of the same render into one."""
+    if not films:
+        raise ValueError("nothing to merge")
+    out = Film(films[0].width, films[0].height)
+    for f in films:
+        if (f.width, f.height) != (out.width, out.height):
+            raise ValueError(f"cannot merge a {f.width}x{f.height} image into a {out.width}x{out.height} one")
+        out.merge(f)
+    out.meta = dict(films[0].meta)
+    out.meta["sample_count"] = int(sum(int(f.meta.get("sample_count", 0)) for f in films))
+    out.meta["sample_offset"] = min(int(f.meta.get("sample_offset", 0)) for f in films)
+    return out

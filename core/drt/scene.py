@@ -1,0 +1,474 @@
+"""The in-memory scene model and its validation.
+
+``scene_from_dict(header, arrays)`` is the single entry point that turns an exported scene (the
+JSON header and the named numpy arrays of ``docs/scene-format.md``) into a validated ``Scene``.
+Both the file loader and the Blender add-on go through it, so a scene that renders from Blender
+renders the same from a file.
+
+Every problem raises ``SceneError`` naming the field, e.g.
+``scene field 'camera.lens': must be a finite number > 0, got -5``.
+Units: metres, radians, Blender world space (+Z up); matrices map local to world space.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+FORMAT_NAME = "drt-scene"
+SUPPORTED_VERSIONS = (1,)
+
+LIGHT_TYPES = ("POINT", "SPOT", "SUN", "AREA")
+AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
+LOBE_TYPES = ("DIFFUSE", "GLOSSY", "GLASS")
+FILTER_TYPES = ("BLACKMAN_HARRIS", "GAUSSIAN", "BOX")
+SAMPLER_KINDS = ("SOBOL", "STRATIFIED", "RANDOM")
+SENSOR_FITS = ("AUTO", "HORIZONTAL", "VERTICAL")
+CAMERA_TYPES = ("PERSP", "ORTHO")
+
+MAX_RESOLUTION = 65536
+MAX_SPP = 1 << 24
+
+
+class SceneError(ValueError):
+    """A scene (file or in-memory export) is malformed; the message names the field."""
+
+    def __init__(self, field_path: str, problem: str):
+        self.field = field_path
+        self.problem = problem
+        super().__init__(f"scene field '{field_path}': {problem}")
+
+
+# --------------------------------------------------------------------------- field readers
+
+
+def _get(d: dict, key: str, path: str, default=...):
+    if not isinstance(d, dict):
+        raise SceneError(path, f"must be an object, got {type(d).__name__}")
+    if key not in d or d[key] is None and default is not ...:
+        if default is ...:
+            raise SceneError(f"{path}.{key}" if path else key, "is missing")
+        return default
+    return d[key]
+
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}" if path else key
+
+
+def _number(d, key, path, default=..., lo=None, hi=None, lo_open=False, integer=False):
+    p = _join(path, key)
+    v = _get(d, key, path, default)
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise SceneError(p, f"must be a number, got {v!r}")
+    if integer and (not float(v).is_integer()):
+        raise SceneError(p, f"must be an integer, got {v!r}")
+    if not math.isfinite(v):
+        raise SceneError(p, f"must be a finite number, got {v!r}")
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        raise SceneError(p, f"must be {'>' if lo_open else '>='} {lo}, got {v!r}")
+    if hi is not None and v > hi:
+        raise SceneError(p, f"must be <= {hi}, got {v!r}")
+    return int(v) if integer else float(v)
+
+
+def _bool(d, key, path, default=...):
+    v = _get(d, key, path, default)
+    if not isinstance(v, bool):
+        raise SceneError(_join(path, key), f"must be true or false, got {v!r}")
+    return v
+
+
+def _enum(d, key, path, choices, default=...):
+    v = _get(d, key, path, default)
+    if v not in choices:
+        raise SceneError(_join(path, key), f"must be one of {', '.join(choices)}, got {v!r}")
+    return v
+
+
+def _vector(d, key, path, n, default=..., lo=None):
+    p = _join(path, key)
+    v = _get(d, key, path, default)
+    try:
+        a = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(p, f"must be a list of {n} numbers") from None
+    if a.shape != (n,):
+        raise SceneError(p, f"must be a list of {n} numbers, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise SceneError(p, "must contain only finite numbers")
+    if lo is not None and np.any(a < lo):
+        raise SceneError(p, f"must contain numbers >= {lo}")
+    return a
+
+
+def _matrix(d, key, path, default=...):
+    p = _join(path, key)
+    v = _get(d, key, path, default)
+    try:
+        m = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(p, "must be a 4x4 list of numbers") from None
+    if m.shape != (4, 4):
+        raise SceneError(p, f"must be a 4x4 matrix, got shape {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise SceneError(p, "must contain only finite numbers")
+    if not np.allclose(m[3], [0, 0, 0, 1], atol=1e-6):
+        raise SceneError(p, "last row must be [0, 0, 0, 1] (an affine transform)")
+    return m
+
+
+def _motion(d, key, path):
+    v = _get(d, key, path, None)
+    if v is None:
+        return None
+    p = _join(path, key)
+    return (_matrix(v, "matrix_open", p), _matrix(v, "matrix_close", p))
+
+
+# --------------------------------------------------------------------------- model
+
+
+@dataclass
+class RenderSettings:
+    """Film and integrator settings. Resolution in pixels; shutter in frames (None: no blur)."""
+
+    width: int
+    height: int
+    pixel_aspect: tuple[float, float] = (1.0, 1.0)
+    border: tuple[float, float, float, float] | None = None
+    film_transparent: bool = False
+    filter_type: str = "BLACKMAN_HARRIS"
+    filter_width: float = 1.5
+    spp: int = 64
+    seed: int = 0
+    sampler: str = "SOBOL"
+    max_bounces: int = 12
+    diffuse_bounces: int = 4
+    glossy_bounces: int = 4
+    transmission_bounces: int = 12
+    clamp_direct: float = 0.0
+    clamp_indirect: float = 0.0
+    shutter: tuple[float, float] | None = None
+
+
+@dataclass
+class CameraSpec:
+    """Blender camera data. ``matrix``: camera to world (looks along local −Z, +Y up).
+    lens, sensor sizes in mm; clip distances in scene units; rotation in radians."""
+
+    type: str
+    matrix: np.ndarray
+    lens: float = 50.0
+    sensor_width: float = 36.0
+    sensor_height: float = 24.0
+    sensor_fit: str = "AUTO"
+    shift_x: float = 0.0
+    shift_y: float = 0.0
+    clip_start: float = 0.1
+    clip_end: float = 1000.0
+    ortho_scale: float = 7.0
+    dof_use: bool = False
+    focus_distance: float = 10.0
+    fstop: float = 2.8
+    blades: int = 0
+    rotation: float = 0.0
+    ratio: float = 1.0
+    motion: tuple[np.ndarray, np.ndarray] | None = None
+
+
+@dataclass
+class MeshData:
+    """A triangle mesh in its object's local space. ``normals``: per-corner (T,3,3) or None
+    (flat shading); ``uvs`` per-corner (T,3,2) or None; ``positions_close`` for deforming meshes."""
+
+    name: str
+    positions: np.ndarray
+    triangles: np.ndarray
+    material_index: np.ndarray
+    normals: np.ndarray | None = None
+    uvs: np.ndarray | None = None
+    positions_close: np.ndarray | None = None
+
+
+@dataclass
+class ObjectSpec:
+    name: str
+    mesh: int
+    matrix: np.ndarray
+    motion: tuple[np.ndarray, np.ndarray] | None = None
+
+
+@dataclass
+class Scene:
+    render: RenderSettings
+    camera: CameraSpec
+    world_color: np.ndarray
+    materials: list[dict]
+    lights: list[dict]
+    meshes: list[MeshData]
+    objects: list[ObjectSpec]
+    header: dict = field(default_factory=dict, repr=False)
+    arrays: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def has_motion(self) -> bool:
+        s = self.render.shutter
+        if s is None or s[1] <= s[0]:
+            return False
+        return (
+            self.camera.motion is not None
+            or any(o.motion is not None for o in self.objects)
+            or any(m.positions_close is not None for m in self.meshes)
+        )
+
+    @property
+    def triangle_count(self) -> int:
+        return int(sum(len(self.meshes[o.mesh].triangles) for o in self.objects))
+
+
+# --------------------------------------------------------------------------- sections
+
+
+def _render_settings(h: dict) -> RenderSettings:
+    p = "render"
+    r = _get(h, "render", "")
+    res = _get(r, "resolution", p)
+    if not isinstance(res, (list, tuple)) or len(res) != 2:
+        raise SceneError("render.resolution", f"must be [width, height], got {res!r}")
+    w = _number({"w": res[0]}, "w", "", integer=True, lo=1, hi=MAX_RESOLUTION)
+    hgt = _number({"h": res[1]}, "h", "", integer=True, lo=1, hi=MAX_RESOLUTION)
+    aspect = _vector(r, "pixel_aspect", p, 2, default=[1.0, 1.0])
+    if np.any(aspect <= 0):
+        raise SceneError("render.pixel_aspect", "must be > 0")
+    border = _get(r, "border", p, None)
+    if border is not None:
+        b = _vector(r, "border", p, 4)
+        if not (0 <= b[0] < b[2] <= 1 and 0 <= b[1] < b[3] <= 1):
+            raise SceneError("render.border", f"must be [xmin, ymin, xmax, ymax] within [0,1] with min < max, got {list(b)}")
+        border = tuple(float(x) for x in b)
+    filt = _get(r, "filter", p, {"type": "BLACKMAN_HARRIS", "width": 1.5})
+    ftype = _enum(filt, "type", "render.filter", FILTER_TYPES, "BLACKMAN_HARRIS")
+    fwidth = _number(filt, "width", "render.filter", 1.5, lo=0.01, hi=64)
+    shutter = _get(r, "shutter", p, None)
+    if shutter is not None:
+        s = _vector(r, "shutter", p, 2)
+        if s[1] < s[0]:
+            raise SceneError("render.shutter", f"close must not be before open, got {list(s)}")
+        shutter = (float(s[0]), float(s[1]))
+    bounces = {
+        k: _number(r, k, p, dflt, lo=0, hi=1024, integer=True)
+        for k, dflt in (("max_bounces", 12), ("diffuse_bounces", 4), ("glossy_bounces", 4), ("transmission_bounces", 12))
+    }
+    return RenderSettings(
+        width=w,
+        height=hgt,
+        pixel_aspect=(float(aspect[0]), float(aspect[1])),
+        border=border,
+        film_transparent=_bool(r, "film_transparent", p, False),
+        filter_type=ftype,
+        filter_width=fwidth,
+        spp=_number(r, "spp", p, 64, lo=1, hi=MAX_SPP, integer=True),
+        seed=_number(r, "seed", p, 0, lo=0, hi=2**31 - 1, integer=True),
+        sampler=_enum(r, "sampler", p, SAMPLER_KINDS, "SOBOL"),
+        clamp_direct=_number(r, "clamp_direct", p, 0.0, lo=0),
+        clamp_indirect=_number(r, "clamp_indirect", p, 0.0, lo=0),
+        shutter=shutter,
+        **bounces,
+    )
+
+
+def _camera(h: dict) -> CameraSpec:
+    p = "camera"
+    c = _get(h, "camera", "")
+    dof = _get(c, "dof", p, {})
+    dp = "camera.dof"
+    cam = CameraSpec(
+        type=_enum(c, "type", p, CAMERA_TYPES, "PERSP"),
+        matrix=_matrix(c, "matrix_world", p),
+        lens=_number(c, "lens", p, 50.0, lo=0, lo_open=True),
+        sensor_width=_number(c, "sensor_width", p, 36.0, lo=0, lo_open=True),
+        sensor_height=_number(c, "sensor_height", p, 24.0, lo=0, lo_open=True),
+        sensor_fit=_enum(c, "sensor_fit", p, SENSOR_FITS, "AUTO"),
+        shift_x=_number(c, "shift_x", p, 0.0),
+        shift_y=_number(c, "shift_y", p, 0.0),
+        clip_start=_number(c, "clip_start", p, 0.1, lo=0),
+        clip_end=_number(c, "clip_end", p, 1000.0, lo=0, lo_open=True),
+        ortho_scale=_number(c, "ortho_scale", p, 7.0, lo=0, lo_open=True),
+        dof_use=_bool(dof, "use", dp, False),
+        focus_distance=_number(dof, "focus_distance", dp, 10.0, lo=0),
+        fstop=_number(dof, "fstop", dp, 2.8, lo=0, lo_open=True),
+        blades=_number(dof, "blades", dp, 0, lo=0, hi=64, integer=True),
+        rotation=_number(dof, "rotation", dp, 0.0),
+        ratio=_number(dof, "ratio", dp, 1.0, lo=0, lo_open=True),
+        motion=_motion(c, "motion", p),
+    )
+    if cam.clip_end <= cam.clip_start:
+        raise SceneError("camera.clip_end", f"must be greater than clip_start ({cam.clip_start}), got {cam.clip_end}")
+    return cam
+
+
+def _materials(h: dict) -> list[dict]:
+    mats = _get(h, "materials", "", [])
+    if not isinstance(mats, list):
+        raise SceneError("materials", "must be a list")
+    out = []
+    for i, m in enumerate(mats):
+        p = f"materials[{i}]"
+        if not isinstance(m, dict):
+            raise SceneError(p, "must be an object")
+        lobes = _get(m, "lobes", p, [])
+        if not isinstance(lobes, list):
+            raise SceneError(f"{p}.lobes", "must be a list")
+        clean = []
+        for j, lobe in enumerate(lobes):
+            lp = f"{p}.lobes[{j}]"
+            t = _enum(lobe, "type", lp, LOBE_TYPES)
+            entry = {"type": t, "color": _vector(lobe, "color", lp, 3, lo=0.0).tolist()}
+            if t in ("GLOSSY", "GLASS"):
+                entry["roughness"] = _number(lobe, "roughness", lp, 0.5 if t == "GLOSSY" else 0.0, lo=0, hi=1)
+            if t == "GLASS":
+                entry["ior"] = _number(lobe, "ior", lp, 1.45, lo=0, lo_open=True, hi=100)
+            clean.append(entry)
+        out.append(
+            {
+                "name": str(_get(m, "name", p, f"material{i}")),
+                "lobes": clean,
+                "emission": _vector(m, "emission", p, 3, default=[0, 0, 0], lo=0.0).tolist(),
+            }
+        )
+    return out
+
+
+def _lights(h: dict) -> list[dict]:
+    lights = _get(h, "lights", "", [])
+    if not isinstance(lights, list):
+        raise SceneError("lights", "must be a list")
+    out = []
+    for i, li in enumerate(lights):
+        p = f"lights[{i}]"
+        t = _enum(li, "type", p, LIGHT_TYPES)
+        e = {
+            "name": str(_get(li, "name", p, f"light{i}")),
+            "type": t,
+            "matrix_world": _matrix(li, "matrix_world", p).tolist(),
+            "color": _vector(li, "color", p, 3, default=[1, 1, 1], lo=0.0).tolist(),
+            "visible_to_camera": _bool(li, "visible_to_camera", p, True),
+        }
+        if t == "SUN":
+            e["strength"] = _number(li, "strength", p, 1.0, lo=0)
+            e["angle"] = _number(li, "angle", p, 0.00918043, lo=0, hi=math.pi)
+        else:
+            e["power"] = _number(li, "power", p, 10.0, lo=0)
+        if t in ("POINT", "SPOT"):
+            e["radius"] = _number(li, "radius", p, 0.1, lo=0)
+            e["soft_falloff"] = _bool(li, "soft_falloff", p, True)
+        if t == "SPOT":
+            e["spot_size"] = _number(li, "spot_size", p, math.radians(45), lo=0, hi=math.pi)
+            e["spot_blend"] = _number(li, "spot_blend", p, 0.15, lo=0, hi=1)
+        if t == "AREA":
+            e["shape"] = _enum(li, "shape", p, AREA_SHAPES, "SQUARE")
+            e["size"] = _number(li, "size", p, 1.0, lo=0)
+            e["size_y"] = _number(li, "size_y", p, e["size"], lo=0)
+            e["spread"] = _number(li, "spread", p, math.pi, lo=0, hi=math.pi)
+        out.append(e)
+    return out
+
+
+def _array(arrays: dict, name: str, kinds: str, ndim: int, shape_tail=()) -> np.ndarray:
+    if name not in arrays:
+        raise SceneError(name, "array is missing")
+    a = arrays[name]
+    if not isinstance(a, np.ndarray):
+        raise SceneError(name, "must be a numpy array")
+    if a.dtype.kind not in kinds:
+        raise SceneError(name, f"has dtype {a.dtype}, expected {'an integer' if kinds == 'iu' else 'a float'} dtype")
+    if a.ndim != ndim or tuple(a.shape[1:]) != tuple(shape_tail):
+        want = "(N, " + ", ".join(str(s) for s in shape_tail) + ")" if shape_tail else "(N,)"
+        raise SceneError(name, f"has shape {a.shape}, expected {want}")
+    if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+        raise SceneError(name, "contains NaN or infinite values")
+    return a
+
+
+def _meshes(h: dict, arrays: dict, n_materials: int) -> list[MeshData]:
+    meshes = _get(h, "meshes", "", [])
+    if not isinstance(meshes, list):
+        raise SceneError("meshes", "must be a list")
+    out = []
+    for k, m in enumerate(meshes):
+        p = f"meshes[{k}]"
+        if not isinstance(m, dict):
+            raise SceneError(p, "must be an object")
+        pre = f"mesh{k}."
+        pos = _array(arrays, pre + "positions", "f", 2, (3,)).astype(np.float64)
+        tri = _array(arrays, pre + "triangles", "iu", 2, (3,)).astype(np.int64)
+        if tri.size and (tri.min() < 0 or tri.max() >= len(pos)):
+            raise SceneError(pre + "triangles", f"indices must lie in [0, {len(pos) - 1}], found {int(tri.min())}..{int(tri.max())}")
+        if pre + "material_index" in arrays:
+            mi = _array(arrays, pre + "material_index", "iu", 1).astype(np.int64)
+            if len(mi) != len(tri):
+                raise SceneError(pre + "material_index", f"has {len(mi)} entries for {len(tri)} triangles")
+        else:
+            mi = np.zeros(len(tri), np.int64)
+        if mi.size and (mi.min() < 0 or mi.max() >= max(n_materials, 1)):
+            raise SceneError(pre + "material_index", f"indices must lie in [0, {max(n_materials, 1) - 1}]")
+        normals = uvs = close = None
+        if pre + "normals" in arrays:
+            normals = _array(arrays, pre + "normals", "f", 3, (3, 3))
+            if len(normals) != len(tri):
+                raise SceneError(pre + "normals", f"has {len(normals)} triangles, expected {len(tri)}")
+        if pre + "uvs" in arrays:
+            uvs = _array(arrays, pre + "uvs", "f", 3, (3, 2))
+            if len(uvs) != len(tri):
+                raise SceneError(pre + "uvs", f"has {len(uvs)} triangles, expected {len(tri)}")
+        if _bool(m, "deforming", p, False):
+            close = _array(arrays, pre + "positions_close", "f", 2, (3,)).astype(np.float64)
+            if close.shape != pos.shape:
+                raise SceneError(pre + "positions_close", f"has shape {close.shape}, expected {pos.shape}")
+        out.append(MeshData(str(m.get("name", f"mesh{k}")), pos, tri, mi, normals, uvs, close))
+    return out
+
+
+def _objects(h: dict, n_meshes: int) -> list[ObjectSpec]:
+    objs = _get(h, "objects", "", [])
+    if not isinstance(objs, list):
+        raise SceneError("objects", "must be a list")
+    out = []
+    for i, o in enumerate(objs):
+        p = f"objects[{i}]"
+        mesh = _number(o, "mesh", p, integer=True, lo=0)
+        if mesh >= n_meshes:
+            raise SceneError(f"{p}.mesh", f"refers to mesh {mesh} but the scene has {n_meshes} meshes")
+        out.append(ObjectSpec(str(o.get("name", f"object{i}")), mesh, _matrix(o, "matrix_world", p), _motion(o, "motion", p)))
+    return out
+
+
+def scene_from_dict(header: dict, arrays: dict | None = None) -> Scene:
+    """Validate an exported scene (header dict + arrays) and build a ``Scene``.
+
+    Raises ``SceneError`` naming the first bad field. Arrays are not copied unless converted.
+    """
+    arrays = arrays or {}
+    if not isinstance(header, dict):
+        raise SceneError("header", "must be a JSON object")
+    fmt = header.get("format")
+    if fmt != FORMAT_NAME:
+        raise SceneError("format", f"must be '{FORMAT_NAME}', got {fmt!r}")
+    version = header.get("version")
+    if version not in SUPPORTED_VERSIONS:
+        raise SceneError("version", f"{version!r} is not supported (this DRT reads versions {', '.join(map(str, SUPPORTED_VERSIONS))})")
+    render = _render_settings(header)
+    camera = _camera(header)
+    world = _get(header, "world", "", {"color": [0, 0, 0]})
+    world_color = _vector(world, "color", "world", 3, default=[0, 0, 0], lo=0.0)
+    materials = _materials(header)
+    lights = _lights(header)
+    meshes = _meshes(header, arrays, len(materials))
+    objects = _objects(header, len(meshes))
+    if not materials and any(len(m.triangles) for m in meshes):
+        # Geometry without materials renders as a neutral grey diffuse (Blender's default look).
+        materials = [{"name": "default", "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}], "emission": [0, 0, 0]}]
+    return Scene(render, camera, world_color, materials, lights, meshes, objects, header, arrays)

@@ -1,0 +1,254 @@
+"""Ray queries against the scene through Embree (embreex), in batches.
+
+embreex's ``run()`` always starts rays at tnear = 0 with ray time 0 and overwrites the ``dists``
+array it is given (used as tfar). So:
+
+* self-intersection is avoided by offsetting spawn points along the geometric normal
+  (``offset_origin``), by an amount that scales with the point's magnitude;
+* motion blur cannot use Embree's own time: a rigidly moving object gets an Embree scene in its
+  local space and each ray is transformed into it by the object's transform *at that ray's time*
+  (exact, no time slices); deforming meshes are intersected exactly at each ray's time by a
+  vectorised ray/triangle test (fine for the modest meshes that deform in practice).
+
+All positions are in the shifted world frame of ``geometry.SceneGeometry``.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass
+
+import numpy as np
+from embreex import rtcore_scene as rtcs
+from embreex.mesh_construction import TriangleMesh
+
+from .geometry import SceneGeometry
+from .motion import apply_linear, apply_linear_transposed
+
+# Spawn offset: relative part scales with |p| (float32 spacing is 6e-8·|p|, Embree's hit error
+# a small multiple of it); the absolute part covers points near the origin.
+OFFSET_RELATIVE = 2e-6
+OFFSET_ABSOLUTE = 1e-5
+
+
+def offset_origin(p: np.ndarray, ng: np.ndarray, toward: np.ndarray) -> np.ndarray:
+    """Move ``p`` off the surface with geometric normal ``ng`` to the side ``toward`` points to.
+
+    p, ng, toward: (n, 3) float64 (ng unit). Returns (n, 3) float64.
+    """
+    eps = OFFSET_ABSOLUTE + OFFSET_RELATIVE * np.max(np.abs(p), axis=1)
+    side = np.where(np.einsum("ij,ij->i", ng, toward) >= 0, 1.0, -1.0)
+    return p + ng * (eps * side)[:, None]
+
+
+@dataclass
+class Hits:
+    """Closest hits. t: (n,) distance along the unit direction (inf: miss); prim: (n,) global
+    triangle id (-1: miss); b1, b2: barycentrics of corners 1 and 2; ng: (n, 3) unit geometric
+    normal in world space, facing the triangle's front (counter-clockwise) side; linear: per-ray
+    local→world linear map for hits on moving objects (identity rows for static)."""
+
+    t: np.ndarray
+    prim: np.ndarray
+    b1: np.ndarray
+    b2: np.ndarray
+    ng: np.ndarray
+    moving_linear: np.ndarray | None = None
+    p: np.ndarray | None = None  # (n, 3) hit points, float64, shifted world frame
+
+    @property
+    def hit(self) -> np.ndarray:
+        return self.prim >= 0
+
+
+class _RigidObject:
+    def __init__(self, mm):
+        self.mesh = mm
+        self.scene = None
+        if mm.positions_close is None:
+            self.scene = rtcs.EmbreeScene()
+            TriangleMesh(self.scene, mm.positions.astype(np.float32), mm.triangles.astype(np.int32))
+
+
+class Tracer:
+    """Closest-hit and occlusion queries for batches of rays.
+
+    Rays: origins ``o`` (n, 3) and unit directions ``d`` (n, 3) float64 in the shifted world
+    frame; ``tau`` (n,) shutter fractions (only used when something moves); ``tmax`` (n,).
+    Thread-safe: the render loop calls it from several worker threads at once (Embree releases
+    the GIL). ``embree_seconds`` accumulates time spent inside Embree calls.
+    """
+
+    def __init__(self, geom: SceneGeometry):
+        self.geom = geom
+        self.static = None
+        if geom.static_count:
+            self.static = rtcs.EmbreeScene()
+            TriangleMesh(self.static, geom.static_positions, geom.static_triangles)
+        self.moving = [_RigidObject(mm) for mm in geom.moving]
+        self.embree_seconds = 0.0
+        self.rays_traced = 0
+
+    # ------------------------------------------------------------------ embree wrappers
+    def _run(self, scene, o, d, tfar, occluded=False):
+        t0 = _time.perf_counter()
+        o32 = np.ascontiguousarray(o, dtype=np.float32)
+        d32 = np.ascontiguousarray(d, dtype=np.float32)
+        dists = np.ascontiguousarray(tfar, dtype=np.float32).copy()
+        if occluded:
+            out = scene.run(o32, d32, dists=dists, query="OCCLUDED")
+        else:
+            out = scene.run(o32, d32, dists=dists, output=1)
+        self.embree_seconds += _time.perf_counter() - t0
+        self.rays_traced += len(o32)
+        return out
+
+    # ------------------------------------------------------------------ queries
+    def intersect(self, o, d, tau=None, tmax=None) -> Hits:
+        n = len(o)
+        t = np.full(n, np.inf) if tmax is None else np.asarray(tmax, dtype=np.float64).copy()
+        t = np.minimum(t, 3.0e38)
+        prim = np.full(n, -1, dtype=np.int64)
+        b1 = np.zeros(n)
+        b2 = np.zeros(n)
+        ng = np.zeros((n, 3))
+        linear = None
+        translation = None
+        if self.static is not None and n:
+            r = self._run(self.static, o, d, t)
+            hit = r["primID"] >= 0
+            t[hit] = r["tfar"][hit]
+            prim[hit] = r["primID"][hit]
+            b1[hit], b2[hit] = r["u"][hit], r["v"][hit]
+        if self.moving and n:
+            tau = np.zeros(n) if tau is None else tau
+            for obj in self.moving:
+                lin, trans = obj.mesh.motion.at(tau)
+                inv = np.linalg.inv(lin)
+                o_l = apply_linear(inv, o - trans)
+                d_l = apply_linear(inv, d)
+                if obj.scene is not None:
+                    r = self._run(obj.scene, o_l, d_l, t)
+                    hit = (r["primID"] >= 0) & (r["tfar"] < t)
+                    tl, pl, u, v = r["tfar"], r["primID"], r["u"], r["v"]
+                else:
+                    tl, pl, u, v, _ = _intersect_deforming(obj.mesh, o_l, d_l, tau, t)
+                    hit = pl >= 0
+                if not np.any(hit):
+                    continue
+                if linear is None:
+                    linear = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+                    translation = np.zeros((n, 3))
+                t[hit] = tl[hit]
+                prim[hit] = pl[hit] + obj.mesh.prim_offset
+                b1[hit], b2[hit] = u[hit], v[hit]
+                linear[hit] = lin[hit]
+                translation[hit] = trans[hit]
+        t[prim < 0] = np.inf
+        hits = Hits(t, prim, b1, b2, ng, linear)
+        self._surface_geometry(hits, o, d, tau, translation if linear is not None else None)
+        return hits
+
+    def _surface_geometry(self, hits, o, d, tau, translation):
+        """Fill ``hits.p`` and ``hits.ng`` from the triangles themselves, in float64: more
+        accurate than Embree's float32 values, and the winding (front side) is ours to define."""
+        n = len(hits.t)
+        hits.p = o + np.where(np.isfinite(hits.t), hits.t, 0.0)[:, None] * d
+        g = self.geom
+        st = (hits.prim >= 0) & (hits.prim < g.static_count)
+        if np.any(st):
+            v = g.static_positions[g.static_triangles[hits.prim[st]]].astype(np.float64)
+            e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+            hits.ng[st] = np.cross(e1, e2)
+            hits.p[st] = v[:, 0] + hits.b1[st, None] * e1 + hits.b2[st, None] * e2
+        for obj in self.moving:
+            mm = obj.mesh
+            sel = (hits.prim >= mm.prim_offset) & (hits.prim < mm.prim_offset + len(mm.triangles))
+            if not np.any(sel):
+                continue
+            tri = mm.triangles[hits.prim[sel] - mm.prim_offset]
+            v = mm.positions[tri]
+            if mm.positions_close is not None:
+                w = tau[sel][:, None, None]
+                v = (1 - w) * v + w * mm.positions_close[tri]
+            e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+            lin = hits.moving_linear[sel]
+            p_local = v[:, 0] + hits.b1[sel, None] * e1 + hits.b2[sel, None] * e2
+            hits.p[sel] = apply_linear(lin, p_local) + translation[sel]
+            # normals transform by the inverse transpose of the local→world map
+            hits.ng[sel] = apply_linear_transposed(np.linalg.inv(lin), np.cross(e1, e2))
+        length = np.linalg.norm(hits.ng, axis=1)
+        good = length > 0
+        hits.ng[good] /= length[good, None]
+        # a degenerate (zero-area) triangle has no normal: face the ray so shading stays finite
+        bad = (hits.prim >= 0) & ~good
+        hits.ng[bad] = -d[bad]
+
+    def occluded(self, o, d, tmax, tau=None) -> np.ndarray:
+        """(n,) bool: is anything hit in (0, tmax)?"""
+        n = len(o)
+        blocked = np.zeros(n, dtype=bool)
+        tmax = np.minimum(np.asarray(tmax, dtype=np.float64), 3.0e38)
+        if self.static is not None and n:
+            blocked = self._run(self.static, o, d, tmax, occluded=True) >= 0
+        if self.moving and n:
+            tau = np.zeros(n) if tau is None else tau
+            for obj in self.moving:
+                idx = np.nonzero(~blocked)[0]
+                if not len(idx):
+                    break
+                lin, trans = obj.mesh.motion.at(tau[idx])
+                inv = np.linalg.inv(lin)
+                o_l = apply_linear(inv, o[idx] - trans)
+                d_l = apply_linear(inv, d[idx])
+                if obj.scene is not None:
+                    blocked[idx] = self._run(obj.scene, o_l, d_l, tmax[idx], occluded=True) >= 0
+                else:
+                    _, pl, *_ = _intersect_deforming(obj.mesh, o_l, d_l, tau[idx], tmax[idx].copy())
+                    blocked[idx] = pl >= 0
+        return blocked
+
+
+def _intersect_deforming(mm, o, d, tau, tmax, chunk_elems=4_000_000):
+    """Exact closest hit against a deforming mesh whose vertices move linearly from
+    ``positions`` to ``positions_close``: each ray sees the mesh at its own τ (Möller–Trumbore,
+    vectorised over rays × triangles in chunks). Returns (t, prim, b1, b2, ng_local)."""
+    n = len(o)
+    tri = mm.triangles
+    p0 = mm.positions[tri]  # (T, 3, 3)
+    p1 = mm.positions_close[tri]
+    t_best = np.asarray(tmax, dtype=np.float64).copy()
+    prim = np.full(n, -1, dtype=np.int64)
+    b1 = np.zeros(n)
+    b2 = np.zeros(n)
+    ng = np.zeros((n, 3))
+    step = max(1, chunk_elems // max(len(tri), 1))
+    for s in range(0, n, step):
+        sl = slice(s, s + step)
+        w = np.asarray(tau[sl])[:, None, None, None]
+        v = (1 - w) * p0[None] + w * p1[None]  # (m, T, 3, 3)
+        e1 = v[:, :, 1] - v[:, :, 0]
+        e2 = v[:, :, 2] - v[:, :, 0]
+        dd = d[sl][:, None, :]
+        pvec = np.cross(dd, e2)
+        det = np.einsum("mtk,mtk->mt", e1, pvec)
+        ok = np.abs(det) > 1e-20
+        inv_det = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        tvec = o[sl][:, None, :] - v[:, :, 0]
+        u = np.einsum("mtk,mtk->mt", tvec, pvec) * inv_det
+        qvec = np.cross(tvec, e1)
+        vv = np.einsum("mk,mtk->mt", d[sl], qvec) * inv_det
+        tt = np.einsum("mtk,mtk->mt", e2, qvec) * inv_det
+        valid = ok & (u >= 0) & (vv >= 0) & (u + vv <= 1) & (tt > 0) & (tt < t_best[sl][:, None])
+        tt = np.where(valid, tt, np.inf)
+        j = np.argmin(tt, axis=1)
+        rows = np.arange(len(j))
+        found = np.isfinite(tt[rows, j])
+        idx = np.arange(s, min(s + step, n))[found]
+        jf = j[found]
+        t_best[idx] = tt[rows[found], jf]
+        prim[idx] = jf
+        b1[idx] = u[rows[found], jf]
+        b2[idx] = vv[rows[found], jf]
+        ng[idx] = np.cross(e1[rows[found], jf], e2[rows[found], jf])
+    return t_best, prim, b1, b2, ng
