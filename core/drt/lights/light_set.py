@@ -1,0 +1,248 @@
+"""LightSet: every light of a scene behind one interface (see docs/architecture.md and
+docs/lights.md): light selection, next-event sampling, and ray intersection / pdfs for MIS.
+
+Selection ("strategies", in this order): the header's lights (same indices as ``scene["lights"]``),
+then all emissive triangles as one entry, then the world. Each is picked with probability ∝ its
+estimated luminance flux (`power`): point P, spot P·(1 − cos(size/2))/2, area P (watts × color
+luminance); emissive triangles 2π·Σ A·lum(L) (two-sided); sun S·πR² and world 4π²R²·lum(L), with
+R the scene radius (pbrt's flux estimates for distant lights). The triangle within the emissive
+group is then picked ∝ area × luminance with the remainder of the same random number.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .area import AreaLight
+from .emissive import EmissiveGroup, EmissiveTriangles
+from .point import PointLight
+from .spot import SpotLight
+from .sun import SunLight
+from .world import WorldLight
+
+
+@dataclass
+class LightSample:
+    """Next-event sample at n shading points (world space, unit ``wi`` toward the light).
+
+    ``radiance`` is the radiance arriving along −wi (delta lights: already divided by d², the sun:
+    its irradiance S), ``pdf`` the solid-angle pdf × selection probability (delta lights: the
+    selection probability), so ``f · |cos θ| · radiance / pdf`` is the estimate for every light.
+    ``dist`` is the distance to the sampled point (inf for sun/world): shadow rays use it as tmax.
+    ``light`` is the strategy index (header light index; ``n_lights`` = emissive group,
+    ``n_lights + 1`` or ``n_lights`` = world) and ``prim`` the global triangle id for emissive
+    samples (−1 otherwise).
+    """
+    wi: np.ndarray
+    dist: np.ndarray
+    radiance: np.ndarray
+    pdf: np.ndarray
+    is_delta: np.ndarray
+    valid: np.ndarray
+    light: np.ndarray
+    prim: np.ndarray
+
+
+@dataclass
+class LightHit:
+    """Nearest visible light shape along rays: ``hit`` (n,) bool, ``t`` (n,) (inf on a miss or
+    for a sun), ``radiance`` (n, 3) arriving at the ray origin, ``pdf`` (n,) the solid-angle pdf ×
+    selection probability that `LightSet.sample` gives this direction from the ray origin (for
+    MIS), ``light`` (n,) header light index (−1 on a miss)."""
+    hit: np.ndarray
+    t: np.ndarray
+    radiance: np.ndarray
+    pdf: np.ndarray
+    light: np.ndarray
+
+
+def selection_distribution(power) -> tuple[np.ndarray, np.ndarray]:
+    """pmf and cdf (both (k,)) for choosing among k strategies ∝ power. Zero total → uniform.
+    With one strategy the pmf is exactly [1.0]."""
+    power = np.maximum(np.asarray(power, dtype=np.float64), 0.0)
+    if len(power) == 0:
+        return power, power
+    total = power.sum()
+    pmf = power / total if total > 0.0 else np.full(len(power), 1.0 / len(power))
+    if len(pmf) == 1:
+        pmf = np.ones(1)
+    cdf = np.cumsum(pmf)
+    cdf[-1] = 1.0
+    return pmf, cdf
+
+
+def select(pmf, cdf, u) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Choose strategies for u (n,) in [0, 1): index (n,), its probability (n,), and u rescaled to
+    [0, 1) within the chosen interval (reusable for a second discrete choice)."""
+    idx = np.searchsorted(cdf, u, side="right")
+    idx = np.minimum(idx, len(cdf) - 1)
+    prob = pmf[idx]
+    # never land on a zero-probability strategy through round-off at the top of the cdf
+    if (prob == 0.0).any():
+        last = int(np.flatnonzero(pmf > 0.0)[-1])
+        idx = np.where(prob == 0.0, last, idx)
+        prob = pmf[idx]
+    lo = cdf[idx] - pmf[idx]
+    u_rem = np.clip((u - lo) / prob, 0.0, np.nextafter(1.0, 0.0))
+    return idx, prob, u_rem
+
+
+def make_light(light: dict, origin_shift, scene_radius: float):
+    kind = str(light.get("type", "POINT")).upper()
+    if kind == "POINT":
+        return PointLight(light, origin_shift)
+    if kind == "SPOT":
+        return SpotLight(light, origin_shift)
+    if kind == "SUN":
+        return SunLight(light, scene_radius)
+    if kind == "AREA":
+        return AreaLight(light, origin_shift)
+    raise ValueError(f"unknown light type {kind!r}")
+
+
+class LightSet:
+    """All lights of a scene.
+
+    lights: the header's light dicts (``docs/scene-format.md``; an optional ``visible_camera``
+    bool, default False as in Blender 5.0). world_color: constant world radiance (3,).
+    emissive: emissive triangles in the tracer's space, or None. origin_shift (3,): subtracted
+    from every light position in ``lights`` (the integrator's re-centring; emissive vertices are
+    taken as given). scene_radius: bounding radius of the scene for the sun/world selection
+    weights (default: from the light positions and emissive vertices, at least 1 m).
+    """
+
+    def __init__(self, lights: list[dict], world_color=(0.0, 0.0, 0.0),
+                 emissive: EmissiveTriangles | None = None, *, origin_shift=(0.0, 0.0, 0.0),
+                 scene_radius: float | None = None):
+        origin_shift = np.asarray(origin_shift, dtype=np.float64).reshape(3)
+        group = EmissiveGroup(emissive) if emissive is not None else None
+        if group is not None and len(group) == 0:
+            group = None
+        if scene_radius is None:
+            scene_radius = self._default_radius(lights, origin_shift, group)
+        self.scene_radius = float(scene_radius)
+        self.lights = [make_light(d, origin_shift, self.scene_radius) for d in lights]
+        self.n_lights = len(self.lights)
+        self.emissive = group
+        world_color = np.asarray(world_color, dtype=np.float64).reshape(3)
+        self.world = WorldLight(world_color, self.scene_radius) if (world_color > 0).any() else None
+        self.strategies = list(self.lights)
+        self.emissive_index = self.world_index = -1
+        if self.emissive is not None:
+            self.emissive_index = len(self.strategies)
+            self.strategies.append(self.emissive)
+        if self.world is not None:
+            self.world_index = len(self.strategies)
+            self.strategies.append(self.world)
+        self.pmf, self.cdf = selection_distribution([s.power for s in self.strategies])
+        self.visible_to_camera = np.array([lt.visible_to_camera for lt in self.lights], dtype=bool)
+        self._shapes = [i for i, lt in enumerate(self.lights)
+                        if isinstance(lt, (AreaLight, PointLight)) and not lt.is_delta]
+        self._suns = [i for i, lt in enumerate(self.lights)
+                      if isinstance(lt, SunLight) and not lt.is_delta]
+
+    @staticmethod
+    def _default_radius(lights, origin_shift, group) -> float:
+        pts = [np.asarray(d["matrix_world"], dtype=np.float64).reshape(4, 4)[:3, 3] - origin_shift
+               for d in lights if str(d.get("type", "")).upper() != "SUN"]
+        if group is not None:
+            pts.extend([group.v0, group.v0 + group.e1, group.v0 + group.e2])
+        if not pts:
+            return 1.0
+        pts = np.vstack([np.reshape(p, (-1, 3)) for p in pts])
+        return max(1.0, 0.5 * float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))))
+
+    # ------------------------------------------------------------------------------------------
+    def sample(self, p, n, u_select, u2) -> LightSample:
+        """p (m,3) shading points; n (m,3) normals of the hemisphere to light (or None);
+        u_select (m,), u2 (m,2) in [0, 1)."""
+        p = np.asarray(p, dtype=np.float64)
+        m = len(p)
+        out = LightSample(wi=np.zeros((m, 3)), dist=np.zeros(m), radiance=np.zeros((m, 3)),
+                          pdf=np.zeros(m), is_delta=np.zeros(m, dtype=bool),
+                          valid=np.zeros(m, dtype=bool), light=np.full(m, -1),
+                          prim=np.full(m, -1))
+        if not self.strategies or m == 0:
+            return out
+        idx, prob, u_rem = select(self.pmf, self.cdf, np.asarray(u_select, dtype=np.float64))
+        u2 = np.asarray(u2, dtype=np.float64)
+        for s, strat in enumerate(self.strategies):
+            sel = idx == s
+            if not sel.any():
+                continue
+            every = sel.all()
+            ps = p if every else p[sel]
+            ns = None if n is None else (n if every else n[sel])
+            us = u2 if every else u2[sel]
+            if s == self.emissive_index:
+                wi, dist, rad, pdf, valid, prim = strat.sample(ps, ns, us, u_rem if every else u_rem[sel])
+                out.prim[sel] = prim
+            else:
+                wi, dist, rad, pdf, valid = strat.sample(ps, ns, us)
+            out.wi[sel], out.dist[sel], out.radiance[sel] = wi, dist, rad
+            out.pdf[sel], out.valid[sel] = pdf, valid
+            out.is_delta[sel] = strat.is_delta
+            out.light[sel] = s
+        out.pdf *= prob
+        out.valid &= out.pdf > 0.0
+        return out
+
+    def intersect(self, o, d, tmax) -> LightHit:
+        """Nearest light shape with t < tmax along unit rays o + t d (world/tracer space).
+        Area lights are hit from both sides (radiance 0 from the back). Suns with an angle are
+        reported (t = inf) for rays whose tmax is inf and that hit no shape; the integrator adds
+        `world_radiance` separately. Camera rays should ignore hits where
+        ``visible_to_camera[light]`` is False."""
+        o = np.asarray(o, dtype=np.float64)
+        d = np.asarray(d, dtype=np.float64)
+        m = len(o)
+        tmax = np.broadcast_to(np.asarray(tmax, dtype=np.float64), (m,))
+        best_t = np.array(tmax, dtype=np.float64, copy=True)
+        best = np.full(m, -1)
+        for i in self._shapes:
+            t = self.lights[i].intersect(o, d)
+            closer = t < best_t
+            best_t = np.where(closer, t, best_t)
+            best = np.where(closer, i, best)
+        hit = best >= 0
+        t_out = np.where(hit, best_t, np.inf)
+        radiance = np.zeros((m, 3))
+        pdf = np.zeros(m)
+        for i in self._shapes:
+            sel = best == i
+            if sel.any():
+                lt = self.lights[i]
+                radiance[sel] = lt.hit_radiance(o[sel], d[sel], t_out[sel])
+                pdf[sel] = lt.pdf(o[sel], d[sel], t_out[sel]) * self.pmf[i]
+        open_sky = ~hit & np.isinf(tmax)
+        for i in self._suns:
+            sel = open_sky & (best < 0) & self.lights[i].in_cone(d)
+            if sel.any():
+                best[sel] = i
+                radiance[sel] = self.lights[i].radiance
+                pdf[sel] = self.lights[i].pdf_dir(d[sel]) * self.pmf[i]
+        return LightHit(hit=best >= 0, t=t_out, radiance=radiance, pdf=pdf, light=best)
+
+    def world_radiance(self, d) -> np.ndarray:
+        """(m, 3) world radiance arriving along −d (constant)."""
+        color = self.world.radiance if self.world is not None else np.zeros(3)
+        return np.broadcast_to(color, (len(d), 3)).copy()
+
+    def world_pdf(self, p, n, d) -> np.ndarray:
+        """(m,) solid-angle pdf × selection probability of the world producing direction d at p
+        with normal n (None → uniform sphere), as `sample` would."""
+        if self.world is None:
+            return np.zeros(len(d))
+        return self.world.pdf(n, np.asarray(d, dtype=np.float64)) * self.pmf[self.world_index]
+
+    def emissive_pdf(self, tri, o, p_hit, ng_hit) -> np.ndarray:
+        """(m,) MIS pdf (solid angle × selection) of sampling p_hit on emissive triangle `tri`
+        (global id) from o; 0 for non-emissive triangles."""
+        if self.emissive is None:
+            return np.zeros(len(o))
+        pdf = self.emissive.pdf(tri, np.asarray(o, dtype=np.float64),
+                                np.asarray(p_hit, dtype=np.float64),
+                                np.asarray(ng_hit, dtype=np.float64))
+        return pdf * self.pmf[self.emissive_index]
