@@ -238,8 +238,11 @@ def _render_settings(h: dict) -> RenderSettings:
     res = _get(r, "resolution", p)
     if not isinstance(res, (list, tuple)) or len(res) != 2:
         raise SceneError("render.resolution", f"must be [width, height], got {res!r}")
-    w = _number({"w": res[0]}, "w", "", integer=True, lo=1, hi=MAX_RESOLUTION)
-    hgt = _number({"h": res[1]}, "h", "", integer=True, lo=1, hi=MAX_RESOLUTION)
+    try:
+        w = _number({"resolution": res[0]}, "resolution", "render", integer=True, lo=1, hi=MAX_RESOLUTION)
+        hgt = _number({"resolution": res[1]}, "resolution", "render", integer=True, lo=1, hi=MAX_RESOLUTION)
+    except SceneError as e:
+        raise SceneError("render.resolution", f"width and height {e.problem}") from None
     aspect = _vector(r, "pixel_aspect", p, 2, default=[1.0, 1.0])
     if np.any(aspect <= 0):
         raise SceneError("render.pixel_aspect", "must be > 0")
