@@ -143,6 +143,11 @@ class LightSet:
         self._suns = [i for i, lt in enumerate(self.lights)
                       if isinstance(lt, SunLight) and not lt.is_delta]
 
+    @property
+    def count(self) -> int:
+        """Number of selectable strategies (lights + emissive group + world); 0 = nothing to sample."""
+        return len(self.strategies)
+
     @staticmethod
     def _default_radius(lights, origin_shift, group) -> float:
         pts = [np.asarray(d["matrix_world"], dtype=np.float64).reshape(4, 4)[:3, 3] - origin_shift
