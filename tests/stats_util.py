@@ -13,7 +13,8 @@ Chi-square goodness-of-fit tests in the style of Mitsuba 3's ``chi2.py``:
 
 Both draw ``u = rng.random((n_samples, sample_dim))`` with a fixed seed, call ``sample_fn(u)``,
 histogram the result and compare with the expected counts ``n_samples * integral of pdf over the
-bin`` (midpoint rule on a ``resolution x resolution`` sub-grid per bin).  ``sample_fn`` may return
+bin`` (midpoint rule on a ``resolution x resolution`` sub-grid per bin, ``refine`` times finer in
+cells on the edge of the pdf's support).  ``sample_fn`` may return
 either the samples, or ``(samples, valid)`` with ``valid`` an (n,) bool mask; non-finite or zero
 rows also count as invalid.  Invalid samples are simply not counted (as in Mitsuba), so a pdf that
 integrates to less than one (energy lost, e.g. below the horizon) is tested correctly.
@@ -205,36 +206,70 @@ def _draw(sample_fn: Callable, n_samples: int, sample_dim: int, seed: int):
     return x, valid
 
 
-def _midpoints(lo: float, hi: float, bins: int, resolution: int) -> tuple[np.ndarray, float]:
-    """Midpoints of ``bins * resolution`` equal sub-intervals of [lo, hi] and their width."""
-    n = bins * resolution
-    h = (hi - lo) / n
-    return lo + (np.arange(n) + 0.5) * h, h
+def _integrate_grid(density, lo0, hi0, lo1, hi1, bins0, bins1, resolution, refine,
+                    chunk=1 << 18):
+    """(bins0, bins1) integrals of ``density(x0, x1)`` (flat arrays in, flat array out, per unit
+    dx0·dx1) over equal cells of [lo0, hi0] × [lo1, hi1], by the midpoint rule on a
+    ``resolution²`` sub-grid per cell.
+
+    Cells on the edge of the density's support (a zero sub-sample with a non-zero one in the cell
+    or in a neighbouring cell) are integrated again on a ``(resolution·refine)²`` sub-grid: a
+    discontinuous pdf (disk, polygon, cone edge) would otherwise give thin slivers of support an
+    expected count of zero, or a biased one.
+    """
+    h0 = (hi0 - lo0) / bins0
+    h1 = (hi1 - lo1) / bins1
+
+    def cells(i0, i1, res):
+        # integrals over the cells (i0[k], i1[k]) with a res × res midpoint grid each
+        off = (np.arange(res) + 0.5) / res
+        out = np.empty(i0.size)
+        zero = np.empty(i0.size, dtype=bool)
+        nonzero = np.empty(i0.size, dtype=bool)
+        per = max(1, chunk // (res * res))
+        for s in range(0, i0.size, per):  # chunks of cells, not samples
+            a = (lo0 + (i0[s:s + per, None, None] + off[None, :, None]) * h0)
+            b = (lo1 + (i1[s:s + per, None, None] + off[None, None, :]) * h1)
+            a, b = np.broadcast_arrays(a, b)
+            f = np.asarray(density(a.ravel(), b.ravel()), dtype=np.float64).reshape(a.shape)
+            f = np.where(np.isfinite(f), f, 0.0)
+            out[s:s + per] = f.sum(axis=(1, 2)) * (h0 * h1) / (res * res)
+            zero[s:s + per] = np.any(f == 0.0, axis=(1, 2))
+            nonzero[s:s + per] = np.any(f != 0.0, axis=(1, 2))
+        return out, zero, nonzero
+
+    g0, g1 = np.meshgrid(np.arange(bins0), np.arange(bins1), indexing="ij")
+    integ, zero, nonzero = cells(g0.ravel(), g1.ravel(), resolution)
+    integ = integ.reshape(bins0, bins1)
+    zero = zero.reshape(bins0, bins1)
+    nz = np.pad(nonzero.reshape(bins0, bins1), 1)
+    near_support = np.zeros((bins0, bins1), dtype=bool)
+    for d0 in (0, 1, 2):
+        for d1 in (0, 1, 2):
+            near_support |= nz[d0:d0 + bins0, d1:d1 + bins1]
+    edge = zero & near_support
+    if refine > 1 and np.any(edge):
+        e0, e1 = np.nonzero(edge)
+        integ[e0, e1] = cells(e0, e1, resolution * refine)[0]
+    return integ
 
 
 def _sph_dirs(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
     st = np.sin(theta)
-    return np.stack([st * np.cos(phi), st * np.sin(phi), np.cos(theta) * np.ones_like(phi)],
-                    axis=-1)
+    return np.stack([st * np.cos(phi), st * np.sin(phi), np.cos(theta)], axis=-1)
 
 
-def _integrate_sphere(pdf_fn, th_lo, th_hi, bins_theta, bins_phi, resolution, chunk=1 << 18):
-    """(bins_theta, bins_phi) integrals of pdf(d) dω over theta/phi bins (midpoint rule)."""
-    th, dth = _midpoints(th_lo, th_hi, bins_theta, resolution)
-    ph, dph = _midpoints(0.0, 2.0 * np.pi, bins_phi, resolution)
-    out = np.empty((th.size, ph.size))
-    rows = max(1, chunk // ph.size)
-    for s in range(0, th.size, rows):  # loop over chunks of grid rows, not over samples
-        t = th[s:s + rows, None]
-        d = _sph_dirs(np.broadcast_to(t, (t.shape[0], ph.size)), ph[None, :]).reshape(-1, 3)
-        p = np.asarray(pdf_fn(d), dtype=np.float64).reshape(t.shape[0], ph.size)
-        out[s:s + rows] = np.where(np.isfinite(p), p, 0.0) * np.sin(t) * dth * dph
-    return out.reshape(bins_theta, resolution, bins_phi, resolution).sum(axis=(1, 3))
+def _integrate_sphere(pdf_fn, th_lo, th_hi, bins_theta, bins_phi, resolution, refine):
+    """(bins_theta, bins_phi) integrals of pdf(d) dω = pdf sinθ dθ dφ over theta/phi cells."""
+    def density(th, ph):
+        return np.asarray(pdf_fn(_sph_dirs(th, ph)), dtype=np.float64).reshape(-1) * np.sin(th)
+    return _integrate_grid(density, th_lo, th_hi, 0.0, 2.0 * np.pi, bins_theta, bins_phi,
+                           resolution, refine)
 
 
 def chi2_test_sphere(sample_fn: Callable, pdf_fn: Callable, n_samples: int = 200_000,
                      bins_theta: int = 20, bins_phi: int = 40, *, theta_max: float = np.pi,
-                     sample_dim: int = 2, seed: int = 0, resolution: int = 8,
+                     sample_dim: int = 2, seed: int = 0, resolution: int = 8, refine: int = 8,
                      min_expected: float = 5.0, return_details: bool = False):
     """Chi-square test of a direction sampler against its solid-angle pdf.
 
@@ -263,14 +298,14 @@ def chi2_test_sphere(sample_fn: Callable, pdf_fn: Callable, n_samples: int = 200
     pj = np.minimum((phi[inside] / (2 * np.pi) * bins_phi).astype(np.int64), bins_phi - 1)
     observed = np.zeros((bins_theta, bins_phi))
     np.add.at(observed, (ti, pj), 1.0)
-    integ = _integrate_sphere(pdf_fn, 0.0, theta_max, bins_theta, bins_phi, resolution)
+    integ = _integrate_sphere(pdf_fn, 0.0, theta_max, bins_theta, bins_phi, resolution, refine)
     expected = integ * n_samples
     obs_cells = [observed.ravel()]
     exp_cells = [expected.ravel()]
     total_integral = float(integ.sum())
     if theta_max < np.pi:
         out_int = float(_integrate_sphere(pdf_fn, theta_max, np.pi, bins_theta, bins_phi,
-                                          resolution).sum())
+                                          resolution, refine).sum())
         total_integral += out_int
         obs_cells.append(np.array([float(np.count_nonzero(~inside))]))
         exp_cells.append(np.array([out_int * n_samples]))
@@ -288,8 +323,8 @@ chi2_test_directions = chi2_test_sphere
 def chi2_test_2d(sample_fn: Callable, pdf_fn: Callable, n_samples: int = 200_000,
                  bins_x: int = 32, bins_y: int = 32, *,
                  bounds=((0.0, 1.0), (0.0, 1.0)), sample_dim: int = 2, seed: int = 0,
-                 resolution: int = 8, min_expected: float = 5.0, return_details: bool = False,
-                 **sphere_kwargs):
+                 resolution: int = 8, refine: int = 8, min_expected: float = 5.0,
+                 return_details: bool = False, **sphere_kwargs):
     """Chi-square test of a 2-D point sampler against its pdf per unit area.
 
     sample_fn(u) -> (n, 2) points (optionally ``(points, valid)``), u: (n, sample_dim) uniform.
@@ -304,7 +339,7 @@ def chi2_test_2d(sample_fn: Callable, pdf_fn: Callable, n_samples: int = 200_000
     if x.shape[1] == 3:
         return chi2_test_sphere(lambda _u: (x, valid), pdf_fn, n_samples, bins_x, bins_y,
                                 sample_dim=sample_dim, seed=seed, resolution=resolution,
-                                min_expected=min_expected, return_details=return_details,
+                                refine=refine, min_expected=min_expected, return_details=return_details,
                                 **sphere_kwargs)
     if x.shape[1] != 2:
         raise ValueError(f"points must be (n, 2), got {x.shape}")
@@ -318,12 +353,9 @@ def chi2_test_2d(sample_fn: Callable, pdf_fn: Callable, n_samples: int = 200_000
     iy = np.clip(((pi[:, 1] - y0) / (y1 - y0) * bins_y).astype(np.int64), 0, bins_y - 1)
     observed = np.zeros((bins_x, bins_y))
     np.add.at(observed, (ix, iy), 1.0)
-    xs, dx = _midpoints(x0, x1, bins_x, resolution)
-    ys, dy = _midpoints(y0, y1, bins_y, resolution)
-    gx, gy = np.meshgrid(xs, ys, indexing="ij")
-    p = np.asarray(pdf_fn(np.stack([gx.ravel(), gy.ravel()], axis=1)), dtype=np.float64)
-    p = np.where(np.isfinite(p), p, 0.0).reshape(xs.size, ys.size) * dx * dy
-    integ = p.reshape(bins_x, resolution, bins_y, resolution).sum(axis=(1, 3))
+    integ = _integrate_grid(
+        lambda a, b: np.asarray(pdf_fn(np.stack([a, b], axis=1)), dtype=np.float64).reshape(-1),
+        x0, x1, y0, y1, bins_x, bins_y, resolution, refine)
     expected = integ * n_samples
     total_integral = float(integ.sum())
     out_exp = 0.0  # bounds must contain the support: any point outside fails the test

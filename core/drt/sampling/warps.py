@@ -180,10 +180,16 @@ def polygon_to_square(p, blades: int, rotation: float = 0.0) -> np.ndarray:
     k, qx, qy, half = _polygon_local(p, n_corners, rotation)
     w = 0.5 * (qx / np.cos(half) + qy / np.sin(half))
     v = 0.5 * (qx / np.cos(half) - qy / np.sin(half))
+    # A point on the ray shared with the previous wedge (w = 0, which would need u.x = (k+1)/N)
+    # is written as wedge k-1's point w' = v, v' = 0 instead, so u.x stays in [k/N, (k+1)/N).
+    shared = (w <= 1e-12) & (v > 1e-12)  # (not the origin, which every wedge reaches at s = 1)
+    k = np.where(shared, np.mod(k - 1.0, n_corners), k)
+    w, v = np.where(shared, v, w), np.where(shared, 0.0, v)
     s = 1.0 - w
     with np.errstate(divide="ignore", invalid="ignore"):
         u1 = np.where(s > 0.0, v / s, 0.0)
-    u0 = (k + np.clip(s * s, 0.0, _ONE_MINUS_EPS)) / n_corners
+    # keep floor(u.x·N) == k after rounding: s² < 1 by a margin far below float32 resolution
+    u0 = (k + np.clip(s * s, 0.0, 1.0 - 1e-12)) / n_corners
     return _to_unit_square(np.stack([u0, u1], axis=-1))
 
 
