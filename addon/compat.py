@@ -1,0 +1,172 @@
+"""Everything that differs between the Blender versions DRT supports (3.4 and 4.2+ / 5.0).
+
+Keep version branches here and nowhere else: the rest of the add-on asks this module.
+Checks are by feature (``hasattr``), not by version number, where Blender allows it.
+"""
+
+import importlib
+
+import bpy
+import numpy as np
+
+BLENDER_VERSION = bpy.app.version
+
+# EEVEE's engine id: BLENDER_EEVEE in <= 4.1 and again in 5.0, BLENDER_EEVEE_NEXT in 4.2-4.4.
+EEVEE_ID = "BLENDER_EEVEE_NEXT" if (4, 2, 0) <= BLENDER_VERSION < (5, 0, 0) else "BLENDER_EEVEE"
+
+
+# --- the core renderer --------------------------------------------------------------------------
+
+def core_module(name: str = ""):
+    """Import the core (``drt``) or one of its modules (``core_module("render")``).
+
+    Inside an installed extension / legacy add-on the core is bundled as the sub-package
+    ``<addon>.drt``; in a development checkout the pip-installed ``drt`` is used.
+    """
+    try:
+        from . import drt as drt_core  # bundled sub-package
+    except ImportError:
+        import drt as drt_core  # development mode: pip install -e .
+    if not name:
+        return drt_core
+    return importlib.import_module(f"{drt_core.__name__}.{name}")
+
+
+# --- meshes -------------------------------------------------------------------------------------
+
+def prepare_mesh(mesh) -> None:
+    """Make loop triangles (and, on 3.4, split normals) available on an evaluated mesh."""
+    if hasattr(mesh, "calc_normals_split"):  # <= 4.0
+        mesh.calc_normals_split()
+    mesh.calc_loop_triangles()
+
+
+def mesh_is_flat(mesh) -> bool:
+    """True when every face is flat shaded (no smooth faces, no custom normals)."""
+    if hasattr(mesh, "normals_domain"):  # 4.1+
+        return mesh.normals_domain == "FACE"
+    if getattr(mesh, "has_custom_normals", False):
+        return False
+    n = len(mesh.polygons)
+    if n == 0:
+        return True
+    smooth = np.empty(n, dtype=bool)
+    mesh.polygons.foreach_get("use_smooth", smooth)
+    return not smooth.any()
+
+
+def corner_normals(mesh) -> np.ndarray:
+    """Per-corner (loop) shading normals as Blender shades them, (L, 3) float32, local space."""
+    n_loops = len(mesh.loops)
+    out = np.empty(n_loops * 3, dtype=np.float32)
+    if hasattr(mesh, "corner_normals"):  # 4.1+
+        domain = mesh.normals_domain
+        if domain == "POINT":
+            vn = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+            mesh.vertex_normals.foreach_get("vector", vn)
+            loop_vert = np.empty(n_loops, dtype=np.int32)
+            mesh.loops.foreach_get("vertex_index", loop_vert)
+            return vn.reshape(-1, 3)[loop_vert]
+        mesh.corner_normals.foreach_get("vector", out)
+    else:  # 3.4: calc_normals_split() filled loop normals
+        mesh.loops.foreach_get("normal", out)
+    return out.reshape(-1, 3)
+
+
+def active_uv_data(mesh):
+    """The active UV map's per-loop collection (``foreach_get("uv")``), or None."""
+    layer = mesh.uv_layers.active
+    if layer is None:
+        return None
+    return layer.data
+
+
+# --- materials ----------------------------------------------------------------------------------
+
+# Principled BSDF socket names: 4.0 renamed several inputs.
+PRINCIPLED_INPUTS = {
+    "transmission": ("Transmission Weight", "Transmission"),
+    "emission_color": ("Emission Color", "Emission"),
+    "specular": ("Specular IOR Level", "Specular"),
+    "specular_tint": ("Specular Tint",),
+    "coat": ("Coat Weight", "Clearcoat"),
+    "sheen": ("Sheen Weight", "Sheen"),
+    "subsurface": ("Subsurface Weight", "Subsurface"),
+}
+
+
+def find_input(node, key_or_names):
+    """A node input socket by a key of PRINCIPLED_INPUTS or a tuple of candidate names."""
+    names = PRINCIPLED_INPUTS.get(key_or_names, (key_or_names,)) if isinstance(key_or_names, str) \
+        else key_or_names
+    for name in names:
+        sock = node.inputs.get(name)
+        if sock is not None:
+            return sock
+    return None
+
+
+def material_node_tree(material):
+    """The material's shader node tree, or None when it has none (viewport color only).
+
+    5.0 deprecates ``Material.use_nodes`` (always node based); older files may switch it off.
+    """
+    tree = material.node_tree
+    if tree is None:
+        return None
+    if BLENDER_VERSION < (5, 0, 0) and not material.use_nodes:
+        return None
+    return tree
+
+
+def world_node_tree(world):
+    tree = world.node_tree
+    if tree is None:
+        return None
+    if BLENDER_VERSION < (5, 0, 0) and not world.use_nodes:
+        return None
+    return tree
+
+
+# --- lights -------------------------------------------------------------------------------------
+
+def light_color(light) -> list:
+    """Light color including the blackbody temperature tint (4.5+)."""
+    c = np.array(light.color[:], dtype=np.float64)
+    if getattr(light, "use_temperature", False):
+        c = c * np.array(light.temperature_color[:], dtype=np.float64)
+    return c.tolist()
+
+
+def light_power_scale(light) -> float:
+    """Multiplier on ``energy``: 2^exposure (4.0+)."""
+    return float(2.0 ** getattr(light, "exposure", 0.0))
+
+
+def light_normalized(light) -> bool:
+    """4.0+ area lights can switch off power normalisation by area."""
+    return bool(getattr(light, "normalize", True))
+
+
+def light_soft_falloff(light) -> bool:
+    """4.0+ point/spot ``use_soft_falloff``; 3.4 always behaves as soft falloff on."""
+    return bool(getattr(light, "use_soft_falloff", True))
+
+
+# --- render engine ------------------------------------------------------------------------------
+
+def set_engine_flags(cls) -> None:
+    """Class flags that exist only in some versions."""
+    cls.bl_use_shading_nodes_custom = False  # read standard Cycles/EEVEE node trees
+    cls.bl_use_eevee_viewport = True  # Material Preview without our own viewport code
+    cls.bl_use_postprocess = True
+    cls.bl_use_preview = False
+
+
+def view_layer_pass_flags(view_layer) -> dict:
+    """Which of the passes DRT can fill are enabled in the view layer."""
+    return {
+        "depth": bool(getattr(view_layer, "use_pass_z", False)),
+        "normal": bool(getattr(view_layer, "use_pass_normal", False)),
+        "albedo": bool(getattr(view_layer, "use_pass_diffuse_color", False)),
+    }

@@ -1,0 +1,164 @@
+"""The DRT RenderEngine: export the depsgraph, render with the core, stream the film back.
+
+Failure semantics (../shared/docs/blender-addon-notes.md): an exception escaping ``render()``
+makes ``blender -b`` save an empty image and exit 0, so ``render()`` catches everything and
+reports it with ``self.report({'ERROR'}, ...)``, which aborts the render with exit code 1 (and
+makes ``bpy.ops.render.render`` raise RuntimeError).
+"""
+
+import time
+import traceback
+
+import bpy
+import numpy as np
+
+from . import compat
+from .export import ExportError, export_depsgraph
+
+# Film arrays are top row first; Blender's render result wants bottom row first.
+PASSES = (  # (Blender pass name, channels, chan_id, type, film attribute, view-layer flag)
+    ("Depth", 1, "Z", "VALUE", "depth", "depth"),
+    ("Normal", 3, "XYZ", "VECTOR", "normal", "normal"),
+    ("DiffCol", 3, "RGB", "COLOR", "albedo", "albedo"),
+)
+
+
+def _format_seconds(s: float) -> str:
+    s = max(0.0, s)
+    m, sec = divmod(int(round(s)), 60)
+    h, m = divmod(m, 60)
+    return f"{h}:{m:02d}:{sec:02d}" if h else f"{m:02d}:{sec:02d}"
+
+
+def sample_range(scene) -> tuple[int, int, int | None]:
+    """(spp, sample_offset, sample_count or None) from the scene's DRT settings."""
+    d = scene.drt
+    spp = int(d.samples)
+    if not d.use_sample_subset:
+        return spp, 0, None
+    offset = min(int(d.sample_offset), spp - 1)
+    count = int(d.sample_count) or spp - offset
+    return spp, offset, min(count, spp - offset)
+
+
+class DRTRenderEngine(bpy.types.RenderEngine):
+    bl_idname = "DRT"
+    bl_label = "DRT"
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+
+    # --- passes -----------------------------------------------------------------------------
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        if scene is None or renderlayer is None:
+            return
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
+        flags = compat.view_layer_pass_flags(renderlayer)
+        for name, channels, chan_id, kind, _attr, flag in PASSES:
+            if flags[flag]:
+                self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
+
+    # --- final render -----------------------------------------------------------------------
+
+    def render(self, depsgraph):
+        try:
+            self._render(depsgraph)
+        except Exception as exc:  # noqa: BLE001 -- must not escape: see the module docstring
+            traceback.print_exc()
+            msg = str(exc) or exc.__class__.__name__
+            if not isinstance(exc, ExportError) and exc.__class__.__name__ != "SceneError":
+                msg = f"{exc.__class__.__name__}: {msg}"
+            self.report({"ERROR"}, f"DRT: {msg}")
+
+    def _render(self, depsgraph):
+        scene = depsgraph.scene
+        t_start = time.perf_counter()
+        self.update_stats("", "DRT | Exporting scene")
+        exported = export_depsgraph(depsgraph, frame_set=self.frame_set)
+        for w in exported.warnings:
+            self.report({"WARNING"}, f"DRT: {w}")
+        if self.test_break():
+            return
+
+        scene_mod = compat.core_module("scene")
+        render_mod = compat.core_module("render")
+        drt_scene = scene_mod.scene_from_dict(exported.header, exported.arrays)
+        spp, offset, count = sample_range(scene)
+        width, height = drt_scene.render.width, drt_scene.render.height
+        layer_name = depsgraph.view_layer.name
+        flags = compat.view_layer_pass_flags(depsgraph.view_layer)
+        wanted = [p for p in PASSES if flags[p[5]]]
+
+        self.update_stats("", "DRT | Building acceleration structures")
+        context = render_mod.prepare(drt_scene)
+        for w in getattr(context, "warnings", []):
+            self.report({"WARNING"}, f"DRT: {w}")
+        t_render = time.perf_counter()
+        last_draw = [0.0]
+        crop = border_crop(scene, width, height)
+        rh, rw = crop[0].stop - crop[0].start, crop[1].stop - crop[1].start
+        result = self.begin_result(0, 0, rw, rh, layer=layer_name)
+
+        def progress(film, done, total):
+            frac = done / max(total, 1)
+            elapsed = time.perf_counter() - t_render
+            remaining = elapsed / frac - elapsed if frac > 0 else 0.0
+            self.update_progress(frac)
+            self.update_stats("", f"DRT | Sample {done}/{total} | Elapsed "
+                                  f"{_format_seconds(time.perf_counter() - t_start)} | Remaining "
+                                  f"{_format_seconds(remaining)}")
+            now = time.perf_counter()
+            if now - last_draw[0] > 0.25 and done < total:
+                last_draw[0] = now
+                fill_layer(result.layers[0], film, crop, wanted)
+                self.update_result(result)
+
+        try:
+            film = render_mod.render(drt_scene, spp=spp, sample_offset=offset,
+                                     sample_count=count, progress=progress,
+                                     cancel=self.test_break, context=context)
+            fill_layer(result.layers[0], film, crop, wanted)
+        finally:
+            self.end_result(result)
+        stats = getattr(film, "stats", None)
+        done = getattr(stats, "samples_done", count or spp)
+        self.update_stats("", f"DRT | {done} samples in "
+                              f"{_format_seconds(time.perf_counter() - t_start)}")
+
+
+def border_crop(scene, width, height) -> tuple[slice, slice]:
+    """Rows (top first) and columns of the film the render result shows.
+
+    Same pixel rounding as the core's border region; the full frame without a border.
+    """
+    r = scene.render
+    if not r.use_border or (r.border_min_x, r.border_min_y, r.border_max_x, r.border_max_y) \
+            == (0.0, 0.0, 1.0, 1.0):
+        return slice(0, height), slice(0, width)
+    x0 = int(np.floor(r.border_min_x * width))
+    x1 = max(int(np.ceil(r.border_max_x * width)), x0 + 1)
+    r0 = int(np.floor((1 - r.border_max_y) * height))
+    r1 = max(int(np.ceil((1 - r.border_min_y) * height)), r0 + 1)
+    return slice(r0, r1), slice(x0, x1)
+
+
+def _set_pass(layer, name, img):
+    """Write an (h, w, c) top-row-first image into a render pass (bottom row first)."""
+    rp = layer.passes.find_by_name(name, "")
+    if rp is None:
+        return
+    a = np.ascontiguousarray(img[::-1], dtype=np.float32)
+    rp.rect.foreach_set(a.reshape(-1)) if hasattr(rp.rect, "foreach_set") else \
+        setattr(rp, "rect", a.reshape(-1, a.shape[2]))
+
+
+def fill_layer(layer, film, crop, wanted) -> None:
+    """Copy the film's passes into a render layer."""
+    rows, cols = crop
+    _set_pass(layer, "Combined", np.nan_to_num(film.combined[rows, cols], nan=0.0))
+    for name, channels, _cid, _kind, attr, _flag in wanted:
+        img = np.asarray(getattr(film, attr))[rows, cols]
+        if name == "Depth":
+            img = np.where(np.isfinite(img), img, 1e10)
+        _set_pass(layer, name, img.reshape(img.shape[0], img.shape[1], channels))

@@ -1,0 +1,200 @@
+"""Depsgraph → DRT scene (header dict + arrays), in memory; see docs/scene-format.md.
+
+``export_depsgraph`` is the one entry point: the render engine calls it with its own
+``frame_set`` (so motion sampling re-evaluates the render depsgraph), the command line and the
+tests call it with ``scene.frame_set``. Nothing here touches the core renderer.
+"""
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .materials import MaterialExporter
+from .mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays, evaluated_positions
+from .scene_parts import (ExportError, camera_dict, light_dict, matrix_list, render_settings,
+                          world_dict)
+
+__all__ = ["ExportError", "ExportResult", "export_depsgraph"]
+
+
+@dataclass
+class ExportResult:
+    header: dict
+    arrays: dict
+    warnings: list = field(default_factory=list)
+
+
+def _instance_key(inst) -> tuple:
+    """Stable identity of an object instance across frames (copied immediately)."""
+    obj = inst.object
+    parent = inst.parent.original.name if inst.parent is not None else ""
+    pid = tuple(inst.persistent_id) if inst.is_instance else ()
+    return (obj.original.name, parent, pid)
+
+
+def _is_rendered(inst) -> bool:
+    obj = inst.object
+    if not inst.is_instance:
+        if not inst.show_self:
+            return False
+        orig = obj.original
+        if orig.hide_render:
+            return False
+    if getattr(obj, "is_holdout", False):
+        return False
+    return True
+
+
+def _deform_candidate(inst, scene) -> bool:
+    """Objects whose shape may change over the shutter (compared later, vertex by vertex)."""
+    if inst.is_instance:
+        return False
+    orig = inst.object.original
+    if orig.type != "MESH":
+        return orig.type in MESH_LIKE_TYPES and orig.animation_data is not None
+    try:
+        if orig.is_deform_modified(scene, "RENDER"):
+            return True
+    except (TypeError, RuntimeError):
+        pass
+    data = orig.data
+    if getattr(data, "shape_keys", None) is not None:
+        return True
+    return any(m.type == "NODES" for m in orig.modifiers)
+
+
+def _frame_time(t: float) -> tuple[int, float]:
+    f = math.floor(t)
+    return int(f), float(t - f)
+
+
+def _matrices_equal(a: list, b: list) -> bool:
+    return np.allclose(np.array(a), np.array(b), rtol=0.0, atol=1e-7)
+
+
+def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> ExportResult:
+    """Export the evaluated scene of ``depsgraph`` at its current frame.
+
+    frame_set(frame: int, subframe: float) moves time (and re-evaluates ``depsgraph``); needed
+    only when motion blur is on. Time is restored before returning.
+    """
+    scene = depsgraph.scene
+    warnings: list[str] = []
+    mats = MaterialExporter()
+    render = render_settings(scene, preview)
+
+    if scene.camera is None:
+        raise ExportError("the scene has no active camera")
+
+    meshes: list[dict] = []
+    arrays: dict[str, np.ndarray] = {}
+    mesh_of_key: dict = {}  # (data pointer, material tuple) -> mesh index
+    objects: list[dict] = []
+    object_index: dict = {}  # instance key -> index into objects
+    deform_keys: dict = {}  # instance key -> mesh index (candidates for deformation)
+    lights: list[dict] = []
+
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        if obj.type == "LIGHT":
+            if _is_rendered(inst):
+                ld = light_dict(obj, inst.matrix_world.copy(), warnings)
+                if ld is not None:
+                    lights.append(ld)
+            continue
+        if obj.type not in MESH_LIKE_TYPES or not _is_rendered(inst):
+            continue
+        key = _instance_key(inst)
+        matrix = matrix_list(inst.matrix_world.copy())
+        slots = [s.material for s in obj.material_slots] or [None]
+        slot_mats = np.array([mats.index_of(m) for m in slots], dtype=np.int32)
+        deforming = _deform_candidate(inst, scene)
+        mkey = (obj.data.as_pointer() if obj.data is not None else obj.as_pointer(),
+                tuple(slot_mats.tolist()))
+        if deforming:
+            mkey = ("deform",) + key  # never shared
+        k = mesh_of_key.get(mkey)
+        if k is None:
+            data = evaluated_mesh_arrays(obj, slot_mats)
+            if data is None:
+                mesh_of_key[mkey] = -1
+                continue
+            k = len(meshes)
+            meshes.append({"name": obj.name, "deforming": False})
+            for name, arr in data.items():
+                arrays[f"mesh{k}.{name}"] = arr
+            mesh_of_key[mkey] = k
+        if k < 0:
+            continue
+        if deforming:
+            deform_keys[key] = k
+        object_index[key] = len(objects)
+        objects.append({"name": obj.name if not inst.is_instance else
+                        f"{obj.name}@{inst.parent.name if inst.parent else ''}{list(key[2])}",
+                        "mesh": k, "matrix_world": matrix, "motion": None})
+
+    cam_obj = scene.camera.evaluated_get(depsgraph)
+    camera = camera_dict(cam_obj, cam_obj.matrix_world.copy())
+
+    if render["shutter"] is not None:
+        if frame_set is None:
+            warnings.append("motion blur needs frame_set; exported without motion")
+        else:
+            _export_motion(depsgraph, scene, frame_set, render["shutter"], camera, objects,
+                           object_index, deform_keys, meshes, arrays, warnings)
+
+    warnings += mats.warnings
+    header = {"format": "drt-scene", "version": 1, "render": render, "camera": camera,
+              "world": world_dict(scene.world, warnings), "materials": mats.materials,
+              "lights": lights, "meshes": meshes, "objects": objects}
+    return ExportResult(header, arrays, warnings)
+
+
+def _export_motion(depsgraph, scene, frame_set, shutter, camera, objects, object_index,
+                   deform_keys, meshes, arrays, warnings):
+    """Sample transforms (and candidate deformations) at shutter open and close."""
+    frame = scene.frame_current
+    subframe = float(scene.frame_subframe)
+    samples = []  # per end: (camera matrix, {key: matrix}, {key: positions})
+    try:
+        for offset in shutter:
+            frame_set(*_frame_time(frame + subframe + offset))
+            cam_obj = scene.camera.evaluated_get(depsgraph)
+            cam_m = matrix_list(cam_obj.matrix_world.normalized())
+            mats, pos = {}, {}
+            for inst in depsgraph.object_instances:
+                if inst.object.type not in MESH_LIKE_TYPES:
+                    continue
+                key = _instance_key(inst)
+                if key in object_index:
+                    mats[key] = matrix_list(inst.matrix_world.copy())
+                    if key in deform_keys:
+                        pos[key] = evaluated_positions(inst.object)
+            samples.append((cam_m, mats, pos))
+    finally:
+        frame_set(frame, subframe)
+
+    (cam_open, m_open, p_open), (cam_close, m_close, p_close) = samples
+    if not (_matrices_equal(cam_open, cam_close) and _matrices_equal(cam_open, camera["matrix_world"])):
+        camera["motion"] = {"matrix_open": cam_open, "matrix_close": cam_close}
+    for key, i in object_index.items():
+        a, b = m_open.get(key), m_close.get(key)
+        if a is None or b is None:
+            continue
+        if not (_matrices_equal(a, b) and _matrices_equal(a, objects[i]["matrix_world"])):
+            objects[i]["motion"] = {"matrix_open": a, "matrix_close": b}
+    for key, k in deform_keys.items():
+        a, b = p_open.get(key), p_close.get(key)
+        base = arrays[f"mesh{k}.positions"]
+        if a is None or b is None:
+            continue
+        if a.shape != base.shape or b.shape != base.shape:
+            warnings.append(f"Mesh '{meshes[k]['name']}': topology changes during the shutter, "
+                            "deformation blur skipped")
+            continue
+        if np.array_equal(a, b) and np.array_equal(a, base):
+            continue
+        meshes[k]["deforming"] = True
+        arrays[f"mesh{k}.positions"] = a
+        arrays[f"mesh{k}.positions_close"] = b

@@ -1,0 +1,166 @@
+"""Render settings, camera, lights and world → header dicts (docs/scene-format.md).
+
+Blender's units and Cycles's meaning; conversions as measured in
+../shared/docs/blender-conventions.md.
+"""
+
+import math
+
+import numpy as np
+
+from .. import compat
+
+
+class ExportError(Exception):
+    """A scene DRT cannot render at all (no camera, panoramic camera, ...)."""
+
+
+def matrix_list(m) -> list:
+    """A mathutils 4×4 Matrix as a row-major nested list of floats."""
+    return [[float(x) for x in row] for row in m]
+
+
+def render_resolution(render) -> tuple[int, int]:
+    """Final pixel count after the resolution percentage, as Blender computes it."""
+    pct = render.resolution_percentage
+    return (max(1, render.resolution_x * pct // 100), max(1, render.resolution_y * pct // 100))
+
+
+def shutter_interval(render) -> list | None:
+    """[open, close] in frames relative to the current frame, or None without motion blur.
+
+    START / CENTER / END move the centre by +shutter/2, 0, −shutter/2.
+    """
+    if not render.use_motion_blur:
+        return None
+    s = float(render.motion_blur_shutter)
+    if s <= 0:
+        return None
+    delta = {"START": 0.5 * s, "CENTER": 0.0, "END": -0.5 * s}.get(
+        getattr(render, "motion_blur_position", "CENTER"), 0.0)
+    return [delta - 0.5 * s, delta + 0.5 * s]
+
+
+def render_settings(scene, preview: bool = False) -> dict:
+    r = scene.render
+    d = scene.drt
+    border = None
+    if r.use_border:
+        border = [float(r.border_min_x), float(r.border_min_y),
+                  float(r.border_max_x), float(r.border_max_y)]
+        if border == [0.0, 0.0, 1.0, 1.0]:
+            border = None
+    return {
+        "resolution": list(render_resolution(r)),
+        "pixel_aspect": [float(r.pixel_aspect_x), float(r.pixel_aspect_y)],
+        "border": border,
+        "film_transparent": bool(r.film_transparent),
+        "filter": {"type": d.filter_type, "width": float(r.filter_size)},
+        "spp": int(d.preview_samples if preview else d.samples),
+        "seed": int(d.seed),
+        "sampler": d.sampler,
+        "max_bounces": int(d.max_bounces), "diffuse_bounces": int(d.diffuse_bounces),
+        "glossy_bounces": int(d.glossy_bounces),
+        "transmission_bounces": int(d.transmission_bounces),
+        "clamp_direct": float(d.clamp_direct), "clamp_indirect": float(d.clamp_indirect),
+        "shutter": shutter_interval(r),
+    }
+
+
+def camera_dict(cam_obj, matrix) -> dict:
+    """Camera header from an evaluated camera object and its (camera → world) matrix."""
+    cam = cam_obj.data
+    if cam.type not in ("PERSP", "ORTHO"):
+        raise ExportError(f"camera '{cam_obj.name}': type {cam.type} is not supported "
+                          "(perspective and orthographic only)")
+    dof = cam.dof
+    focus = float(dof.focus_distance)
+    if dof.focus_object is not None:
+        # Distance along the view axis (a focus plane), like Cycles.
+        fpos = np.array(dof.focus_object.matrix_world.translation[:])
+        cpos = np.array(matrix.translation[:])
+        z_axis = np.array(matrix.col[2][:3])
+        z_axis /= max(np.linalg.norm(z_axis), 1e-12)
+        focus = float(abs(np.dot(z_axis, cpos - fpos)))
+    return {
+        "type": cam.type,
+        "matrix_world": matrix_list(matrix.normalized()),
+        "lens": float(cam.lens),
+        "sensor_width": float(cam.sensor_width), "sensor_height": float(cam.sensor_height),
+        "sensor_fit": cam.sensor_fit,
+        "shift_x": float(cam.shift_x), "shift_y": float(cam.shift_y),
+        "clip_start": float(cam.clip_start), "clip_end": float(cam.clip_end),
+        "ortho_scale": float(cam.ortho_scale),
+        "dof": {"use": bool(dof.use_dof), "focus_distance": max(focus, 1e-6),
+                "fstop": float(dof.aperture_fstop), "blades": int(dof.aperture_blades),
+                "rotation": float(dof.aperture_rotation), "ratio": float(dof.aperture_ratio)},
+        "motion": None,
+    }
+
+
+def light_dict(obj, matrix, warnings: list) -> dict | None:
+    """Light header from an evaluated light object and its world matrix (None: skipped)."""
+    light = obj.data
+    color = compat.light_color(light)
+    scale = compat.light_power_scale(light)
+    d = {"name": obj.name, "type": light.type, "matrix_world": matrix_list(matrix),
+         "color": color, "visible_to_camera": bool(getattr(obj, "visible_camera", True))}
+    if light.type in ("POINT", "SPOT"):
+        d.update(power=float(light.energy) * scale, radius=float(light.shadow_soft_size),
+                 soft_falloff=compat.light_soft_falloff(light))
+        if light.type == "SPOT":
+            d.update(spot_size=float(light.spot_size), spot_blend=float(light.spot_blend))
+            if getattr(light, "use_square", False):
+                warnings.append(f"Light '{obj.name}': square spot rendered as round")
+    elif light.type == "SUN":
+        d.update(strength=float(light.energy) * scale, angle=float(light.angle))
+    elif light.type == "AREA":
+        power = float(light.energy) * scale
+        size, size_y = float(light.size), float(light.size_y)
+        if light.shape in ("SQUARE", "DISK"):
+            size_y = size
+        if not compat.light_normalized(light):
+            # Unnormalised: radiance P/π regardless of area, i.e. power scales with the area.
+            sx = np.linalg.norm(np.array(matrix.col[0][:3]))
+            sy = np.linalg.norm(np.array(matrix.col[1][:3]))
+            area = size * size_y * sx * sy
+            if light.shape in ("DISK", "ELLIPSE"):
+                area *= math.pi / 4
+            power *= area
+        d.update(power=power, shape=light.shape, size=size, size_y=size_y,
+                 spread=min(float(getattr(light, "spread", math.pi)), math.pi))
+    else:
+        warnings.append(f"Light '{obj.name}': type {light.type} not supported, skipped")
+        return None
+    return d
+
+
+def world_dict(world, warnings: list) -> dict:
+    """Constant background radiance: Background color × strength."""
+    if world is None:
+        return {"color": [0.0, 0.0, 0.0]}
+    tree = compat.world_node_tree(world)
+    if tree is None:
+        return {"color": [float(x) for x in world.color[:3]]}
+    outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"]
+    out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return {"color": [0.0, 0.0, 0.0]}
+    node = out.inputs["Surface"].links[0].from_node
+    if node.bl_idname != "ShaderNodeBackground":
+        warnings.append(f"World '{world.name}': '{node.name}' unsupported, using the world color")
+        return {"color": [float(x) for x in world.color[:3]]}
+    col_sock, str_sock = node.inputs["Color"], node.inputs["Strength"]
+    if col_sock.is_linked:
+        src = col_sock.links[0].from_node
+        if src.bl_idname == "ShaderNodeRGB":
+            col = np.array(src.outputs[0].default_value[:3])
+        else:
+            warnings.append(f"World '{world.name}': background color from '{src.name}' "
+                            "unsupported, using its constant value")
+            col = np.array(col_sock.default_value[:3])
+    else:
+        col = np.array(col_sock.default_value[:3])
+    if str_sock.is_linked:
+        warnings.append(f"World '{world.name}': linked strength unsupported, using its value")
+    return {"color": (col * float(str_sock.default_value)).tolist()}

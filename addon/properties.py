@@ -1,0 +1,83 @@
+"""DRT settings stored in the .blend: one PropertyGroup on the scene, ``scene.drt``.
+
+Defaults equal Cycles's (bounces 12/4/4/12, no clamping, Blackman-Harris filter), so a scene
+set up for Cycles converges to the same image. Camera depth of field and motion blur use
+Blender's own properties (``camera.data.dof``, ``scene.render.motion_blur_*``), not copies here.
+"""
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
+
+SAMPLER_ITEMS = (
+    ("SOBOL", "Sobol", "Owen-scrambled Sobol sequence (like Cycles's tabulated Sobol)", 0),
+    ("STRATIFIED", "Stratified", "Jittered stratified samples per dimension", 1),
+    ("RANDOM", "Random", "Independent uniform random samples (for testing)", 2),
+)
+
+FILTER_ITEMS = (
+    ("BLACKMAN_HARRIS", "Blackman-Harris", "Blackman-Harris filter (Cycles's default)", 0),
+    ("GAUSSIAN", "Gaussian", "Gaussian filter", 1),
+    ("BOX", "Box", "Box filter", 2),
+)
+
+
+class DRTSceneSettings(bpy.types.PropertyGroup):
+    samples: IntProperty(
+        name="Render Samples", description="Samples per pixel for final renders",
+        default=64, min=1, soft_max=4096, max=1 << 24)
+    preview_samples: IntProperty(
+        name="Viewport Samples", description="Samples per pixel for viewport renders",
+        default=16, min=1, soft_max=1024, max=1 << 24)
+    seed: IntProperty(
+        name="Seed", description="Seed of the sample sequences; the same seed gives the same image",
+        default=0, min=0)
+    sampler: EnumProperty(
+        name="Sampler", description="Random number pattern used for sampling",
+        items=SAMPLER_ITEMS, default="SOBOL")
+
+    max_bounces: IntProperty(
+        name="Total", description="Maximum number of bounces, all kinds together",
+        default=12, min=0, max=1024)
+    diffuse_bounces: IntProperty(
+        name="Diffuse", description="Maximum number of diffuse reflection bounces",
+        default=4, min=0, max=1024)
+    glossy_bounces: IntProperty(
+        name="Glossy", description="Maximum number of glossy reflection bounces",
+        default=4, min=0, max=1024)
+    transmission_bounces: IntProperty(
+        name="Transmission", description="Maximum number of transmission bounces",
+        default=12, min=0, max=1024)
+
+    clamp_direct: FloatProperty(
+        name="Direct Light", description="Clamp the radiance of direct light samples (0 disables)",
+        default=0.0, min=0.0)
+    clamp_indirect: FloatProperty(
+        name="Indirect Light",
+        description="Clamp the radiance of indirect light samples (0 disables)",
+        default=0.0, min=0.0)
+
+    filter_type: EnumProperty(
+        name="Pixel Filter", description="Pixel filter; its width is Blender's Filter Size",
+        items=FILTER_ITEMS, default="BLACKMAN_HARRIS")
+
+    use_sample_subset: BoolProperty(
+        name="Sample Subset",
+        description="Render only a range of the samples, to split one frame over several machines",
+        default=False)
+    sample_offset: IntProperty(
+        name="Offset", description="Index of the first sample rendered", default=0, min=0)
+    sample_count: IntProperty(
+        name="Length", description="Number of samples rendered (0: up to the sample count)",
+        default=0, min=0)
+
+    @classmethod
+    def register(cls):
+        bpy.types.Scene.drt = PointerProperty(
+            name="DRT Render Settings", description="DRT render settings", type=cls)
+
+    @classmethod
+    def unregister(cls):
+        del bpy.types.Scene.drt
+
+
+classes = (DRTSceneSettings,)

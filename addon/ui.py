@@ -1,0 +1,155 @@
+"""DRT's render-property panels, and Blender's built-in panels re-used through COMPAT_ENGINES.
+
+The motion-blur and depth-of-field controls edit Blender's own properties
+(``scene.render.motion_blur_*``, ``camera.data.dof``), so a scene moves between engines
+unchanged.
+"""
+
+import bpy
+
+ENGINE = "DRT"
+
+# Built-in panels shown for DRT besides those that show for BLENDER_RENDER (output, format,
+# dimensions, color management, ...).
+EXTRA_PANELS = (
+    "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture",
+    "DATA_PT_EEVEE_light", "DATA_PT_area", "DATA_PT_spot", "DATA_PT_sunlight",
+    "EEVEE_MATERIAL_PT_context_material", "EEVEE_MATERIAL_PT_surface", "MATERIAL_PT_preview",
+    "EEVEE_WORLD_PT_surface", "WORLD_PT_context_world",
+    "RENDER_PT_color_management", "RENDER_PT_format", "RENDER_PT_frame_range",
+    "VIEWLAYER_PT_layer_passes",
+)
+# Panels that show for BLENDER_RENDER but draw settings DRT ignores.
+SKIP_PANELS = {"RENDER_PT_simplify", "RENDER_PT_freestyle",
+               "DATA_PT_light"}  # only the type row; DATA_PT_EEVEE_light draws it all
+
+_added: list = []  # panel classes we added 'DRT' to, to undo on unregister
+
+
+class DRTRenderPanel:
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "render"
+    COMPAT_ENGINES = {ENGINE}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+
+class DRT_RENDER_PT_sampling(DRTRenderPanel, bpy.types.Panel):
+    bl_label = "Sampling"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        d = context.scene.drt
+        col = layout.column(align=True)
+        col.prop(d, "samples", text="Render")
+        col.prop(d, "preview_samples", text="Viewport")
+        col = layout.column()
+        col.prop(d, "sampler")
+        col.prop(d, "seed")
+
+
+class DRT_RENDER_PT_sampling_subset(DRTRenderPanel, bpy.types.Panel):
+    bl_label = "Sample Subset"
+    bl_parent_id = "DRT_RENDER_PT_sampling"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.drt, "use_sample_subset", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        d = context.scene.drt
+        col = layout.column(align=True)
+        col.active = d.use_sample_subset
+        col.prop(d, "sample_offset")
+        col.prop(d, "sample_count")
+
+
+class DRT_RENDER_PT_light_paths(DRTRenderPanel, bpy.types.Panel):
+    bl_label = "Light Paths"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        d = context.scene.drt
+        col = layout.column(align=True, heading="Max Bounces")
+        col.prop(d, "max_bounces")
+        col.prop(d, "diffuse_bounces")
+        col.prop(d, "glossy_bounces")
+        col.prop(d, "transmission_bounces")
+        col = layout.column(align=True, heading="Clamping")
+        col.prop(d, "clamp_direct")
+        col.prop(d, "clamp_indirect")
+
+
+class DRT_RENDER_PT_motion_blur(DRTRenderPanel, bpy.types.Panel):
+    bl_label = "Motion Blur"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.render, "use_motion_blur", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        rd = context.scene.render
+        col = layout.column()
+        col.active = rd.use_motion_blur
+        col.prop(rd, "motion_blur_position", text="Position")
+        col.prop(rd, "motion_blur_shutter")
+
+
+class DRT_RENDER_PT_film(DRTRenderPanel, bpy.types.Panel):
+    bl_label = "Film"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        rd = context.scene.render
+        col = layout.column()
+        col.prop(context.scene.drt, "filter_type")
+        col.prop(rd, "filter_size", text="Width")
+        col.prop(rd, "film_transparent", text="Transparent")
+
+
+classes = (
+    DRT_RENDER_PT_sampling,
+    DRT_RENDER_PT_sampling_subset,
+    DRT_RENDER_PT_light_paths,
+    DRT_RENDER_PT_motion_blur,
+    DRT_RENDER_PT_film,
+)
+
+
+def _compat_panels():
+    for cls in bpy.types.Panel.__subclasses__():
+        engines = getattr(cls, "COMPAT_ENGINES", None)
+        if not isinstance(engines, set) or ENGINE in engines:
+            continue
+        name = cls.__name__
+        if name in SKIP_PANELS:
+            continue
+        if "BLENDER_RENDER" in engines or name in EXTRA_PANELS:
+            yield cls
+
+
+def add_compat_engines() -> None:
+    for cls in _compat_panels():
+        cls.COMPAT_ENGINES.add(ENGINE)
+        _added.append(cls)
+
+
+def remove_compat_engines() -> None:
+    while _added:
+        _added.pop().COMPAT_ENGINES.discard(ENGINE)
