@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _warps
-from .common import T_EPSILON, light_frame, luminance, unit
+from .common import T_EPSILON, camera_visible, light_frame, luminance, unit
 
 #: Below this solid angle (sr) rectangles are sampled by area instead of solid angle.
 MIN_SOLID_ANGLE = 1e-7
@@ -56,7 +56,7 @@ class AreaLight:
             self.spread_norm = 1.0 / (self.tan_half - self.half_spread)
         self.solid_angle_sampling = self.plain and not self.is_ellipse
         self.is_delta = False
-        self.visible_to_camera = bool(light.get("visible_camera", False))
+        self.visible_to_camera = camera_visible(light)
         self.power = float(power * luminance(self.color))
 
     # --- emission profile ----------------------------------------------------------------

@@ -54,3 +54,9 @@ def smoothstep01(x: np.ndarray) -> np.ndarray:
 def one_minus_cos_from_sin2(sin2: np.ndarray) -> np.ndarray:
     """1 − cos θ from sin²θ without cancellation (θ ≤ π/2)."""
     return sin2 / (1.0 + np.sqrt(np.maximum(1.0 - sin2, 0.0)))
+
+
+def camera_visible(light: dict) -> bool:
+    """The light's camera-ray visibility: ``visible_camera`` (scene format), or the add-on's
+    ``visible_to_camera``; False by default, as for Blender 5.0 light objects."""
+    return bool(light.get("visible_camera", light.get("visible_to_camera", False)))

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _warps
-from .common import T_EPSILON, light_frame, luminance, one_minus_cos_from_sin2
+from .common import T_EPSILON, camera_visible, light_frame, luminance, one_minus_cos_from_sin2
 
 
 class PointLight:
@@ -36,7 +36,7 @@ class PointLight:
         self.radiance = (self.color * power / (4.0 * np.pi ** 2 * self.radius ** 2)
                          if not self.is_delta else np.zeros(3))       # W/(m² sr), RGB
         self.is_sphere = not self.is_delta and not self.soft_falloff
-        self.visible_to_camera = bool(light.get("visible_camera", False))
+        self.visible_to_camera = camera_visible(light)
         self.power = float(power * luminance(self.color)) * self._power_fraction()
 
     # --- overridden by spot lights -------------------------------------------------------

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _warps
-from .common import luminance, unit
+from .common import camera_visible, luminance, unit
 
 
 class SunLight:
@@ -30,7 +30,7 @@ class SunLight:
         self.cos_half = 1.0 - self.one_minus_cos
         self.radiance = (self.irradiance / (np.pi * np.sin(half) ** 2)
                          if not self.is_delta else np.zeros(3))
-        self.visible_to_camera = bool(light.get("visible_camera", False))
+        self.visible_to_camera = camera_visible(light)
         # Flux through the scene's cross-section (pbrt's DistantLight::Phi).
         self.power = float(strength * luminance(self.color)) * np.pi * scene_radius ** 2
 
