@@ -20,48 +20,13 @@ from drt.materials import (
     eval_glossy,
     fresnel_dielectric,
 )
+from stats_util import chi2_pvalue, chi2_sf
 
 P_THRESHOLD = 0.01
 N_SAMPLES = 150_000
 
 
 # ----------------------------------------------------------------------------- helpers
-def _gammaq(a: float, x: float) -> float:
-    """Regularised upper incomplete gamma Q(a, x) (series / continued fraction)."""
-    if x <= 0.0:
-        return 1.0
-    gln = math.lgamma(a)
-    if x < a + 1.0:
-        ap, s, d = a, 1.0 / a, 1.0 / a
-        for _ in range(1000):
-            ap += 1.0
-            d *= x / ap
-            s += d
-            if abs(d) < abs(s) * 1e-15:
-                break
-        return 1.0 - s * math.exp(-x + a * math.log(x) - gln)
-    b = x + 1.0 - a
-    c = 1.0 / 1e-300
-    d = 1.0 / b
-    h = d
-    for i in range(1, 1000):
-        an = -i * (i - a)
-        b += 2.0
-        d = an * d + b
-        d = 1e-300 if abs(d) < 1e-300 else d
-        c = b + an / c
-        c = 1e-300 if abs(c) < 1e-300 else c
-        d = 1.0 / d
-        h *= d * c
-        if abs(d * c - 1.0) < 1e-15:
-            break
-    return math.exp(-x + a * math.log(x) - gln) * h
-
-
-def chi2_sf(stat: float, dof: int) -> float:
-    return _gammaq(0.5 * dof, 0.5 * stat)
-
-
 def _basis(axis):
     axis = np.asarray(axis, float) / np.linalg.norm(axis)
     helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
@@ -124,20 +89,13 @@ class SphereGrid:
             self.n_theta, self.n_phi)
 
 
-def chi2_pvalue(observed, expected_prob, n_total, n_lost):
-    """Pearson chi-square with low-expectation cells (< 5) pooled, plus a 'lost samples' cell."""
+def pvalue_with_lost(observed, expected_prob, n_total, n_lost):
+    """Pearson chi-square (stats_util, Mitsuba's pooling) over the bins plus one 'lost samples'
+    cell (samples sample() marked invalid vs the pdf mass missing from the sphere)."""
     exp = np.append(expected_prob.ravel() * n_total,
                     max(n_total * (1.0 - expected_prob.sum()), 0.0))
     obs = np.append(observed.ravel().astype(float), n_lost)
-    low = exp < 5.0
-    e = list(exp[~low])
-    o = list(obs[~low])
-    if exp[low].sum() > 0:
-        e.append(exp[low].sum())
-        o.append(obs[low].sum())
-    e, o = np.array(e), np.array(o)
-    stat = float(np.sum((o - e) ** 2 / e))
-    return chi2_sf(stat, len(e) - 1)
+    return chi2_pvalue(obs, exp)[0]
 
 
 def direction(theta_deg, phi_deg=0.0, below=False):
@@ -180,7 +138,7 @@ def check_sampling(table, wo, grid, n=N_SAMPLES, seed=0):
 
     expected = grid.integrate(lambda d: eval_at(table, wo, d)[1])
     observed = grid.histogram(s.wi[s.valid])
-    p = chi2_pvalue(observed, expected, n, int(n - s.valid.sum()))
+    p = pvalue_with_lost(observed, expected, n, int(n - s.valid.sum()))
     integral = grid.integrate(lambda d: eval_at(table, wo, d)[0]).sum(axis=(0, 1))
     mean = s.weight.mean(axis=0)
     return p, mean, integral, s
@@ -275,7 +233,7 @@ def test_chi2_detects_a_wrong_pdf():
     grid = SphereGrid([-wo[0], -wo[1], wo[2]], lobe_edges(28, 1.5), 24, sub=8)
     s, _ = draw(good, wo)
     expected = grid.integrate(lambda d: eval_at(bad, wo, d)[1])
-    p = chi2_pvalue(grid.histogram(s.wi[s.valid]), expected, N_SAMPLES,
+    p = pvalue_with_lost(grid.histogram(s.wi[s.valid]), expected, N_SAMPLES,
                     int(N_SAMPLES - s.valid.sum()))
     assert p < 1e-6
 

@@ -13,28 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..sampling.warps import square_to_cosine_hemisphere
+
 INV_PI = 1.0 / np.pi
-
-
-def square_to_concentric_disk(u: np.ndarray) -> np.ndarray:
-    """Shirley-Chiu concentric map. u: (n, 2) in [0, 1)²; returns (n, 2) points in the unit disk
-    (uniform in area)."""
-    a = 2.0 * u[:, 0] - 1.0
-    b = 2.0 * u[:, 1] - 1.0
-    use_a = np.abs(a) > np.abs(b)
-    r = np.where(use_a, a, b)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        phi = np.where(use_a, (np.pi / 4.0) * (b / a), (np.pi / 2.0) - (np.pi / 4.0) * (a / b))
-    phi = np.where((a == 0.0) & (b == 0.0), 0.0, phi)
-    return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=-1)
-
-
-def square_to_cosine_hemisphere(u: np.ndarray) -> np.ndarray:
-    """u: (n, 2) in [0, 1)²; returns (n, 3) unit directions on the z ≥ 0 hemisphere with density
-    cos θ / π per unit solid angle (Malley's method on the concentric disk)."""
-    d = square_to_concentric_disk(u)
-    z = np.sqrt(np.maximum(0.0, 1.0 - d[:, 0] ** 2 - d[:, 1] ** 2))
-    return np.stack([d[:, 0], d[:, 1], z], axis=-1)
 
 
 def eval_diffuse(wo: np.ndarray, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

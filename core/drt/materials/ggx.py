@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .diffuse import square_to_concentric_disk
+from ..sampling.warps import square_to_disk_concentric
 
 #: alpha² at or below which a microfacet lobe is a delta (mirror / smooth dielectric). Cycles 5.0:
 #: ``BSDF_ROUGHNESS_SQ_THRESH = 2e-10`` compared with alpha_x·alpha_y.
@@ -69,7 +69,7 @@ def sample_vndf(wo: np.ndarray, alpha: np.ndarray, u2: np.ndarray) -> np.ndarray
                    np.where(has_t, v[:, 0] * inv, 0.0),
                    np.zeros_like(inv)], axis=1)
     t2 = np.cross(v, t1)
-    d = square_to_concentric_disk(u2)
+    d = square_to_disk_concentric(u2)
     s = 0.5 * (1.0 + v[:, 2])
     p1 = d[:, 0]
     p2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s * d[:, 1]
