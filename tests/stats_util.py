@@ -339,7 +339,8 @@ def chi2_test_2d(sample_fn: Callable, pdf_fn: Callable, n_samples: int = 200_000
     if x.shape[1] == 3:
         return chi2_test_sphere(lambda _u: (x, valid), pdf_fn, n_samples, bins_x, bins_y,
                                 sample_dim=sample_dim, seed=seed, resolution=resolution,
-                                refine=refine, min_expected=min_expected, return_details=return_details,
+                                refine=refine, min_expected=min_expected,
+                                return_details=return_details,
                                 **sphere_kwargs)
     if x.shape[1] != 2:
         raise ValueError(f"points must be (n, 2), got {x.shape}")

@@ -198,7 +198,8 @@ def test_decorrelation_across_pixels_and_dims(kind):
 
 
 def _f(x, y):
-    return np.exp(-((x - 0.3) ** 2) - 2.0 * (y - 0.6) ** 2) * (1.0 + 0.5 * np.cos(3.0 * x + 2.0 * y))
+    bump = np.exp(-((x - 0.3) ** 2) - 2.0 * (y - 0.6) ** 2)
+    return bump * (1.0 + 0.5 * np.cos(3.0 * x + 2.0 * y))
 
 
 def _exact_integral():

@@ -85,7 +85,7 @@ def square_to_disk_concentric_pdf(p) -> np.ndarray:
 
 
 def disk_concentric_to_square(p) -> np.ndarray:
-    """Inverse of ``square_to_disk_concentric``: (n, 2) points in the unit disk -> (n, 2) in [0,1)²."""
+    """Inverse of ``square_to_disk_concentric``: (n, 2) points in the unit disk -> (n, 2)."""
     p = _f64(p)
     x, y = p[..., 0], p[..., 1]
     r = np.hypot(x, y)
