@@ -124,9 +124,14 @@ def _load(args):
     if not os.path.exists(path):
         raise CliError(f"scene file not found: {path}")
     if path.lower().endswith(".blend"):
-        from .blend_bridge import scene_from_blend
+        from .blend_bridge import BlendError, scene_from_blend
 
-        return scene_from_blend(path, frame=args.frame)
+        try:
+            return scene_from_blend(path, frame=args.frame)
+        except BlendError as e:
+            raise CliError(str(e)) from None
+        except SceneError as e:
+            raise CliError(f"{path} exported an invalid scene: {e}", EXIT_FAILURE) from None
     try:
         from .scene_file import load_scene
 
@@ -225,12 +230,18 @@ def cmd_merge(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from .blend_bridge import export_blend
+    from .blend_bridge import BlendError, export_blend
+    from .scene import SceneError
 
     if not os.path.exists(args.scene):
         raise CliError(f"scene file not found: {args.scene}")
     _check_output(args.output, ".npz")
-    export_blend(args.scene, args.output, frame=args.frame)
+    try:
+        export_blend(args.scene, args.output, frame=args.frame)
+    except BlendError as e:
+        raise CliError(str(e)) from None
+    except SceneError as e:
+        raise CliError(f"{args.scene} exported an invalid scene: {e}", EXIT_FAILURE) from None
     print(f"drt: exported {args.scene} -> {args.output}")
     return EXIT_OK
 

@@ -197,8 +197,10 @@ class Integrator:
             if np.any(light_hit):
                 w = np.where(st.prev_delta, 1.0, power_heuristic(st.prev_pdf, lh.pdf))[light_hit]
                 c = st.throughput[light_hit] * lh.radiance[light_hit] * w[:, None]
-                radiance[st.path[light_hit]] += self._clamp(c, ~np.full(len(c), camera_ray) & (st.bounce[light_hit] > 0))
-            miss = ~hits.hit & ~light_hit
+                radiance[st.path[light_hit]] += self._clamp(c, st.bounce[light_hit] > 0)
+            # a sun disk is "hit" at t = inf: the world behind it still shines
+            shape_hit = light_hit & np.isfinite(lh.t)
+            miss = ~hits.hit & ~shape_hit
             if np.any(miss):
                 paths = st.path[miss]
                 if camera_ray and s.film_transparent:
@@ -210,37 +212,38 @@ class Integrator:
                     c = st.throughput[miss] * le * w[:, None]
                     radiance[paths] += self._clamp(c, st.bounce[miss] > 0)
 
-            surf = hits.hit & ~light_hit
-            st = st.select(surf)
+            surf = hits.hit & ~shape_hit
+            # emission of hit surfaces (also for paths that stop here at a bounce limit)
+            si = np.nonzero(surf)[0]
+            mat_all = self.geom.material[hits.prim[si]]
+            em = self.materials.has_emission[mat_all]
+            if np.any(em):
+                e = si[em]
+                le = self.materials.emission[mat_all[em]]
+                lpdf = self.lights.emissive_pdf(hits.prim[e], st.prev_p[e], hits.p[e], hits.ng[e])
+                w = np.where(st.prev_delta[e], 1.0, power_heuristic(st.prev_pdf[e], lpdf))
+                c = st.throughput[e] * le * w[:, None]
+                radiance[st.path[e]] += self._clamp(c, st.bounce[e] > 0)
+
+            # --- paths that reached a bounce limit stop here (after collecting emission)
+            go = surf & ~st.terminate_next
+            st = st.select(go)
             if len(st.path) == 0:
                 break
-            prim = hits.prim[surf]
-            p = hits.p[surf]
-            ng = hits.ng[surf]
-            linear = hits.moving_linear[surf] if hits.moving_linear is not None else None
-            ns = self._shading_normal(prim, hits.b1[surf], hits.b2[surf], ng, linear)
+            prim = hits.prim[go]
+            p = hits.p[go]
+            ng = hits.ng[go]
+            linear = hits.moving_linear[go] if hits.moving_linear is not None else None
+            ns = self._shading_normal(prim, hits.b1[go], hits.b2[go], ng, linear)
             mat = self.geom.material[prim]
             wo = -st.d
 
-            em = self.materials.has_emission[mat]
-            if np.any(em):
-                le = self.materials.emission[mat[em]]
-                lpdf = self.lights.emissive_pdf(prim[em], st.prev_p[em], p[em], ng[em])
-                w = np.where(st.prev_delta[em], 1.0, power_heuristic(st.prev_pdf[em], lpdf))
-                c = st.throughput[em] * le * w[:, None]
-                radiance[st.path[em]] += self._clamp(c, st.bounce[em] > 0)
-
-            if camera_ray:
+            if camera_ray:  # nothing terminates before the first hit: go == surf here
                 paths = st.path
                 depth[paths] = np.maximum(_dot(p - rays.eye[paths], rays.forward[paths]), 0.0)
                 normal[paths] = ns
                 albedo[paths] = self.materials.albedo(mat)
 
-            # --- paths that reached a bounce limit stop here (after collecting emission)
-            go = ~st.terminate_next
-            st, p, ng, ns, mat, wo = st.select(go), p[go], ng[go], ns[go], mat[go], wo[go]
-            if len(st.path) == 0:
-                break
             base = D_BOUNCE0 + DIMS_PER_BOUNCE * int(depth_i)
             pid_b = pixel[st.path].astype(np.uint32)
             idx_b = idx[st.path]
@@ -249,13 +252,16 @@ class Integrator:
             # local frame: z = shading normal on the front side
             t_ax, b_ax = build_frame(ns)
             wo_l = to_local(wo, t_ax, b_ax, ns)
+            # lights are sampled over the hemisphere wo is in (cosine-weighted world sampling
+            # there); transmitted light stays reachable by BSDF sampling, whose MIS weight is 1
+            n_wo = ns * np.where(wo_l[:, 2] >= 0, 1.0, -1.0)[:, None]
 
             # --- next-event estimation with MIS
             can_nee = ~self.materials.is_delta_only(mat)
-            if np.any(can_nee) and self.lights.count > 0:
+            if np.any(can_nee) and self.lights.strategies:
                 k = np.nonzero(can_nee)[0]
                 u_l = self.sampler.sample_2d(pid_b[k], idx_b[k], base + 1)
-                ls = self.lights.sample(p[k], ns[k], u_sel[k, 0], u_l)
+                ls = self.lights.sample(p[k], n_wo[k], u_sel[k, 0], u_l)
                 wi = ls.wi
                 wi_l = to_local(wi, t_ax[k], b_ax[k], ns[k])
                 f, pdf_b = self.materials.eval(mat[k], wo_l[k], wi_l)
@@ -312,7 +318,7 @@ class Integrator:
                 prev_pdf=bs.pdf,
                 prev_delta=bs.is_delta,
                 prev_p=p,
-                prev_n=ns,
+                prev_n=n_wo,
                 bounce=bounce,
                 diffuse=diffuse.astype(np.int32),
                 glossy=glossy.astype(np.int32),

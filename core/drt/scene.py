@@ -358,7 +358,8 @@ def _lights(h: dict) -> list[dict]:
             "type": t,
             "matrix_world": _matrix(li, "matrix_world", p).tolist(),
             "color": _vector(li, "color", p, 3, default=[1, 1, 1], lo=0.0).tolist(),
-            "visible_to_camera": _bool(li, "visible_to_camera", p, True),
+            # Blender 5.0 lights are invisible to camera rays by default (object.visible_camera)
+            "visible_camera": _bool(li, "visible_camera", p, _bool(li, "visible_to_camera", p, False)),
         }
         if t == "SUN":
             e["strength"] = _number(li, "strength", p, 1.0, lo=0)
