@@ -4,7 +4,8 @@ eval / sample / pdf of a material (= the sum of its lobes) for batches of hits.
 A material is a sum of lobes (scene-format.md): DIFFUSE (Lambert), GLOSSY (GGX reflection, no
 Fresnel) and GLASS (GGX dielectric), each with its own colour; a Mix shader arrives as lobes whose
 colours carry the mix weight. Arrays, M materials × L lobe slots (L = most lobes in one material;
-lobes with a black colour are dropped, the remaining lobes are packed into the first slots):
+lobes whose average colour is below 1e-5 are dropped, like Cycles's CLOSURE_WEIGHT_CUTOFF, and
+the remaining lobes are packed into the first slots):
 
     lobe_type   (M, L) int8     BSDF_NONE / BSDF_DIFFUSE / BSDF_GLOSSY / BSDF_GLASS
     lobe_color  (M, L, 3)       linear RGB weight of the lobe
@@ -48,6 +49,9 @@ BSDF_DIFFUSE = 1
 BSDF_GLOSSY = 2
 BSDF_GLASS = 3
 BSDF_TYPES = {"DIFFUSE": BSDF_DIFFUSE, "GLOSSY": BSDF_GLOSSY, "GLASS": BSDF_GLASS}
+
+#: lobes whose average colour is below this are dropped (Cycles's CLOSURE_WEIGHT_CUTOFF).
+CLOSURE_WEIGHT_CUTOFF = 1e-5
 
 # BSDFSample.lobe_kind values, for Cycles's bounce counting
 LOBE_NONE = 0
@@ -174,7 +178,7 @@ class MaterialTable:
                     ior = _number(lobe["ior"], lw, "ior")
                     if ior <= 0.0:
                         raise _fail(lw, f"ior must be > 0, got {ior!r}")
-                if np.any(color > 0.0):
+                if color.mean() >= CLOSURE_WEIGHT_CUTOFF:
                     rows.append((BSDF_TYPES[kind], color, alpha, ior))
             names.append(name)
             parsed.append(rows)
@@ -249,7 +253,7 @@ class MaterialTable:
         count = self.lobe_count[mat]
         has = (count > 0) & (wo[:, 2] != 0.0)
         if self.lobe_type.shape[1] == 0 or not np.any(has):
-            return BSDFSample(wi, weight, pdf, kind, is_delta, has & False)
+            return BSDFSample(wi, weight, pdf, kind, is_delta, np.zeros(n, bool))
 
         cdf = self._lobe_cdf[mat]
         slot = np.minimum(np.sum(u_lobe[:, None] >= cdf, axis=1), np.maximum(count - 1, 0))
@@ -258,9 +262,10 @@ class MaterialTable:
         u_rest = np.clip((u_lobe - cdf_lo) / np.where(p_sel > 0, p_sel, 1.0), 0.0,
                          np.nextafter(1.0, 0.0))
         t_sel = np.where(has, self.lobe_type[mat, slot], BSDF_NONE)
-        alpha = self.lobe_alpha[mat, slot]
-        ior = self.lobe_ior[mat, slot]
         is_delta = has & self.lobe_delta[mat, slot]
+        # alpha 0 makes the lobe functions take their delta path (also for glass with ior ≈ 1)
+        alpha = np.where(is_delta, 0.0, self.lobe_alpha[mat, slot])
+        ior = self.lobe_ior[mat, slot]
 
         for t in self._types_present:
             idx = np.nonzero(t_sel == t)[0]
