@@ -8,9 +8,9 @@ wo is on the +z side ("upper frame") and eta is the index of the −z side relat
 Model (Walter et al. 2007, "Microfacet Models for Refraction through Rough Surfaces", with GGX D,
 alpha = roughness², height-correlated Smith G2 = 1 / (1 + Λ(wo) + Λ(wi))):
 
-    reflection    f·|cos θi| = F(wo·h) D G2 / (4 |cos θo|),          h = normalize(wo + wi)
-    transmission  f·|cos θi| = (1 − F(wo·h)) D G2 |wo·h| η² |wi·h| / (|cos θo| |wo + η wi|²),
-                                                                     h ∝ ±(wo + η wi), h.z > 0
+    reflection    f·|cos θi| = F(wo·h) D G2 / (4 |cos θo|),       h = normalize(wo + wi)
+    transmission  f·|cos θi| = (1 − F(wo·h)) D G2 |wo·h| η² |wi·h| / (|cos θo| |wo + η wi|²)
+                  with h ∝ ±(wo + η wi), h.z > 0
 
 F is the exact unpolarised dielectric Fresnel (1 at total internal reflection). The colour tints
 reflection and transmission alike (Cycles 5.0 sets ``reflection_tint = transmission_tint =
@@ -20,8 +20,8 @@ Radiance scaling on refraction — decision: **no 1/η² factor**, like Cycles. 
 term above carries η² |wi·h| / |wo + η wi|², which is exactly Cycles's
 ``sqr(ior * inv_len_H) * |cos_HI cos_HO|`` in ``bsdf_microfacet_eval`` (kernel/closure/
 bsdf_microfacet.h, shipped in the bpy 5.0.1 wheel) and its sampling branch
-``|cos_HI cos_HO| / sqr(cos_HO + cos_HI / eta)``; the delta branch returns eval = (1 − F)·1e6 with
-pdf = (1 − F)·1e6, i.e. weight 1. This is the *adjoint* (importance) form of Walter's BTDF: the
+``|cos_HI cos_HO| / sqr(cos_HO + cos_HI / eta)``; the delta branch returns eval = (1 − F)·1e6
+with pdf = (1 − F)·1e6, i.e. weight 1. This is the *adjoint* (importance) form of Walter's BTDF: the
 physically correct radiance BTDF would be this divided by η² (pbrt-v4 divides by η² in
 TransportMode::Radiance). For camera paths Cycles therefore does not compress radiance entering a
 denser medium; a ray that enters and leaves a closed object gets η²·(1/η²) = 1 either way, so

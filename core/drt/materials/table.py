@@ -204,7 +204,8 @@ class MaterialTable:
         materials without lobes)."""
         return self._delta_only[np.asarray(mat, dtype=np.intp)]
 
-    def eval(self, mat: np.ndarray, wo: np.ndarray, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def eval(self, mat: np.ndarray, wo: np.ndarray,
+             wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """mat (n,) int; wo, wi (n, 3) local unit vectors. Returns (f·|cos θi| (n, 3) summed over
         the non-delta lobes, pdf (n,) per unit solid angle of wi, Σ p_l pdf_l, exactly what
         sample() reports for a non-delta sample)."""
