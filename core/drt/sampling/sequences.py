@@ -60,14 +60,27 @@ def _hash_chain(*values) -> np.ndarray:
     return h
 
 
+def _byte_reverse_table() -> np.ndarray:
+    b = np.arange(256, dtype=np.uint32)
+    r = np.zeros(256, dtype=np.uint32)
+    for j in range(8):
+        r |= ((b >> j) & 1) << (7 - j)
+    return r
+
+
+_REV8 = _byte_reverse_table()
+
+
 def reverse_bits(x) -> np.ndarray:
-    """Reverse the 32 bits of each uint32."""
-    x = _u32(x).copy()
-    x = ((x >> _U32(1)) & _U32(0x55555555)) | ((x & _U32(0x55555555)) << _U32(1))
-    x = ((x >> _U32(2)) & _U32(0x33333333)) | ((x & _U32(0x33333333)) << _U32(2))
-    x = ((x >> _U32(4)) & _U32(0x0F0F0F0F)) | ((x & _U32(0x0F0F0F0F)) << _U32(4))
-    x = ((x >> _U32(8)) & _U32(0x00FF00FF)) | ((x & _U32(0x00FF00FF)) << _U32(8))
-    return (x >> _U32(16)) | (x << _U32(16))
+    """Reverse the 32 bits of each uint32 (four byte-table lookups: cheaper than bit twiddling
+    in numpy, where every operation is a pass over the array)."""
+    x = _u32(x)
+    return (
+        (_REV8[x & _U32(0xFF)] << _U32(24))
+        | (_REV8[(x >> _U32(8)) & _U32(0xFF)] << _U32(16))
+        | (_REV8[(x >> _U32(16)) & _U32(0xFF)] << _U32(8))
+        | _REV8[x >> _U32(24)]
+    )
 
 
 def _laine_karras_permutation(x: np.ndarray, seed: np.ndarray) -> np.ndarray:
@@ -100,22 +113,33 @@ def _sobol_dim1_matrix() -> np.ndarray:
 _SOBOL_DIM1 = _sobol_dim1_matrix()
 
 
+def _byte_xor_tables(v: np.ndarray) -> np.ndarray:
+    """(4, 256) tables: entry [k, b] = XOR of v[8k + j] over the set bits j of byte b."""
+    t = np.zeros((4, 256), dtype=np.uint32)
+    b = np.arange(256)
+    for k in range(4):
+        for j in range(8):
+            t[k] ^= np.where((b >> j) & 1, v[8 * k + j], 0).astype(np.uint32)
+    return t
+
+
+_SOBOL_DIM1_BYTES = _byte_xor_tables(_SOBOL_DIM1)
+
+
 def sobol_2d(index) -> tuple[np.ndarray, np.ndarray]:
     """First two Sobol dimensions of ``index`` as 32-bit fixed-point uint32 (value·2^32).
 
     Dimension 0 is van der Corput (bit reversal); dimension 1 uses the direction numbers of the
-    primitive polynomial x + 1 (v_0 = 2^31, v_i = v_{i-1} ^ (v_{i-1} >> 1)).
+    primitive polynomial x + 1 (v_0 = 2^31, v_i = v_{i-1} ^ (v_{i-1} >> 1)), applied a byte of
+    the index at a time through precomputed XOR tables.
     """
     index = _u32(index)
     x = reverse_bits(index)
-    y = np.zeros_like(index)
-    for bit in range(32):  # loop over the 32 bits of the index, vectorized over samples
-        mask = ((index >> _U32(bit)) & _U32(1)).astype(bool)
-        if not mask.any():
-            if not (index >> _U32(bit)).any():
-                break
-            continue
-        y ^= np.where(mask, _SOBOL_DIM1[bit], _U32(0))
+    t = _SOBOL_DIM1_BYTES
+    y = t[0][index & _U32(0xFF)]
+    hi = index >> _U32(8)
+    if hi.any():
+        y = y ^ t[1][hi & _U32(0xFF)] ^ t[2][(index >> _U32(16)) & _U32(0xFF)] ^ t[3][index >> _U32(24)]
     return x, y
 
 
