@@ -67,6 +67,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--threads", type=_positive, help="worker threads (default: all cores)")
     r.add_argument("--resolution", type=_resolution, help="override WIDTHxHEIGHT (keeps the camera's framing)")
     r.add_argument("--sampler", choices=["SOBOL", "STRATIFIED", "RANDOM"], help="sample generator")
+    r.add_argument("--direct", choices=["MIS_POWER", "MIS_BALANCE", "LIGHT", "BSDF"], help="direct-light estimator (default MIS_POWER)")
+    r.add_argument("--indirect", choices=["BSDF", "COSINE", "UNIFORM"], help="how paths continue (default BSDF)")
+    r.add_argument("--adaptive-threshold", type=float, help="stop pixels whose relative standard error is below this (0: off)")
+    r.add_argument("--adaptive-min-samples", type=_non_negative, help="samples before a pixel may stop (0: automatic)")
     r.add_argument("--sample-offset", type=_non_negative, default=0, help="first sample number (farm splitting)")
     r.add_argument("--sample-count", type=_positive, help="number of samples to render from --sample-offset")
     r.add_argument("--frame", type=int, help="frame to render (.blend only)")
@@ -156,6 +160,8 @@ def cmd_render(args) -> int:
     from .scene import SceneError
 
     _check_output(args.output)
+    if args.adaptive_threshold is not None and not (0 <= args.adaptive_threshold <= 1):
+        raise CliError(f"--adaptive-threshold must be within [0, 1], got {args.adaptive_threshold}")
     scene = _load(args)
     if args.resolution:
         scene.render = replace(scene.render, width=args.resolution[0], height=args.resolution[1])
@@ -179,6 +185,8 @@ def cmd_render(args) -> int:
     try:
         film = render(
             scene, spp=spp, seed=args.seed, threads=args.threads, sampler=args.sampler,
+            direct=args.direct, indirect=args.indirect, adaptive_threshold=args.adaptive_threshold,
+            adaptive_min_samples=args.adaptive_min_samples,
             sample_offset=args.sample_offset, sample_count=count, tick=bar, cancel=stop.is_set,
         )
     except SceneError as e:

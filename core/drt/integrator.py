@@ -40,7 +40,8 @@ from .lights import LightSet
 from .materials import LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, MaterialTable
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
-from .sampling.warps import build_frame, to_local, to_world
+from .sampling.warps import build_frame, square_to_cosine_hemisphere, square_to_uniform_hemisphere, to_local, to_world
+from . import scene as scene_module
 from .scene import RenderSettings
 from .trace import Tracer, offset_origin
 
@@ -54,6 +55,21 @@ def power_heuristic(pdf_a: np.ndarray, pdf_b: np.ndarray) -> np.ndarray:
     a2 = pdf_a * pdf_a
     denom = a2 + pdf_b * pdf_b
     return np.where(denom > 0, a2 / np.where(denom > 0, denom, 1.0), 0.0)
+
+
+def balance_heuristic(pdf_a: np.ndarray, pdf_b: np.ndarray) -> np.ndarray:
+    """Veach's balance heuristic weight of strategy a; 0 where both pdfs are 0."""
+    denom = pdf_a + pdf_b
+    return np.where(denom > 0, pdf_a / np.where(denom > 0, denom, 1.0), 0.0)
+
+
+# How direct light is estimated at each path vertex (selectable for study; MIS_POWER is best):
+# LIGHT: next-event estimation only; BSDF: only BSDF-sampled rays that hit emitters;
+# MIS_*: both, combined by the balance or power heuristic.
+DIRECT_STRATEGIES = scene_module.DIRECT_STRATEGIES
+# How the path continues: by importance-sampling the BSDF (best), or cosine-weighted / uniform
+# over the hemisphere on wo's side (materials with refraction always use their BSDF).
+INDIRECT_STRATEGIES = scene_module.INDIRECT_STRATEGIES
 
 
 def _dot(a, b):
@@ -97,7 +113,15 @@ class Integrator:
         camera: Camera,
         sampler: Sampler,
         pixel_filter: PixelFilter,
+        direct: str = "MIS_POWER",
+        indirect: str = "BSDF",
     ):
+        if direct not in DIRECT_STRATEGIES:
+            raise ValueError(f"unknown direct-light strategy {direct!r} (choose from {', '.join(DIRECT_STRATEGIES)})")
+        if indirect not in INDIRECT_STRATEGIES:
+            raise ValueError(f"unknown indirect strategy {indirect!r} (choose from {', '.join(INDIRECT_STRATEGIES)})")
+        self.direct = direct
+        self.indirect = indirect
         self.s = settings
         self.geom = geom
         self.tracer = tracer
@@ -134,6 +158,28 @@ class Integrator:
         ns[smooth] = n
         return ns
 
+    def _hit_weight(self, prev_delta, bsdf_pdf, light_pdf):
+        """MIS weight of an emitter found by a BSDF-sampled ray (1 after camera/specular rays)."""
+        if self.direct == "BSDF":
+            w = np.ones(len(bsdf_pdf))
+        elif self.direct == "LIGHT":
+            # next-event estimation already counted it, unless NEE could not have sampled it
+            w = np.where(light_pdf > 0, 0.0, 1.0)
+        elif self.direct == "MIS_BALANCE":
+            w = balance_heuristic(bsdf_pdf, light_pdf)
+        else:
+            w = power_heuristic(bsdf_pdf, light_pdf)
+        return np.where(prev_delta, 1.0, w)
+
+    def _nee_weight(self, is_delta, light_pdf, bsdf_pdf):
+        if self.direct == "LIGHT":
+            w = np.ones(len(light_pdf))
+        elif self.direct == "MIS_BALANCE":
+            w = balance_heuristic(light_pdf, bsdf_pdf)
+        else:
+            w = power_heuristic(light_pdf, bsdf_pdf)
+        return np.where(is_delta, 1.0, w)
+
     def _clamp(self, contrib: np.ndarray, indirect: np.ndarray) -> np.ndarray:
         limits = np.where(indirect, self.s.clamp_indirect, self.s.clamp_direct)
         if not np.any(limits > 0):
@@ -141,6 +187,29 @@ class Integrator:
         peak = contrib.max(axis=1)
         scale = np.where((limits > 0) & (peak > limits), limits / np.where(peak > 0, peak, 1.0), 1.0)
         return contrib * scale[:, None]
+
+    def _hemisphere_continuation(self, bs, mat, wo_l, u):
+        """Replace the BSDF sample by a cosine-weighted or uniform direction on wo's side of the
+        surface (the lecture's estimators), for materials without refraction or mirrors."""
+        k = np.nonzero(~self.materials.has_transmission_or_delta(mat))[0]
+        if not len(k):
+            return
+        if self.indirect == "COSINE":
+            wi = square_to_cosine_hemisphere(u[k])
+            pdf = wi[:, 2] / np.pi
+        else:
+            wi = square_to_uniform_hemisphere(u[k])
+            pdf = np.full(len(k), 1.0 / (2.0 * np.pi))
+        side = np.where(wo_l[k, 2] >= 0, 1.0, -1.0)
+        wi[:, 2] *= side
+        f, _ = self.materials.eval(mat[k], wo_l[k], wi)
+        ok = pdf > 0
+        bs.wi[k] = wi
+        bs.pdf[k] = pdf
+        bs.weight[k] = np.where(ok[:, None], f / np.where(ok, pdf, 1.0)[:, None], 0.0)
+        bs.is_delta[k] = False
+        bs.valid[k] = ok
+        bs.lobe_kind[k] = np.where(self.materials.has_diffuse(mat[k]), LOBE_DIFFUSE, LOBE_GLOSSY)
 
     # ------------------------------------------------------------------ main entry
     def render_batch(self, x: np.ndarray, row: np.ndarray, index: np.ndarray) -> SampleBatch:
@@ -195,7 +264,7 @@ class Integrator:
             if camera_ray and np.any(light_hit):
                 light_hit &= self.lights.visible_to_camera[np.maximum(lh.light, 0)]
             if np.any(light_hit):
-                w = np.where(st.prev_delta, 1.0, power_heuristic(st.prev_pdf, lh.pdf))[light_hit]
+                w = self._hit_weight(st.prev_delta, st.prev_pdf, lh.pdf)[light_hit]
                 c = st.throughput[light_hit] * lh.radiance[light_hit] * w[:, None]
                 radiance[st.path[light_hit]] += self._clamp(c, st.bounce[light_hit] > 0)
             # a sun disk is "hit" at t = inf: the world behind it still shines
@@ -208,7 +277,7 @@ class Integrator:
                 else:
                     le = self.lights.world_radiance(st.d[miss])
                     wpdf = self.lights.world_pdf(st.prev_p[miss], st.prev_n[miss], st.d[miss])
-                    w = np.where(st.prev_delta[miss], 1.0, power_heuristic(st.prev_pdf[miss], wpdf))
+                    w = self._hit_weight(st.prev_delta[miss], st.prev_pdf[miss], wpdf)
                     c = st.throughput[miss] * le * w[:, None]
                     radiance[paths] += self._clamp(c, st.bounce[miss] > 0)
 
@@ -221,7 +290,7 @@ class Integrator:
                 e = si[em]
                 le = self.materials.emission[mat_all[em]]
                 lpdf = self.lights.emissive_pdf(hits.prim[e], st.prev_p[e], hits.p[e], hits.ng[e])
-                w = np.where(st.prev_delta[e], 1.0, power_heuristic(st.prev_pdf[e], lpdf))
+                w = self._hit_weight(st.prev_delta[e], st.prev_pdf[e], lpdf)
                 c = st.throughput[e] * le * w[:, None]
                 radiance[st.path[e]] += self._clamp(c, st.bounce[e] > 0)
 
@@ -258,7 +327,7 @@ class Integrator:
 
             # --- next-event estimation with MIS
             can_nee = ~self.materials.is_delta_only(mat)
-            if np.any(can_nee) and self.lights.strategies:
+            if self.direct != "BSDF" and np.any(can_nee) and self.lights.strategies:
                 k = np.nonzero(can_nee)[0]
                 u_l = self.sampler.sample_2d(pid_b[k], idx_b[k], base + 1)
                 ls = self.lights.sample(p[k], n_wo[k], u_sel[k, 0], u_l)
@@ -271,7 +340,7 @@ class Integrator:
                 ok = ls.valid & (ls.pdf > 0) & (same_geo == same_sh) & np.any(f > 0, axis=1)
                 if np.any(ok):
                     k2 = k[ok]
-                    w = np.where(ls.is_delta[ok], 1.0, power_heuristic(ls.pdf[ok], pdf_b[ok]))
+                    w = self._nee_weight(ls.is_delta[ok], ls.pdf[ok], pdf_b[ok])
                     contrib = st.throughput[k2] * f[ok] * ls.radiance[ok] * (w / ls.pdf[ok])[:, None]
                     o_sh = offset_origin(p[k2], ng[k2], wi[ok])
                     dist = ls.dist[ok]
@@ -284,6 +353,8 @@ class Integrator:
             # --- continue the path by sampling the BSDF
             u_b = self.sampler.sample_2d(pid_b, idx_b, base + 2)
             bs = self.materials.sample(mat, wo_l, u_sel[:, 1], u_b)
+            if self.indirect != "BSDF":
+                self._hemisphere_continuation(bs, mat, wo_l, u_b)
             wi = to_world(bs.wi, t_ax, b_ax, ns)
             refl_geo = _dot(wi, ng) * _dot(wo, ng) > 0
             refl_sh = bs.wi[:, 2] * wo_l[:, 2] > 0

@@ -36,10 +36,6 @@ from .trace import Tracer
 BATCH_PATHS = 1 << 16
 
 
-class RenderCancelled(Exception):
-    """Raised by nothing: ``render`` returns the partial film instead (see ``RenderStats``)."""
-
-
 @dataclass
 class RenderStats:
     seconds: float = 0.0
@@ -49,6 +45,7 @@ class RenderStats:
     rays: int = 0
     embree_seconds: float = 0.0
     nan_samples: int = 0
+    active_pixels: int = -1  # pixels still sampling (adaptive sampling); -1: all
     cancelled: bool = False
     threads: int = 1
 
@@ -80,12 +77,13 @@ def _emissive_triangles(scene: Scene, geom, materials: MaterialTable) -> Emissiv
     return EmissiveTriangles(verts, materials.emission[mat[em]], em)
 
 
-def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None) -> RenderContext:
-    """Build the tracer, material table, lights and camera for ``scene``."""
+def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None,
+            direct: str | None = None, indirect: str | None = None) -> RenderContext:
+    """Build the tracer, material table, lights and camera for ``scene``. Arguments that are
+    not None override the scene's render settings."""
     t0 = time.perf_counter()
-    settings = scene.render
-    if seed is not None or sampler is not None:
-        settings = replace(settings, seed=settings.seed if seed is None else int(seed), sampler=sampler or settings.sampler)
+    overrides = {k: v for k, v in (("seed", seed), ("sampler", sampler), ("direct", direct), ("indirect", indirect)) if v is not None}
+    settings = replace(scene.render, **overrides)
     geom = build_geometry(scene)
     try:
         materials = MaterialTable.from_scene(scene.materials)
@@ -102,6 +100,8 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
         settings, geom, tracer, materials, lights, camera,
         Sampler(settings.sampler, settings.seed, settings.spp),
         PixelFilter(settings.filter_type, settings.filter_width),
+        direct=settings.direct,
+        indirect=settings.indirect,
     )
     ctx = RenderContext(scene, integ, tracer, time.perf_counter() - t0)
     if not scene.lights and not np.any(scene.world_color > 0) and emissive is None:
@@ -143,21 +143,30 @@ def render(
     sample_offset: int = 0,
     sample_count: int | None = None,
     sampler: str | None = None,
+    direct: str | None = None,
+    indirect: str | None = None,
+    adaptive_threshold: float | None = None,
+    adaptive_min_samples: int | None = None,
     progress: Callable[[Film, int, int], None] | None = None,
     tick: Callable[[float, RenderStats], None] | None = None,
     cancel: Callable[[], bool] | None = None,
     context: RenderContext | None = None,
 ) -> Film:
-    """Render ``scene`` and return its ``Film`` (``film.meta['stats']`` holds a ``RenderStats``).
+    """Render ``scene`` and return its ``Film`` (``film.stats`` holds a ``RenderStats``).
 
     spp: samples per pixel of the *whole* render (default: the scene's); the samples rendered
     here are numbers [sample_offset, sample_offset + sample_count) (default: all of them).
     progress(film, samples_done, samples_total) after each pass; tick(fraction, stats) after each
     batch; cancel() -> bool polled between batches: when it returns True the partial film is
     returned with ``stats.cancelled`` set.
+
+    Adaptive sampling (``adaptive_threshold`` > 0): once every pixel has
+    ``adaptive_min_samples``, a pixel stops receiving samples when the relative standard error
+    of its mean luminance falls below the threshold (``film.sample_count`` records what each
+    pixel took). Stopping depends only on the pixel's own samples, so it stays deterministic.
     """
     t0 = time.perf_counter()
-    ctx = context or prepare(scene, seed=seed, sampler=sampler)
+    ctx = context or prepare(scene, seed=seed, sampler=sampler, direct=direct, indirect=indirect)
     integ = ctx.integrator
     spp = int(spp or scene.render.spp)
     if spp < 1:
@@ -170,7 +179,12 @@ def render(
     threads = max(1, int(threads or os.cpu_count() or 1))
     film = Film(scene.render.width, scene.render.height)
     stats = RenderStats(samples_total=count, threads=threads)
-    xs, ys = _pixel_region(scene)
+    xs_all, ys_all = _pixel_region(scene)
+    xs, ys = xs_all, ys_all
+    threshold = scene.render.adaptive_threshold if adaptive_threshold is None else float(adaptive_threshold)
+    min_samples = scene.render.adaptive_min_samples if adaptive_min_samples is None else int(adaptive_min_samples)
+    if min_samples <= 0:
+        min_samples = max(16, spp // 16)
     npix = len(xs)
     rays0 = ctx.tracer.rays_traced
     emb0 = ctx.tracer.embree_seconds
@@ -178,6 +192,7 @@ def render(
 
     def batches(first: int, k: int):
         """(x, row, sample index) arrays of one pass, cut into batches."""
+        npix = len(xs)
         per = max(1, BATCH_PATHS // max(k, 1))
         for start in range(0, npix, per):
             sl = slice(start, start + per)
@@ -203,6 +218,15 @@ def render(
                 break
             done += k
             stats.samples_done = done - sample_offset
+            if threshold > 0 and stats.samples_done >= min_samples:
+                keep = adaptive_active(film, xs, ys, threshold)
+                xs, ys = xs[keep], ys[keep]
+                stats.active_pixels = int(len(xs))
+                if len(xs) == 0:
+                    stats.samples_done = count
+                    if progress is not None:
+                        progress(film, count, count)
+                    break
             if progress is not None:
                 progress(film, stats.samples_done, count)
             if cancel is not None and cancel():
@@ -227,6 +251,18 @@ def render(
     )
     film.stats = stats
     return film
+
+
+def adaptive_active(film: Film, xs: np.ndarray, ys: np.ndarray, threshold: float) -> np.ndarray:
+    """(n,) bool for the given pixels: is the relative standard error of the mean luminance
+    still above ``threshold``? The denominator is floored at 1e-3 so black pixels converge."""
+    flat = ys * film.width + xs
+    n = film.count[flat].astype(np.float64)
+    weights = np.array([0.2126, 0.7152, 0.0722])
+    mean = film.sum_rgba[flat, :3] @ weights / np.maximum(n, 1)
+    m2 = film.sum_lum2[flat] / np.maximum(n, 1)
+    var_mean = np.maximum(m2 - mean**2, 0.0) / np.maximum(n - 1, 1)
+    return np.sqrt(var_mean) > threshold * np.maximum(mean, 1e-3)
 
 
 def _collect(batch, film, stats, tick, total_paths, ctx, rays0, emb0, t0):

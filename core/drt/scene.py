@@ -25,6 +25,8 @@ AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
 LOBE_TYPES = ("DIFFUSE", "GLOSSY", "GLASS")
 FILTER_TYPES = ("BLACKMAN_HARRIS", "GAUSSIAN", "BOX")
 SAMPLER_KINDS = ("SOBOL", "STRATIFIED", "RANDOM")
+DIRECT_STRATEGIES = ("MIS_POWER", "MIS_BALANCE", "LIGHT", "BSDF")
+INDIRECT_STRATEGIES = ("BSDF", "COSINE", "UNIFORM")
 SENSOR_FITS = ("AUTO", "HORIZONTAL", "VERTICAL")
 CAMERA_TYPES = ("PERSP", "ORTHO")
 
@@ -152,6 +154,10 @@ class RenderSettings:
     clamp_direct: float = 0.0
     clamp_indirect: float = 0.0
     shutter: tuple[float, float] | None = None
+    direct: str = "MIS_POWER"  # direct-light estimator (see integrator.DIRECT_STRATEGIES)
+    indirect: str = "BSDF"  # continuation sampling (integrator.INDIRECT_STRATEGIES)
+    adaptive_threshold: float = 0.0  # stop a pixel when its relative standard error falls below; 0 = off
+    adaptive_min_samples: int = 0  # samples every pixel takes before it may stop; 0 = automatic
 
 
 @dataclass
@@ -279,6 +285,10 @@ def _render_settings(h: dict) -> RenderSettings:
         clamp_direct=_number(r, "clamp_direct", p, 0.0, lo=0),
         clamp_indirect=_number(r, "clamp_indirect", p, 0.0, lo=0),
         shutter=shutter,
+        direct=_enum(r, "direct", p, DIRECT_STRATEGIES, "MIS_POWER"),
+        indirect=_enum(r, "indirect", p, INDIRECT_STRATEGIES, "BSDF"),
+        adaptive_threshold=_number(r, "adaptive_threshold", p, 0.0, lo=0, hi=1),
+        adaptive_min_samples=_number(r, "adaptive_min_samples", p, 0, lo=0, hi=MAX_SPP, integer=True),
         **bounces,
     )
 

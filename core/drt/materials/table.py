@@ -204,6 +204,17 @@ class MaterialTable:
         materials without lobes)."""
         return self._delta_only[np.asarray(mat, dtype=np.intp)]
 
+    def has_transmission_or_delta(self, mat: np.ndarray) -> np.ndarray:
+        """mat (n,) int; (n,) bool: a glass lobe or a mirror-like (delta) lobe is present, so
+        only the material's own sampling reaches all of its directions."""
+        used = self.lobe_type != BSDF_NONE
+        flag = np.any(used & ((self.lobe_type == BSDF_GLASS) | self.lobe_delta), axis=1)
+        return flag[np.asarray(mat, dtype=np.intp)]
+
+    def has_diffuse(self, mat: np.ndarray) -> np.ndarray:
+        """mat (n,) int; (n,) bool: the material has a diffuse lobe."""
+        return np.any(self.lobe_type == BSDF_DIFFUSE, axis=1)[np.asarray(mat, dtype=np.intp)]
+
     def eval(self, mat: np.ndarray, wo: np.ndarray,
              wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """mat (n,) int; wo, wi (n, 3) local unit vectors. Returns (f·|cos θi| (n, 3) summed over
