@@ -22,6 +22,7 @@ from typing import Callable
 
 import numpy as np
 
+from . import __version__
 from .camera import Camera
 from .film import Film
 from .geometry import build_geometry
@@ -239,7 +240,7 @@ def render(
     stats.nan_samples = film.nan_samples
     film.meta.update(
         {
-            "version": __import__("drt").__version__,
+            "version": __version__,
             "seed": integ.s.seed,
             "sampler": integ.sampler.kind,
             "spp": spp,
