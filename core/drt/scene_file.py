@@ -9,13 +9,16 @@ from __future__ import annotations
 
 import json
 import os
+import struct
 import zipfile
+import zlib
 
 import numpy as np
 
 from .scene import Scene, SceneError, scene_from_dict
 
 MAX_HEADER_BYTES = 64 << 20
+MAX_ARRAY_BYTES = 16 << 30  # total uncompressed arrays a scene file may declare
 
 
 def encode_header(header: dict) -> np.ndarray:
@@ -37,26 +40,77 @@ def save_scene(path: str | os.PathLike, header: dict, arrays: dict[str, np.ndarr
     os.replace(tmp, path)  # never leave a half-written scene behind
 
 
+def _available_memory() -> int | None:
+    """Bytes the OS says can still be allocated (Linux MemAvailable); None if unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _array_budget() -> int:
+    avail = _available_memory()
+    return MAX_ARRAY_BYTES if avail is None else min(MAX_ARRAY_BYTES, int(0.8 * avail))
+
+
+def _read_member(z: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:
+    """One ``.npy`` member, after checking that the shape its header declares matches the size
+    the archive declares (a lying header cannot make us allocate more than the archive holds)."""
+    name = info.filename[:-4]
+    with z.open(info) as f:
+        try:
+            version = np.lib.format.read_magic(f)
+            shape, fortran, dtype = np.lib.format._read_array_header(f, version, max_header_size=10000)
+        except (ValueError, SyntaxError, TypeError) as e:
+            raise SceneError(name, f"is not a valid .npy array ({e})") from None
+        if dtype.hasobject:
+            raise SceneError(name, "is an object array, which would need pickle to load: refused")
+        count = 1
+        for s in shape:
+            count *= int(s)
+        data_bytes = info.file_size - f.tell()
+        if count * dtype.itemsize != data_bytes:
+            raise SceneError(
+                name, f"declares shape {shape} of {dtype} ({count * dtype.itemsize} bytes) but holds {data_bytes} bytes"
+            )
+    with z.open(info) as f:
+        return np.lib.format.read_array(f, allow_pickle=False, max_header_size=10000)
+
+
 def read_scene_arrays(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarray]]:
-    """Read the header dict and arrays without validating their meaning."""
+    """Read the header dict and arrays without validating their meaning.
+
+    Memory stays bounded by what the archive declares: before anything is decompressed, the
+    members' declared sizes must fit ``MAX_ARRAY_BYTES`` (and 80 % of the available memory), and
+    every ``.npy`` header's shape must match its member's size (no zip bombs, no lying shapes).
+    """
     p = os.fspath(path)
     if not os.path.isfile(p):
         raise SceneError("file", f"{p} does not exist")
     try:
-        with np.load(p, allow_pickle=False) as z:
-            names = list(z.files)
+        with zipfile.ZipFile(p) as z:
+            infos = [i for i in z.infolist() if not i.is_dir()]
+            names = [i.filename[:-4] if i.filename.endswith(".npy") else i.filename for i in infos]
             if "header" not in names:
                 raise SceneError("header", f"{p} has no 'header' entry (is it a DRT scene file?)")
-            arrays = {}
-            for name in names:
-                try:
-                    a = z[name]
-                except ValueError as e:  # object arrays need pickle: refused
-                    raise SceneError(name, f"cannot be loaded without pickle ({e})") from None
-                arrays[name] = a
+            for i, name in zip(infos, names):
+                if not i.filename.endswith(".npy"):
+                    raise SceneError(name, "is not a .npy array (a scene archive holds only .npy members)")
+            header_info = infos[names.index("header")]
+            if header_info.file_size > MAX_HEADER_BYTES + 1024:
+                raise SceneError("header", f"is larger than {MAX_HEADER_BYTES} bytes")
+            total, budget = sum(i.file_size for i in infos), _array_budget()
+            if total > budget:
+                raise SceneError("file", f"{p} declares {total / 2**30:.2f} GiB of arrays, more than the {budget / 2**30:.2f} GiB allowed")
+            arrays = {name: _read_member(z, i) for i, name in zip(infos, names)}
     except SceneError:
         raise
-    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, RuntimeError) as e:
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError, ValueError, KeyError, RuntimeError,
+            NotImplementedError, zlib.error, struct.error) as e:
         raise SceneError("file", f"{p} is not a readable scene archive ({type(e).__name__}: {e})") from None
     raw = arrays.pop("header")
     if raw.dtype != np.uint8 or raw.ndim != 1:
@@ -67,6 +121,10 @@ def read_scene_arrays(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarr
         header = json.loads(raw.tobytes().decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise SceneError("header", f"is not valid UTF-8 JSON ({e})") from None
+    except RecursionError:
+        raise SceneError("header", "is nested too deeply") from None
+    except ValueError as e:  # e.g. an integer with more digits than Python converts
+        raise SceneError("header", f"is not valid JSON ({e})") from None
     if not isinstance(header, dict):
         raise SceneError("header", "must be a JSON object")
     return header, arrays
