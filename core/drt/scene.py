@@ -65,6 +65,8 @@ def _number(d, key, path, default=..., lo=None, hi=None, lo_open=False, integer=
     v = _get(d, key, path, default)
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise SceneError(p, f"must be a number, got {v!r}")
+    if isinstance(v, int) and abs(v) > 2**63:  # float(v) would overflow
+        raise SceneError(p, f"must be a finite number, got an integer of {len(str(abs(v)))} digits")
     if integer and (not float(v).is_integer()):
         raise SceneError(p, f"must be an integer, got {v!r}")
     if not math.isfinite(v):
@@ -95,8 +97,8 @@ def _vector(d, key, path, n, default=..., lo=None):
     v = _get(d, key, path, default)
     try:
         a = np.asarray(v, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SceneError(p, f"must be a list of {n} numbers") from None
+    except (TypeError, ValueError, OverflowError):
+        raise SceneError(p, f"must be a list of {n} finite numbers") from None
     if a.shape != (n,):
         raise SceneError(p, f"must be a list of {n} numbers, got shape {a.shape}")
     if not np.all(np.isfinite(a)):
@@ -111,7 +113,7 @@ def _matrix(d, key, path, default=...):
     v = _get(d, key, path, default)
     try:
         m = np.asarray(v, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise SceneError(p, "must be a 4x4 list of numbers") from None
     if m.shape != (4, 4):
         raise SceneError(p, f"must be a 4x4 matrix, got shape {m.shape}")
@@ -472,7 +474,7 @@ def scene_from_dict(header: dict, arrays: dict | None = None) -> Scene:
     if fmt != FORMAT_NAME:
         raise SceneError("format", f"must be '{FORMAT_NAME}', got {fmt!r}")
     version = header.get("version")
-    if version not in SUPPORTED_VERSIONS:
+    if isinstance(version, bool) or version not in SUPPORTED_VERSIONS:
         raise SceneError("version", f"{version!r} is not supported (this DRT reads versions {', '.join(map(str, SUPPORTED_VERSIONS))})")
     render = _render_settings(header)
     camera = _camera(header)
