@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import json
 import os
-import struct
 import zipfile
-import zlib
 
 import numpy as np
 
@@ -109,8 +107,10 @@ def read_scene_arrays(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarr
             arrays = {name: _read_member(z, i) for i, name in zip(infos, names)}
     except SceneError:
         raise
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError, ValueError, KeyError, RuntimeError,
-            NotImplementedError, zlib.error, struct.error) as e:
+    except MemoryError:
+        raise SceneError("file", f"{p} does not fit in the available memory") from None
+    except Exception as e:  # noqa: BLE001 - zipfile/numpy raise many types on corrupt archives
+        # (BadZipFile, EOFError, zlib.error, struct.error, IndexError on an empty member name, ...)
         raise SceneError("file", f"{p} is not a readable scene archive ({type(e).__name__}: {e})") from None
     raw = arrays.pop("header")
     if raw.dtype != np.uint8 or raw.ndim != 1:
