@@ -48,6 +48,8 @@ from .trace import Tracer, offset_origin
 D_PIXEL, D_LENS, D_TIME, D_BOUNCE0, DIMS_PER_BOUNCE = 0, 1, 2, 3, 4
 RR_START_BOUNCE = 3
 SHADOW_EPSILON = 1e-4  # relative shortening of shadow rays so they stop before the light's surface
+# largest radiance a sample may carry: its square (the variance pass) still fits float32
+MAX_SAMPLE_RADIANCE = 1e18
 
 
 def power_heuristic(pdf_a: np.ndarray, pdf_b: np.ndarray) -> np.ndarray:
@@ -397,8 +399,9 @@ class Integrator:
                 terminate_next=limit,
             ).select(alive)
 
-        # a NaN/Inf sample is counted, dropped (it does not enter its pixel's mean) and reported
-        good = np.all(np.isfinite(radiance), axis=1)
+        # a NaN/Inf sample is counted, dropped (it does not enter its pixel's mean) and reported;
+        # so is one beyond MAX_SAMPLE_RADIANCE, which would overflow the float32 passes
+        good = np.all(np.isfinite(radiance) & (np.abs(radiance) <= MAX_SAMPLE_RADIANCE), axis=1)
         nan_count = int(n - good.sum())
         if nan_count:
             pixel, radiance, alpha, depth = pixel[good], radiance[good], alpha[good], depth[good]
