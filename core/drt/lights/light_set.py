@@ -7,6 +7,21 @@ estimated luminance flux (`power`): point P, spot P·(1 − cos(size/2))/2, area
 luminance); emissive triangles 2π·Σ A·lum(L) (two-sided); sun S·πR² and world 4π²R²·lum(L), with
 R the scene radius (pbrt's flux estimates for distant lights). The triangle within the emissive
 group is then picked ∝ area × luminance with the remainder of the same random number.
+
+Selection modes (``selection=``):
+
+- ``"DISTANCE"`` (default): per shading point, ∝ an estimate of the irradiance each strategy
+  delivers there: a local light's flux over the squared distance to its centre, floored at the
+  square of its bounding radius (the cheap bound: it never explodes near or inside a light),
+  P/(4π·max(d², r²)) for points and spots, P/(π·max(d², r²)) for area lights (zero behind their
+  one-sided plane, where they give no light), 2πΣAL/(2π·max(d², r²)) for the emissive group
+  around its bounding sphere; the distant lights' flux over πR² (sun: S, world: π·L). The same
+  function of the point is evaluated by `intersect` / `emissive_pdf` / `world_pdf` (at the ray
+  origin) so MIS pdfs agree with `sample`.
+- ``"POWER"``: ∝ flux alone, the same everywhere.
+- ``"UNIFORM"``: every strategy alike (for comparison).
+
+With a single strategy nothing is computed: its probability is exactly 1.
 """
 
 from __future__ import annotations
@@ -89,6 +104,26 @@ def select(pmf, cdf, u) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return idx, prob, u_rem
 
 
+def select_rows(pmf, u) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Like `select`, with a separate distribution per row: pmf (m, k), u (m,) in [0, 1)."""
+    m, k = pmf.shape
+    cdf = np.cumsum(pmf, axis=1)
+    cdf[:, -1] = 1.0
+    idx = np.minimum((u[:, None] >= cdf).sum(axis=1), k - 1)
+    rows = np.arange(m)
+    prob = pmf[rows, idx]
+    if (prob == 0.0).any():  # round-off at the top of a row's cdf: take its last non-zero entry
+        last = k - 1 - np.argmax(pmf[:, ::-1] > 0.0, axis=1)
+        idx = np.where(prob == 0.0, last, idx)
+        prob = pmf[rows, idx]
+    lo = cdf[rows, idx] - prob
+    u_rem = np.clip((u - lo) / np.where(prob > 0, prob, 1.0), 0.0, np.nextafter(1.0, 0.0))
+    return idx, prob, u_rem
+
+
+SELECTION_MODES = ("DISTANCE", "POWER", "UNIFORM")
+
+
 def make_light(light: dict, origin_shift, scene_radius: float):
     kind = str(light.get("type", "POINT")).upper()
     if kind == "POINT":
@@ -115,7 +150,7 @@ class LightSet:
 
     def __init__(self, lights: list[dict], world_color=(0.0, 0.0, 0.0),
                  emissive: EmissiveTriangles | None = None, *, origin_shift=(0.0, 0.0, 0.0),
-                 scene_radius: float | None = None):
+                 scene_radius: float | None = None, selection: str = "DISTANCE"):
         origin_shift = np.asarray(origin_shift, dtype=np.float64).reshape(3)
         group = EmissiveGroup(emissive) if emissive is not None else None
         if group is not None and len(group) == 0:
@@ -136,12 +171,82 @@ class LightSet:
         if self.world is not None:
             self.world_index = len(self.strategies)
             self.strategies.append(self.world)
-        self.pmf, self.cdf = selection_distribution([s.power for s in self.strategies])
+        selection = str(selection).upper()
+        if selection not in SELECTION_MODES:
+            raise ValueError(f"unknown light selection {selection!r} (choose from {', '.join(SELECTION_MODES)})")
+        self.selection = selection
+        powers = [s.power for s in self.strategies]
+        if selection == "UNIFORM":
+            powers = [1.0] * len(powers)
+        self.pmf, self.cdf = selection_distribution(powers)
+        self._setup_distance_selection()
         self.visible_to_camera = np.array([lt.visible_to_camera for lt in self.lights], dtype=bool)
         self._shapes = [i for i, lt in enumerate(self.lights)
                         if isinstance(lt, (AreaLight, PointLight)) and not lt.is_delta]
         self._suns = [i for i, lt in enumerate(self.lights)
                       if isinstance(lt, SunLight) and not lt.is_delta]
+
+    # ------------------------------------------------------------------------------ selection
+    def _setup_distance_selection(self) -> None:
+        """Per-strategy arrays for `selection_pmf`: centre (k, 3), squared bounding radius (k,),
+        irradiance scale (k,) (flux × 1/(4π), 1/π, ...), local (k,) bool, one-sided normal
+        (k, 3) (zero: two-sided)."""
+        k = len(self.strategies)
+        self._per_point = self.selection == "DISTANCE" and k > 1
+        if not self._per_point:
+            return
+        centre = np.zeros((k, 3))
+        radius2 = np.zeros(k)
+        scale = np.zeros(k)
+        local = np.zeros(k, dtype=bool)
+        facing = np.zeros((k, 3))
+        for i, strat in enumerate(self.strategies):
+            if isinstance(strat, AreaLight):
+                centre[i], local[i] = strat.center, True
+                radius2[i] = 0.25 * (strat.len_x ** 2 + strat.len_y ** 2)
+                scale[i] = strat.power / np.pi
+                facing[i] = strat.normal
+            elif isinstance(strat, PointLight):  # and spot lights
+                centre[i], local[i] = strat.position, True
+                radius2[i] = strat.radius ** 2
+                scale[i] = strat.power / (4.0 * np.pi)
+            elif strat is self.emissive:
+                g = strat
+                pts = np.concatenate([g.v0, g.v0 + g.e1, g.v0 + g.e2])
+                lo, hi = pts.min(axis=0), pts.max(axis=0)
+                centre[i], local[i] = 0.5 * (lo + hi), True
+                radius2[i] = 0.25 * float(np.sum((hi - lo) ** 2))
+                scale[i] = strat.power / (2.0 * np.pi)
+            else:  # sun, world: flux over the scene's disk πR²
+                scale[i] = strat.power / (np.pi * self.scene_radius ** 2)
+        self._sel_centre, self._sel_radius2, self._sel_scale = centre, radius2, scale
+        self._sel_local, self._sel_facing = local, facing
+        self._sel_one_sided = np.any(facing != 0.0, axis=1)
+
+    def selection_pmf(self, p) -> np.ndarray:
+        """(m, k) probability of choosing each strategy at points p (m, 3) (see the module
+        docstring). Rows whose estimates are all zero fall back to the power distribution."""
+        p = np.asarray(p, dtype=np.float64)
+        if not self._per_point:
+            return np.broadcast_to(self.pmf, (len(p), len(self.pmf)))
+        rel = p[:, None, :] - self._sel_centre[None, :, :]
+        d2 = np.einsum("mkj,mkj->mk", rel, rel)
+        w = np.where(self._sel_local, self._sel_scale / np.maximum(d2, np.maximum(self._sel_radius2, 1e-12)),
+                     self._sel_scale)
+        if self._sel_one_sided.any():
+            behind = np.einsum("mkj,kj->mk", rel, self._sel_facing) <= 0.0
+            w = np.where(self._sel_one_sided & behind, 0.0, w)
+        total = w.sum(axis=1, keepdims=True)
+        pmf = np.where(total > 0, w / np.where(total > 0, total, 1.0), self.pmf[None, :])
+        return pmf
+
+    def selection_prob(self, p, index) -> np.ndarray:
+        """(m,) probability that `sample` at points p (m, 3) chooses strategy ``index`` (int or
+        (m,) ints)."""
+        index = np.broadcast_to(np.asarray(index), (len(p),))
+        if not self._per_point:
+            return self.pmf[index]
+        return self.selection_pmf(p)[np.arange(len(p)), index]
 
     @property
     def count(self) -> int:
@@ -171,7 +276,11 @@ class LightSet:
                           prim=np.full(m, -1))
         if not self.strategies or m == 0:
             return out
-        idx, prob, u_rem = select(self.pmf, self.cdf, np.asarray(u_select, dtype=np.float64))
+        u_select = np.asarray(u_select, dtype=np.float64)
+        if self._per_point:
+            idx, prob, u_rem = select_rows(self.selection_pmf(p), u_select)
+        else:
+            idx, prob, u_rem = select(self.pmf, self.cdf, u_select)
         u2 = np.asarray(u2, dtype=np.float64)
         for s, strat in enumerate(self.strategies):
             sel = idx == s
@@ -220,14 +329,14 @@ class LightSet:
             if sel.any():
                 lt = self.lights[i]
                 radiance[sel] = lt.hit_radiance(o[sel], d[sel], t_out[sel])
-                pdf[sel] = lt.pdf(o[sel], d[sel], t_out[sel]) * self.pmf[i]
+                pdf[sel] = lt.pdf(o[sel], d[sel], t_out[sel]) * self.selection_prob(o[sel], i)
         open_sky = ~hit & np.isinf(tmax)
         for i in self._suns:
             sel = open_sky & (best < 0) & self.lights[i].in_cone(d)
             if sel.any():
                 best[sel] = i
                 radiance[sel] = self.lights[i].radiance
-                pdf[sel] = self.lights[i].pdf_dir(d[sel]) * self.pmf[i]
+                pdf[sel] = self.lights[i].pdf_dir(d[sel]) * self.selection_prob(o[sel], i)
         return LightHit(hit=best >= 0, t=t_out, radiance=radiance, pdf=pdf, light=best)
 
     def world_radiance(self, d) -> np.ndarray:
@@ -240,7 +349,7 @@ class LightSet:
         with normal n (None → uniform sphere), as `sample` would."""
         if self.world is None:
             return np.zeros(len(d))
-        return self.world.pdf(n, np.asarray(d, dtype=np.float64)) * self.pmf[self.world_index]
+        return self.world.pdf(n, np.asarray(d, dtype=np.float64)) * self.selection_prob(p, self.world_index)
 
     def emissive_pdf(self, tri, o, p_hit, ng_hit) -> np.ndarray:
         """(m,) MIS pdf (solid angle × selection) of sampling p_hit on emissive triangle `tri`
@@ -250,4 +359,4 @@ class LightSet:
         pdf = self.emissive.pdf(tri, np.asarray(o, dtype=np.float64),
                                 np.asarray(p_hit, dtype=np.float64),
                                 np.asarray(ng_hit, dtype=np.float64))
-        return pdf * self.pmf[self.emissive_index]
+        return pdf * self.selection_prob(o, self.emissive_index)
