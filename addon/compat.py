@@ -55,30 +55,83 @@ def mesh_is_flat(mesh) -> bool:
     return not smooth.any()
 
 
-def corner_normals(mesh) -> np.ndarray:
-    """Per-corner (loop) shading normals as Blender shades them, (L, 3) float32, local space."""
-    n_loops = len(mesh.loops)
-    out = np.empty(n_loops * 3, dtype=np.float32)
-    if hasattr(mesh, "corner_normals"):  # 4.1+
-        domain = mesh.normals_domain
-        if domain == "POINT":
-            vn = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
-            mesh.vertex_normals.foreach_get("vector", vn)
-            loop_vert = np.empty(n_loops, dtype=np.int32)
-            mesh.loops.foreach_get("vertex_index", loop_vert)
-            return vn.reshape(-1, 3)[loop_vert]
-        mesh.corner_normals.foreach_get("vector", out)
-    else:  # 3.4: calc_normals_split() filled loop normals
-        mesh.loops.foreach_get("normal", out)
+def _attribute(mesh, name, domain, kind, width):
+    """A built-in attribute as a flat numpy array, or None when the mesh lacks it (3.4)."""
+    attrs = getattr(mesh, "attributes", None)
+    attr = attrs.get(name) if attrs is not None else None
+    if attr is None or attr.domain != domain:
+        return None
+    out = np.empty(len(attr.data) * width, dtype=np.float32 if kind == "vector" else np.int32)
+    attr.data.foreach_get(kind, out)
+    return out
+
+
+def positions(mesh) -> np.ndarray:
+    """Vertex positions, (V, 3) float32, object local space."""
+    out = _attribute(mesh, "position", "POINT", "vector", 3)
+    if out is None:
+        out = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+        mesh.vertices.foreach_get("co", out)
     return out.reshape(-1, 3)
 
 
-def active_uv_data(mesh):
-    """The active UV map's per-loop collection (``foreach_get("uv")``), or None."""
-    layer = mesh.uv_layers.active
-    if layer is None:
+def triangle_corners(mesh) -> np.ndarray:
+    """Corner (loop) indices of each loop triangle, (T, 3) int32."""
+    out = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
+    mesh.loop_triangles.foreach_get("loops", out)
+    return out.reshape(-1, 3)
+
+
+def corner_verts(mesh) -> np.ndarray:
+    """Vertex index of each corner, (L,) int32."""
+    out = _attribute(mesh, ".corner_vert", "CORNER", "value", 1)
+    if out is None:
+        out = np.empty(len(mesh.loops), dtype=np.int32)
+        mesh.loops.foreach_get("vertex_index", out)
+    return out
+
+
+def triangle_material_slots(mesh) -> np.ndarray:
+    """Material slot index of each loop triangle, (T,) int32."""
+    n_tri = len(mesh.loop_triangles)
+    if hasattr(mesh, "loop_triangle_polygons"):  # 3.6+: fast face lookup
+        face = np.empty(n_tri, dtype=np.int32)
+        mesh.loop_triangle_polygons.foreach_get("value", face)
+        slots = _attribute(mesh, "material_index", "FACE", "value", 1)
+        return np.zeros(n_tri, np.int32) if slots is None else slots[face]
+    out = np.empty(n_tri, dtype=np.int32)
+    mesh.loop_triangles.foreach_get("material_index", out)
+    return out
+
+
+def triangle_normals(mesh, tri_corners: np.ndarray, tri_verts: np.ndarray) -> np.ndarray | None:
+    """Per-corner shading normals of each triangle (T, 3, 3) float32, None when all flat."""
+    if mesh_is_flat(mesh):
         return None
-    return layer.data
+    if hasattr(mesh, "corner_normals"):  # 4.1+
+        if mesh.normals_domain == "POINT":
+            vn = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+            mesh.vertex_normals.foreach_get("vector", vn)
+            return vn.reshape(-1, 3)[tri_verts]
+        cn = np.empty(len(mesh.loops) * 3, dtype=np.float32)
+        mesh.corner_normals.foreach_get("vector", cn)
+    else:  # <= 4.0: calc_normals_split() filled loop normals
+        cn = np.empty(len(mesh.loops) * 3, dtype=np.float32)
+        mesh.loops.foreach_get("normal", cn)
+    return cn.reshape(-1, 3)[tri_corners]
+
+
+def active_uvs(mesh) -> np.ndarray | None:
+    """The active UV map per corner, (L, 2) float32, or None."""
+    layer = mesh.uv_layers.active
+    if layer is None or len(mesh.loops) == 0:
+        return None
+    out = np.empty(len(mesh.loops) * 2, dtype=np.float32)
+    if hasattr(layer, "uv"):  # 3.5+: a float2 attribute, much faster than .data
+        layer.uv.foreach_get("vector", out)
+    else:
+        layer.data.foreach_get("uv", out)
+    return out.reshape(-1, 2)
 
 
 # --- materials ----------------------------------------------------------------------------------

@@ -230,10 +230,12 @@ def finish(scene, name, resolution=(96, 96), samples=16, out=None, npz=True):
         scene.render.engine = "DRT"
         scene.drt.samples = samples
     blend = os.path.join(out, f"{name}.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=blend, compress=False)
+    bpy.ops.wm.save_as_mainfile(filepath=blend, compress=True)
     npz_path = None
     if npz and not opts.no_npz and _ensure_addon():
         npz_path = os.path.join(out, f"{name}.npz")
+        # Export what the saved file holds (mesh generators need not be deterministic).
+        bpy.ops.wm.open_mainfile(filepath=blend)
         export_npz(npz_path)
     print(f"saved {blend}" + (f" and {npz_path}" if npz_path else ""))
     return blend, npz_path

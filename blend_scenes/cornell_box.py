@@ -10,6 +10,8 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _common as C  # noqa: E402
 
+FINISH = dict(resolution=(96, 96), samples=16)
+
 
 def build():
     scene = C.reset()
@@ -32,4 +34,4 @@ def build():
 
 
 if __name__ == "__main__":
-    C.finish(build(), "cornell_box", resolution=(96, 96), samples=16)
+    C.finish(build(), "cornell_box", **FINISH)

@@ -33,6 +33,15 @@ def _instance_key(inst) -> tuple:
     return (obj.original.name, parent, pid)
 
 
+def _instance_name(inst, key) -> str:
+    """Readable object name: instances are 'Object@Instancer.i.j' (persistent id path)."""
+    if not inst.is_instance:
+        return inst.object.name
+    ids = [str(i) for i in key[2] if i != 0x7FFFFFFF]
+    parent = inst.parent.name if inst.parent is not None else ""
+    return f"{inst.object.name}@{parent}." + ".".join(ids)
+
+
 def _is_rendered(inst) -> bool:
     obj = inst.object
     if not inst.is_instance:
@@ -130,8 +139,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
         if deforming:
             deform_keys[key] = k
         object_index[key] = len(objects)
-        objects.append({"name": obj.name if not inst.is_instance else
-                        f"{obj.name}@{inst.parent.name if inst.parent else ''}{list(key[2])}",
+        objects.append({"name": _instance_name(inst, key),
                         "mesh": k, "matrix_world": matrix, "motion": None})
 
     cam_obj = scene.camera.evaluated_get(depsgraph)

@@ -13,9 +13,7 @@ MESH_LIKE_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 
 def read_positions(mesh) -> np.ndarray:
     """Vertex positions, (V, 3) float32, object local space."""
-    pos = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
-    mesh.vertices.foreach_get("co", pos)
-    return pos.reshape(-1, 3)
+    return compat.positions(mesh)
 
 
 def mesh_arrays(mesh, slot_materials: np.ndarray) -> dict | None:
@@ -27,38 +25,20 @@ def mesh_arrays(mesh, slot_materials: np.ndarray) -> dict | None:
     optionally "normals" (T,3,3) f32 and "uvs" (T,3,2) f32}.
     """
     compat.prepare_mesh(mesh)
-    tris = mesh.loop_triangles
-    n_tri = len(tris)
-    if n_tri == 0:
+    if len(mesh.loop_triangles) == 0:
         return None
-
-    out = {"positions": read_positions(mesh)}
-
-    tri_verts = np.empty(n_tri * 3, dtype=np.int32)
-    tris.foreach_get("vertices", tri_verts)
-    out["triangles"] = tri_verts.reshape(-1, 3)
-
-    slot = np.empty(n_tri, dtype=np.int32)
-    tris.foreach_get("material_index", slot)
+    tri_corners = compat.triangle_corners(mesh)
+    tri_verts = compat.corner_verts(mesh)[tri_corners]
+    out = {"positions": read_positions(mesh), "triangles": tri_verts}
+    slot = compat.triangle_material_slots(mesh)
     np.clip(slot, 0, len(slot_materials) - 1, out=slot)
     out["material_index"] = slot_materials.astype(np.int32)[slot]
-
-    tri_loops = None
-    if not compat.mesh_is_flat(mesh):
-        tri_loops = np.empty(n_tri * 3, dtype=np.int32)
-        tris.foreach_get("loops", tri_loops)
-        normals = compat.corner_normals(mesh)
-        out["normals"] = np.ascontiguousarray(normals[tri_loops].reshape(n_tri, 3, 3),
-                                              dtype=np.float32)
-
-    uv_data = compat.active_uv_data(mesh)
-    if uv_data is not None and len(uv_data):
-        if tri_loops is None:
-            tri_loops = np.empty(n_tri * 3, dtype=np.int32)
-            tris.foreach_get("loops", tri_loops)
-        uv = np.empty(len(uv_data) * 2, dtype=np.float32)
-        uv_data.foreach_get("uv", uv)
-        out["uvs"] = uv.reshape(-1, 2)[tri_loops].reshape(n_tri, 3, 2)
+    normals = compat.triangle_normals(mesh, tri_corners, tri_verts)
+    if normals is not None:
+        out["normals"] = np.ascontiguousarray(normals, dtype=np.float32)
+    uvs = compat.active_uvs(mesh)
+    if uvs is not None:
+        out["uvs"] = uvs[tri_corners]
     return out
 
 
