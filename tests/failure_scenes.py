@@ -152,7 +152,7 @@ def veach_scene(width=64, height=48, spp=16):
 
 
 def caustic_scene(width=24, height=24, spp=64, clamp_indirect=0.0):
-    """A clear glass sphere focusing a small sphere light onto a diffuse floor: the caustic is
+    """A clear glass ball focusing a small sphere light onto a diffuse floor: the caustic is
     reachable only by paths floor → glass → glass → light found by BSDF sampling (fireflies)."""
     h = base_header(width, height, spp, camera={"type": "PERSP", "matrix_world": look_at((0, -2.2, 2.2), (0, 0, 0)),
                                                 "lens": 40.0},
@@ -162,7 +162,8 @@ def caustic_scene(width=24, height=24, spp=64, clamp_indirect=0.0):
     glass = add_material(h, "glass", [{"type": "GLASS", "color": [1, 1, 1], "roughness": 0.0, "ior": 1.5}])
     pos, tri, nrm = uv_sphere(0.35, center=(0, 0, 0.55), rings=24, segments=48)
     add_mesh(h, a, "ball", pos, tri, material=glass, normals=nrm)
-    h["lights"].append(_sphere_light((0.0, 0.0, 2.0), 0.05, 200.0))
+    # the light is off to the side so the caustic lands beside the ball, in view (x ≈ 0.55)
+    h["lights"].append(_sphere_light((-1.5, 0.0, 2.0), 0.05, 200.0))
     return h, a
 
 
