@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .motion import RigidMotion
+from .motion import RigidMotion, invert_linear
 from .scene import Scene
 
 
@@ -60,7 +60,7 @@ def _shift_matrix(m: np.ndarray, shift: np.ndarray) -> np.ndarray:
 
 
 def _transform_normals(n: np.ndarray, m: np.ndarray) -> np.ndarray:
-    inv_t = np.linalg.inv(m[:3, :3]).T
+    inv_t = invert_linear(m[:3, :3]).T
     out = n.reshape(-1, 3).astype(np.float64) @ inv_t.T
     length = np.linalg.norm(out, axis=1, keepdims=True)
     out = np.where(length > 0, out / np.where(length > 0, length, 1), 0.0)

@@ -37,6 +37,7 @@ from .camera import Camera
 from .film import SampleBatch
 from .geometry import SceneGeometry
 from .lights import LightSet
+from .motion import invert_linear
 from .materials import LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, MaterialTable
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
@@ -148,7 +149,7 @@ class Integrator:
         w1, w2 = b1[smooth, None], b2[smooth, None]
         n = (1 - w1 - w2) * nc[:, 0] + w1 * nc[:, 1] + w2 * nc[:, 2]
         if linear is not None:
-            inv_t = np.linalg.inv(linear[smooth])
+            inv_t = invert_linear(linear[smooth])
             n = np.einsum("nji,nj->ni", inv_t, n)
         length = np.linalg.norm(n, axis=1)
         ok = length > 1e-12

@@ -103,3 +103,20 @@ def apply_linear(linear: np.ndarray, v: np.ndarray) -> np.ndarray:
 def apply_linear_transposed(linear: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Per-ray matrixᵀ × vector."""
     return np.einsum("nji,nj->ni", linear, v)
+
+
+def invert_linear(linear: np.ndarray) -> np.ndarray:
+    """Inverse of (n,3,3) (or (3,3)) linear maps; a singular one (an object scaled to zero,
+    legal in Blender) gets the zero matrix, so rays mapped through it have no direction and
+    hit nothing, and normals through it vanish (np.linalg.inv would raise LinAlgError)."""
+    m = np.asarray(linear, dtype=np.float64)
+    flat = m.reshape(-1, 3, 3)
+    scale = np.max(np.abs(flat), axis=(1, 2))
+    det = np.linalg.det(flat)
+    ok = np.abs(det) > 1e-12 * np.maximum(scale, 1e-300) ** 3
+    out = np.zeros_like(flat)
+    if np.all(ok):
+        out = np.linalg.inv(flat)
+    elif np.any(ok):
+        out[ok] = np.linalg.inv(flat[ok])
+    return out.reshape(m.shape)

@@ -23,7 +23,7 @@ from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
 from .geometry import SceneGeometry
-from .motion import apply_linear, apply_linear_transposed
+from .motion import apply_linear, apply_linear_transposed, invert_linear
 
 # Spawn offset: relative part scales with |p| (float32 spacing is 6e-8·|p|, Embree's hit error
 # a small multiple of it); the absolute part covers points near the origin.
@@ -124,7 +124,7 @@ class Tracer:
             tau = np.zeros(n) if tau is None else tau
             for obj in self.moving:
                 lin, trans = obj.mesh.motion.at(tau)
-                inv = np.linalg.inv(lin)
+                inv = invert_linear(lin)
                 o_l = apply_linear(inv, o - trans)
                 d_l = apply_linear(inv, d)
                 if obj.scene is not None:
@@ -176,7 +176,7 @@ class Tracer:
             p_local = v[:, 0] + hits.b1[sel, None] * e1 + hits.b2[sel, None] * e2
             hits.p[sel] = apply_linear(lin, p_local) + translation[sel]
             # normals transform by the inverse transpose of the local→world map
-            hits.ng[sel] = apply_linear_transposed(np.linalg.inv(lin), np.cross(e1, e2))
+            hits.ng[sel] = apply_linear_transposed(invert_linear(lin), np.cross(e1, e2))
         length = np.linalg.norm(hits.ng, axis=1)
         good = length > 0
         hits.ng[good] /= length[good, None]
@@ -198,7 +198,7 @@ class Tracer:
                 if not len(idx):
                     break
                 lin, trans = obj.mesh.motion.at(tau[idx])
-                inv = np.linalg.inv(lin)
+                inv = invert_linear(lin)
                 o_l = apply_linear(inv, o[idx] - trans)
                 d_l = apply_linear(inv, d[idx])
                 if obj.scene is not None:
