@@ -5,6 +5,8 @@ Checks are by feature (``hasattr``), not by version number, where Blender allows
 """
 
 import importlib
+import os
+import sys
 
 import bpy
 import numpy as np
@@ -17,12 +19,37 @@ EEVEE_ID = "BLENDER_EEVEE_NEXT" if (4, 2, 0) <= BLENDER_VERSION < (5, 0, 0) else
 
 # --- the core renderer --------------------------------------------------------------------------
 
+def _load_embree_isolated() -> None:
+    """Import embreex so that its bundled Embree/TBB bind to their own symbols.
+
+    Blender links its own TBB (and Embree); without RTLD_DEEPBIND the wheel's libembree4
+    resolves TBB symbols to Blender's copy of a different version and crashes on the first
+    ray query (seen with Debian's Blender 3.4.1). Linux only; elsewhere a plain import.
+    """
+    if "embreex.rtcore_scene" in sys.modules:
+        return
+    deepbind = getattr(os, "RTLD_DEEPBIND", 0)
+    if not deepbind or not sys.platform.startswith("linux"):
+        return
+    old = sys.getdlopenflags()
+    sys.setdlopenflags(os.RTLD_NOW | deepbind)
+    try:
+        importlib.import_module("embreex.rtcore")
+        importlib.import_module("embreex.rtcore_scene")
+        importlib.import_module("embreex.mesh_construction")
+    except ImportError:
+        pass  # reported by the core's own import with its message
+    finally:
+        sys.setdlopenflags(old)
+
+
 def core_module(name: str = ""):
     """Import the core (``drt``) or one of its modules (``core_module("render")``).
 
     Inside an installed extension / legacy add-on the core is bundled as the sub-package
     ``<addon>.drt``; in a development checkout the pip-installed ``drt`` is used.
     """
+    _load_embree_isolated()
     try:
         from . import drt as drt_core  # bundled sub-package
     except ImportError:
@@ -214,6 +241,18 @@ def set_engine_flags(cls) -> None:
     cls.bl_use_eevee_viewport = True  # Material Preview without our own viewport code
     cls.bl_use_postprocess = True
     cls.bl_use_preview = False
+
+
+def set_pass_pixels(render_pass, img: np.ndarray) -> None:
+    """Write an (h, w, c) float32 bottom-row-first image into a RenderPass.
+
+    4.x/5.0 accept a flat ``rect.foreach_set``; 3.4 wants ``rect`` assigned (h·w, c) rows.
+    """
+    flat = img.reshape(-1)
+    try:
+        render_pass.rect.foreach_set(flat)
+    except (TypeError, AttributeError):
+        render_pass.rect = img.reshape(-1, img.shape[-1])
 
 
 def view_layer_pass_flags(view_layer) -> dict:

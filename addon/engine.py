@@ -148,9 +148,7 @@ def _set_pass(layer, name, img):
     rp = layer.passes.find_by_name(name, "")
     if rp is None:
         return
-    a = np.ascontiguousarray(img[::-1], dtype=np.float32)
-    rp.rect.foreach_set(a.reshape(-1)) if hasattr(rp.rect, "foreach_set") else \
-        setattr(rp, "rect", a.reshape(-1, a.shape[2]))
+    compat.set_pass_pixels(rp, np.ascontiguousarray(img[::-1], dtype=np.float32))
 
 
 def fill_layer(layer, film, crop, wanted) -> None:

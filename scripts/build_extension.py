@@ -1,0 +1,134 @@
+"""Build the installable DRT packages for Blender.
+
+    python scripts/build_extension.py [--out dist] [--no-download] [--legacy-only]
+
+1. Stages ``addon/`` with the core (``core/drt``) copied in as the sub-package ``drt`` and the
+   embreex wheels listed in ``addon/blender_manifest.toml`` (downloaded with pip into
+   ``build/wheels``, reused when present).
+2. Extension (Blender 4.2+): runs Blender's own extension builder, shipped in the bpy wheel at
+   ``bpy/<ver>/scripts/addons_core/bl_pkg/cli/blender_ext.py``, with ``--split-platforms``:
+   one ``drt-<version>-<platform>.zip`` per platform. Install with
+   Edit > Preferences > Get Extensions > Install from Disk, or ``blender --command extension
+   install-file -r user_default <zip>``.
+3. Legacy add-on (Blender 3.4 - 4.1): ``drt_legacy-<version>-linux-x64.zip`` holding the folder
+   ``drt_blender/`` with embreex unpacked into ``drt_blender/_vendor`` (appended to sys.path by
+   the add-on). Install with Preferences > Add-ons > Install... Blender builds without numpy
+   (Debian's package) also need numpy: ``apt-get install python3-numpy``.
+
+``stage_addon(dest, vendor=True)`` is importable: tests use it to install the add-on into a
+temporary user scripts directory.
+"""
+
+import argparse
+import glob
+import os
+import re
+import shutil
+import subprocess
+import sys
+import zipfile
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ADDON = os.path.join(REPO, "addon")
+CORE = os.path.join(REPO, "core", "drt")
+WHEEL_CACHE = os.path.join(REPO, "build", "wheels")
+LEGACY_NAME = "drt_blender"
+IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "_vendor", "wheels")
+
+
+def manifest_wheels() -> list[str]:
+    text = open(os.path.join(ADDON, "blender_manifest.toml"), encoding="utf-8").read()
+    return re.findall(r'"\./wheels/([^"]+\.whl)"', text)
+
+
+def manifest_version() -> str:
+    text = open(os.path.join(ADDON, "blender_manifest.toml"), encoding="utf-8").read()
+    return re.search(r'^version = "([^"]+)"', text, re.M).group(1)
+
+
+def download_wheels(names: list[str], dest: str = WHEEL_CACHE) -> list[str]:
+    """Fetch the listed wheels with pip (one platform at a time); returns their paths."""
+    os.makedirs(dest, exist_ok=True)
+    paths = []
+    for name in names:
+        path = os.path.join(dest, name)
+        if not os.path.exists(path):
+            dist, version, py, _abi, plat = name[:-4].split("-", 4)
+            platform = plat.split(".")[-1]
+            subprocess.run([sys.executable, "-m", "pip", "download", f"{dist}=={version}",
+                            "--no-deps", "--only-binary=:all:", "--python-version", "3.11",
+                            "--platform", platform, "-d", dest], check=True)
+        if not os.path.exists(path):
+            raise SystemExit(f"wheel {name} was not downloaded")
+        paths.append(path)
+    return paths
+
+
+def stage_addon(dest: str, vendor_wheels: list[str] | None = None) -> str:
+    """Copy the add-on and the core into ``dest`` (created); unpack wheels into _vendor."""
+    if os.path.exists(dest):
+        shutil.rmtree(dest)
+    shutil.copytree(ADDON, dest, ignore=IGNORE)
+    shutil.copytree(CORE, os.path.join(dest, "drt"), ignore=IGNORE)
+    for whl in vendor_wheels or []:
+        with zipfile.ZipFile(whl) as z:
+            z.extractall(os.path.join(dest, "_vendor"))
+    return dest
+
+
+def blender_ext_cli() -> str:
+    import importlib.util
+    spec = importlib.util.find_spec("bpy")  # the bpy wheel's directory, without importing it
+    if spec is None or spec.origin is None:
+        raise SystemExit("the bpy module (pip install bpy) is needed for Blender's builder")
+    root = os.path.dirname(spec.origin)
+    found = glob.glob(os.path.join(root, "*", "scripts", "addons_core", "bl_pkg", "cli",
+                                   "blender_ext.py"))
+    if not found:
+        raise SystemExit("blender_ext.py not found in the bpy wheel")
+    return found[0]
+
+
+def build_extension(out: str, wheels: list[str]) -> list[str]:
+    stage = os.path.join(REPO, "build", "extension", "drt")
+    stage_addon(stage)
+    os.makedirs(os.path.join(stage, "wheels"))
+    for w in wheels:
+        shutil.copy2(w, os.path.join(stage, "wheels"))
+    os.makedirs(out, exist_ok=True)
+    subprocess.run([sys.executable, blender_ext_cli(), "build", "--source-dir", stage,
+                    "--output-dir", out, "--split-platforms"], check=True)
+    return sorted(glob.glob(os.path.join(out, f"drt-{manifest_version()}-*.zip")))
+
+
+def build_legacy(out: str, linux_wheels: list[str]) -> str:
+    stage = os.path.join(REPO, "build", "legacy", LEGACY_NAME)
+    stage_addon(stage, linux_wheels)
+    os.remove(os.path.join(stage, "blender_manifest.toml"))  # would mark it an extension
+    os.makedirs(out, exist_ok=True)
+    path = os.path.join(out, f"drt_legacy-{manifest_version()}-linux-x64.zip")
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+        for root, _dirs, files in os.walk(stage):
+            for f in files:
+                full = os.path.join(root, f)
+                z.write(full, os.path.relpath(full, os.path.dirname(stage)))
+    return path
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", default=os.path.join(REPO, "dist"))
+    p.add_argument("--legacy-only", action="store_true")
+    opts = p.parse_args(argv)
+    wheels = download_wheels(manifest_wheels())
+    built = []
+    if not opts.legacy_only:
+        built += build_extension(opts.out, wheels)
+    built.append(build_legacy(opts.out, [w for w in wheels if "manylinux" in w]))
+    for b in built:
+        print(f"built {b} ({os.path.getsize(b) / 1e6:.1f} MB)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
