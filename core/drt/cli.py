@@ -84,6 +84,21 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("scene", help=".blend file")
     e.add_argument("-o", "--output", required=True, help="output .npz")
     e.add_argument("--frame", type=int)
+    b = sub.add_parser("bench", help="error against time for each estimator/sampler (and Cycles)")
+    b.add_argument("scene", help="scene file: .npz (DRT export) or .blend (needs the bpy module)")
+    b.add_argument("-o", "--output", required=True, help="output directory (bench.csv, bench.json, bench.png)")
+    b.add_argument("--reference", help="reference EXR (default: render one at --reference-spp)")
+    b.add_argument("--reference-spp", type=_positive, default=1024, help="samples of the rendered reference (default 1024)")
+    b.add_argument("--methods", nargs="+", help="presets (mis_power mis_balance light bsdf cosine uniform random "
+                   "stratified sobol adaptive) or DIRECT/INDIRECT/SAMPLER[/THRESHOLD]")
+    b.add_argument("--spp-list", nargs="+", type=_positive, help="sample counts (default 1 4 16 64)")
+    b.add_argument("--cycles", action="store_true", help="also render with Cycles through bpy (needs the .blend)")
+    b.add_argument("--threads", type=_positive, help="threads for DRT and Cycles (default: all cores)")
+    b.add_argument("--resolution", type=_resolution, help="override WIDTHxHEIGHT")
+    b.add_argument("--seed", type=_non_negative, default=0)
+    b.add_argument("--point", action="store_true", help="the lecture's direct-light estimators at the surface "
+                   "the image centre sees, instead of whole renders")
+    b.add_argument("--no-chart", action="store_true", help="skip the PNG chart")
     return p
 
 
@@ -254,10 +269,43 @@ def cmd_export(args) -> int:
     return EXIT_OK
 
 
+def cmd_bench(args) -> int:
+    from . import bench
+
+    if not os.path.exists(args.scene):
+        raise CliError(f"scene file not found: {args.scene}")
+    if args.reference and not os.path.exists(args.reference):
+        raise CliError(f"reference not found: {args.reference}")
+    parent = os.path.dirname(os.path.abspath(args.output))
+    if not os.path.isdir(parent):
+        raise CliError(f"output directory's parent does not exist: {parent}")
+    try:
+        for m in args.methods or ():
+            if not args.point:
+                bench.parse_method(m)
+        if args.point:
+            bench.bench_point(args.scene, args.output, methods=args.methods,
+                              spp_list=args.spp_list or (4, 16, 64, 256, 1024), chart=not args.no_chart)
+        else:
+            bench.bench(args.scene, args.output, reference=args.reference,
+                        methods=args.methods or bench.DEFAULT_METHODS, spp_list=args.spp_list or bench.DEFAULT_SPP,
+                        reference_spp=args.reference_spp, cycles=args.cycles, threads=args.threads,
+                        resolution=args.resolution, seed=args.seed, chart=not args.no_chart)
+    except ValueError as e:  # bad method names, sizes, invalid scenes (SceneError)
+        raise CliError(str(e)) from None
+    except RuntimeError as e:  # a failed Cycles render
+        raise CliError(str(e), EXIT_FAILURE) from None
+    except Exception as e:
+        if type(e).__name__ == "BlendError":
+            raise CliError(str(e)) from None
+        raise
+    return EXIT_OK
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    handlers = {"render": cmd_render, "merge": cmd_merge, "export": cmd_export}
+    handlers = {"render": cmd_render, "merge": cmd_merge, "export": cmd_export, "bench": cmd_bench}
     try:
         return handlers[args.command](args)
     except CliError as e:
