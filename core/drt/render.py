@@ -14,6 +14,7 @@ merge into the full image (``merge_films``).
 from __future__ import annotations
 
 import os
+import sys
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -110,6 +111,37 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
     return ctx
 
 
+class _ThreadWorkers:
+    """Batches on threads sharing one context (used inside Blender and for small jobs)."""
+
+    def __init__(self, ctx: RenderContext, threads: int):
+        self.ctx = ctx
+        self.pool = ThreadPoolExecutor(max_workers=threads)
+        self.rays0 = ctx.tracer.rays_traced
+        self.emb0 = ctx.tracer.embree_seconds
+
+    def submit(self, x, row, idx):
+        fut = self.pool.submit(self.ctx.integrator.render_batch, x, row, idx)
+        return fut.result
+
+    def counters(self) -> tuple[int, float]:
+        return self.ctx.tracer.rays_traced - self.rays0, self.ctx.tracer.embree_seconds - self.emb0
+
+    def close(self):
+        self.pool.shutdown(wait=True)
+
+
+def _use_processes(parallel: str, threads: int, paths: int) -> bool:
+    if parallel == "threads" or threads < 2:
+        return False
+    if parallel == "processes":
+        return True
+    # auto: not inside Blender (its executable is not a Python to spawn) and only for jobs big
+    # enough to repay a second or so of worker start-up
+    inside_blender = "bpy" in sys.modules and not sys.executable.endswith(("python", "python3", "python3.11"))
+    return not inside_blender and paths >= 32 * BATCH_PATHS
+
+
 def _pixel_region(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """Columns (from the left) and rows (from the top) of the pixels to render (border aware)."""
     w, h = scene.render.width, scene.render.height
@@ -152,6 +184,7 @@ def render(
     tick: Callable[[float, RenderStats], None] | None = None,
     cancel: Callable[[], bool] | None = None,
     context: RenderContext | None = None,
+    parallel: str = "auto",
 ) -> Film:
     """Render ``scene`` and return its ``Film`` (``film.stats`` holds a ``RenderStats``).
 
@@ -165,6 +198,9 @@ def render(
     ``adaptive_min_samples``, a pixel stops receiving samples when the relative standard error
     of its mean luminance falls below the threshold (``film.sample_count`` records what each
     pixel took). Stopping depends only on the pixel's own samples, so it stays deterministic.
+
+    parallel: "threads", "processes" or "auto" (processes for large jobs outside Blender). The
+    image is bit-identical in every mode: batches are added to the film in a fixed order.
     """
     t0 = time.perf_counter()
     ctx = context or prepare(scene, seed=seed, sampler=sampler, direct=direct, indirect=indirect)
@@ -187,8 +223,6 @@ def render(
     if min_samples <= 0:
         min_samples = max(16, spp // 16)
     npix = len(xs)
-    rays0 = ctx.tracer.rays_traced
-    emb0 = ctx.tracer.embree_seconds
     total_paths = max(npix * count, 1)
 
     def batches(first: int, k: int):
@@ -203,18 +237,30 @@ def render(
 
     done = sample_offset
     cancelled = False
-    with ThreadPoolExecutor(max_workers=threads) as pool:
+    overrides = {"seed": seed, "sampler": sampler, "direct": direct, "indirect": indirect}
+    if _use_processes(parallel, threads, npix * count):
+        from .worker import WorkerPool
+
+        light_scene = replace(scene, header={}, arrays={})  # the arrays live in scene.meshes too
+        workers = WorkerPool(light_scene, {k: v for k, v in overrides.items() if v is not None}, spp, threads)
+    else:
+        workers = _ThreadWorkers(ctx, threads)
+
+    def collect(result):
+        _collect(result(), film, stats, tick, total_paths, workers, t0)
+
+    try:
         for k in pass_schedule(count):
             pending = deque()
             for b in batches(done, k):
                 if cancel is not None and cancel():
                     cancelled = True
                     break
-                pending.append(pool.submit(integ.render_batch, *b))
+                pending.append(workers.submit(*b))
                 while len(pending) >= threads + 1:
-                    _collect(pending.popleft().result(), film, stats, tick, total_paths, ctx, rays0, emb0, t0)
+                    collect(pending.popleft())
             while pending:
-                _collect(pending.popleft().result(), film, stats, tick, total_paths, ctx, rays0, emb0, t0)
+                collect(pending.popleft())
             if cancelled:
                 break
             done += k
@@ -233,10 +279,11 @@ def render(
             if cancel is not None and cancel():
                 cancelled = stats.samples_done < count
                 break
+    finally:
+        workers.close()
     stats.cancelled = cancelled
     stats.seconds = time.perf_counter() - t0
-    stats.rays = ctx.tracer.rays_traced - rays0
-    stats.embree_seconds = ctx.tracer.embree_seconds - emb0
+    stats.rays, stats.embree_seconds = workers.counters()
     stats.nan_samples = film.nan_samples
     film.meta.update(
         {
@@ -266,13 +313,12 @@ def adaptive_active(film: Film, xs: np.ndarray, ys: np.ndarray, threshold: float
     return np.sqrt(var_mean) > threshold * np.maximum(mean, 1e-3)
 
 
-def _collect(batch, film, stats, tick, total_paths, ctx, rays0, emb0, t0):
+def _collect(batch, film, stats, tick, total_paths, workers, t0):
     film.add(batch)
     stats.camera_paths += len(batch.pixel) + batch.nan_count
     if tick is not None:
         stats.seconds = time.perf_counter() - t0
-        stats.rays = ctx.tracer.rays_traced - rays0
-        stats.embree_seconds = ctx.tracer.embree_seconds - emb0
+        stats.rays, stats.embree_seconds = workers.counters()
         tick(min(stats.camera_paths / total_paths, 1.0), stats)
 
 
