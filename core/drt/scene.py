@@ -63,8 +63,10 @@ def _join(path: str, key: str) -> str:
 def _number(d, key, path, default=..., lo=None, hi=None, lo_open=False, integer=False):
     p = _join(path, key)
     v = _get(d, key, path, default)
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
+    # numpy scalars are accepted too: in-memory exports (the add-on) produce them
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
         raise SceneError(p, f"must be a number, got {v!r}")
+    v = float(v) if isinstance(v, np.floating) else int(v) if isinstance(v, np.integer) else v
     if isinstance(v, int) and abs(v) > 2**63:  # float(v) would overflow
         raise SceneError(p, f"must be a finite number, got an integer of {len(str(abs(v)))} digits")
     if integer and (not float(v).is_integer()):
