@@ -75,3 +75,68 @@ def test_pickled_arrays_are_refused(tmp_path):
     np.savez(path, header=np.frombuffer(b"{}", np.uint8), evil=np.array([object()], dtype=object))
     with pytest.raises(SceneError, match="pickle"):
         load_scene(path)
+
+
+NAN, INF = float("nan"), float("inf")
+
+
+@pytest.mark.parametrize(
+    "mutate, field",
+    [
+        # unknown or mistyped versions
+        (lambda h, a: h.update(version="1"), "version"),
+        (lambda h, a: h.update(version=0), "version"),
+        (lambda h, a: h.update(version=True), "version"),
+        (lambda h, a: h.pop("version"), "version"),
+        # a scene needs a camera (the add-on reports "no camera" itself; the core refuses)
+        (lambda h, a: h.pop("camera"), "camera"),
+        (lambda h, a: h.update(camera=None), "camera"),
+        (lambda h, a: h["camera"].pop("matrix_world"), "camera.matrix_world"),
+        # negative or zero sizes
+        (lambda h, a: h["render"].update(resolution=[-4, 4]), "render.resolution"),
+        (lambda h, a: h["render"].update(resolution=[4.5, 4]), "render.resolution"),
+        (lambda h, a: h["render"].update(resolution=[65537, 1]), "render.resolution"),
+        (lambda h, a: h["render"].update(pixel_aspect=[0, 1]), "render.pixel_aspect"),
+        (lambda h, a: h["render"].update(filter={"type": "BOX", "width": -1}), "render.filter.width"),
+        (lambda h, a: h["render"].update(shutter=[0.5, -0.5]), "render.shutter"),
+        (lambda h, a: h["render"].update(border=[0.5, 0, 0.2, 1]), "render.border"),
+        (lambda h, a: h["render"].update(max_bounces=-1), "render.max_bounces"),
+        (lambda h, a: h["camera"].update(sensor_width=0), "camera.sensor_width"),
+        (lambda h, a: h["camera"].update(clip_start=5.0, clip_end=1.0), "camera.clip_end"),
+        (lambda h, a: h["camera"].update(dof={"use": True, "fstop": 0}), "camera.dof.fstop"),
+        (lambda h, a: h["camera"].update(dof={"use": True, "focus_distance": -1}), "camera.dof.focus_distance"),
+        (lambda h, a: h["lights"][0].update(size=-1), "lights[0].size"),
+        (lambda h, a: h["lights"][0].update(size_y=-0.5), "lights[0].size_y"),
+        (lambda h, a: h["lights"][0].update(spread=-1), "lights[0].spread"),
+        (lambda h, a: h["lights"].append({"type": "POINT", "matrix_world": np.eye(4).tolist(), "radius": -1}), "lights[1].radius"),
+        (lambda h, a: h["lights"].append({"type": "SUN", "matrix_world": np.eye(4).tolist(), "angle": -0.1}), "lights[1].angle"),
+        (lambda h, a: h["lights"].append({"type": "SPOT", "matrix_world": np.eye(4).tolist(), "spot_size": -1}), "lights[1].spot_size"),
+        (lambda h, a: h["materials"][0].update(emission=[-1, 0, 0]), "materials[0].emission"),
+        (lambda h, a: h["materials"][0]["lobes"].append({"type": "GLASS", "color": [1, 1, 1], "ior": 0}), "materials[0].lobes[1].ior"),
+        (lambda h, a: h["materials"][0]["lobes"].append({"type": "GLOSSY", "color": [1, 1, 1], "roughness": 2}), "materials[0].lobes[1].roughness"),
+        # NaN / Inf / numbers too large for a float
+        (lambda h, a: h["world"].update(color=[NAN, 0, 0]), "world.color"),
+        (lambda h, a: h["lights"][0].update(power=INF), "lights[0].power"),
+        (lambda h, a: h["camera"].update(lens=10**400), "camera.lens"),
+        (lambda h, a: h["render"].update(spp=10**30), "render.spp"),
+        (lambda h, a: h["objects"][0].update(matrix_world=[[INF, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]), "objects[0].matrix_world"),
+        (lambda h, a: h["objects"][0].update(matrix_world=[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [1, 0, 0, 1]]), "objects[0].matrix_world"),
+        (lambda h, a: h["objects"][0].update(motion={"matrix_open": np.eye(4).tolist()}), "objects[0].motion.matrix_close"),
+        # arrays: wrong shapes / counts / values
+        (lambda h, a: a.update({"mesh0.normals": np.zeros((2, 3), np.float32)}), "mesh0.normals"),
+        (lambda h, a: a.update({"mesh0.uvs": np.full((2, 3, 2), NAN, np.float32)}), "mesh0.uvs"),
+        (lambda h, a: a.update({"mesh0.uvs": np.zeros((3, 3, 2), np.float32)}), "mesh0.uvs"),
+        (lambda h, a: a.update({"mesh0.material_index": np.zeros(5, np.int32)}), "mesh0.material_index"),
+        (lambda h, a: a.update({"mesh0.triangles": np.array([[0, 1, -1]], np.int64)}), "mesh0.triangles"),
+        (lambda h, a: a.update({"mesh0.positions": np.zeros((4, 3), np.complex64)}), "mesh0.positions"),
+        (lambda h, a: h["meshes"][0].update(deforming=True), "mesh0.positions_close"),
+        (lambda h, a: (h["meshes"][0].update(deforming=True), a.update({"mesh0.positions_close": np.zeros((3, 3))})), "mesh0.positions_close"),
+    ],
+)
+def test_more_bad_fields_are_named(mutate, field):
+    h, a = cornell_box()
+    mutate(h, a)
+    with pytest.raises(SceneError) as e:
+        scene_from_dict(h, a)
+    assert e.value.field == field, str(e.value)
+    assert str(e.value).startswith(f"scene field '{field}': ")
