@@ -64,7 +64,9 @@ class Camera:
         m[:3, 3] -= origin_shift
         self.matrix = m
         self.motion = None
-        if spec.motion is not None:
+        shutter = settings.shutter
+        # like objects (Scene.has_motion): no shutter or a zero-length one means no blur
+        if spec.motion is not None and shutter is not None and shutter[1] > shutter[0]:
             m0 = np.array(spec.motion[0], dtype=np.float64)
             m1 = np.array(spec.motion[1], dtype=np.float64)
             m0[:3, 3] -= origin_shift
