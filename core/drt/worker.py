@@ -15,12 +15,16 @@ from __future__ import annotations
 
 import os
 import pickle
+import signal
 import subprocess
 import sys
 import threading
 
 
 def _serve() -> None:
+    # Ctrl-C on a terminal signals the whole process group: the parent alone decides to cancel
+    # (it stops sending batches and closes us); dying here would lose the partial image
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     from .render import prepare
     from .sampling.sequences import Sampler
 
@@ -63,6 +67,7 @@ class WorkerProcess:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", f"{__package__}.worker"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env,
+            start_new_session=True,  # out of the terminal's process group: Ctrl-C reaches the parent only
         )
         pickle.dump((scene, overrides, spp), self.proc.stdin, protocol=pickle.HIGHEST_PROTOCOL)
         self.proc.stdin.flush()
