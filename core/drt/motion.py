@@ -108,15 +108,18 @@ def apply_linear_transposed(linear: np.ndarray, v: np.ndarray) -> np.ndarray:
 def invert_linear(linear: np.ndarray) -> np.ndarray:
     """Inverse of (n,3,3) (or (3,3)) linear maps; a singular one (an object scaled to zero,
     legal in Blender) gets the zero matrix, so rays mapped through it have no direction and
-    hit nothing, and normals through it vanish (np.linalg.inv would raise LinAlgError)."""
+    hit nothing, and normals through it vanish (np.linalg.inv would raise LinAlgError).
+
+    Computed from cofactors with plain array arithmetic: for many small matrices this is
+    several times faster than np.linalg.inv's per-matrix LAPACK calls."""
     m = np.asarray(linear, dtype=np.float64)
-    flat = m.reshape(-1, 3, 3)
-    scale = np.max(np.abs(flat), axis=(1, 2))
-    det = np.linalg.det(flat)
+    a = m.reshape(-1, 3, 3)
+    c0 = np.cross(a[:, 1], a[:, 2])  # cofactor rows: the inverse's columns
+    c1 = np.cross(a[:, 2], a[:, 0])
+    c2 = np.cross(a[:, 0], a[:, 1])
+    det = np.einsum("ij,ij->i", a[:, 0], c0)
+    scale = np.max(np.abs(a), axis=(1, 2))
     ok = np.abs(det) > 1e-12 * np.maximum(scale, 1e-300) ** 3
-    out = np.zeros_like(flat)
-    if np.all(ok):
-        out = np.linalg.inv(flat)
-    elif np.any(ok):
-        out[ok] = np.linalg.inv(flat[ok])
+    inv_det = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    out = np.stack([c0, c1, c2], axis=2) * inv_det[:, None, None]
     return out.reshape(m.shape)

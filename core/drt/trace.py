@@ -209,46 +209,91 @@ class Tracer:
         return blocked
 
 
-def _intersect_deforming(mm, o, d, tau, tmax, chunk_elems=4_000_000):
+CLUSTER_SIZE = 16  # triangles per bounding box in the deforming-mesh culling level
+
+
+class DeformingBounds:
+    """A one-level bounding hierarchy for a deforming mesh: consecutive triangles (meshes are
+    stored with spatial coherence) grouped in clusters whose boxes bound their motion over the
+    whole shutter (the box of all vertices at open and close contains every in-between
+    position, since vertices move linearly)."""
+
+    def __init__(self, mm):
+        tri = mm.triangles
+        t = len(tri)
+        self.count = t
+        c = -(-t // CLUSTER_SIZE)
+        pad = c * CLUSTER_SIZE - t
+        self.members = np.concatenate([np.arange(t), np.full(pad, -1)]).reshape(c, CLUSTER_SIZE)
+        both = np.concatenate([mm.positions[tri], mm.positions_close[tri]], axis=1)  # (T, 6, 3)
+        lo = both.min(axis=1)
+        hi = both.max(axis=1)
+        lo = np.concatenate([lo, np.full((pad, 3), np.inf)]).reshape(c, CLUSTER_SIZE, 3).min(axis=1)
+        hi = np.concatenate([hi, np.full((pad, 3), -np.inf)]).reshape(c, CLUSTER_SIZE, 3).max(axis=1)
+        margin = 1e-7 * (1.0 + np.abs(np.concatenate([lo, hi])).max())
+        self.lo, self.hi = lo - margin, hi + margin
+
+
+def _intersect_deforming(mm, o, d, tau, tmax, chunk_elems=2_000_000):
     """Exact closest hit against a deforming mesh whose vertices move linearly from
-    ``positions`` to ``positions_close``: each ray sees the mesh at its own τ (Möller–Trumbore,
-    vectorised over rays × triangles in chunks). Returns (t, prim, b1, b2, ng_local)."""
+    ``positions`` to ``positions_close``: each ray sees the mesh at its own τ. Rays are culled
+    against cluster boxes (slab test), then Möller–Trumbore runs on the surviving
+    (ray, triangle) pairs only. Returns (t, prim, b1, b2, ng_local)."""
+    if getattr(mm, "_bounds", None) is None:
+        mm._bounds = DeformingBounds(mm)
+    bounds = mm._bounds
     n = len(o)
-    tri = mm.triangles
-    p0 = mm.positions[tri]  # (T, 3, 3)
-    p1 = mm.positions_close[tri]
     t_best = np.asarray(tmax, dtype=np.float64).copy()
     prim = np.full(n, -1, dtype=np.int64)
     b1 = np.zeros(n)
     b2 = np.zeros(n)
     ng = np.zeros((n, 3))
-    step = max(1, chunk_elems // max(len(tri), 1))
+    n_clusters = len(bounds.lo)
+    step = max(1, chunk_elems // max(n_clusters, 1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_d = 1.0 / d
     for s in range(0, n, step):
-        sl = slice(s, s + step)
-        w = np.asarray(tau[sl])[:, None, None, None]
-        v = (1 - w) * p0[None] + w * p1[None]  # (m, T, 3, 3)
-        e1 = v[:, :, 1] - v[:, :, 0]
-        e2 = v[:, :, 2] - v[:, :, 0]
-        dd = d[sl][:, None, :]
+        rows = np.arange(s, min(s + step, n))
+        # slab test of every ray of the chunk against every cluster box
+        t0 = (bounds.lo[None] - o[rows, None]) * inv_d[rows, None]
+        t1 = (bounds.hi[None] - o[rows, None]) * inv_d[rows, None]
+        # fmin/fmax skip the NaN of 0·inf (a ray in a slab's boundary plane)
+        near = np.fmax.reduce(np.fmin(t0, t1), axis=2)
+        far = np.fmin.reduce(np.fmax(t0, t1), axis=2)
+        ri, ci = np.nonzero((near <= far) & (far > 0) & (near < t_best[rows, None]))
+        if not len(ri):
+            continue
+        ray = np.repeat(rows[ri], CLUSTER_SIZE)
+        tri_id = bounds.members[ci].reshape(-1)
+        keep = tri_id >= 0
+        ray, tri_id = ray[keep], tri_id[keep]
+        corners = mm.triangles[tri_id]
+        w = tau[ray][:, None, None]
+        v = (1 - w) * mm.positions[corners] + w * mm.positions_close[corners]  # (p, 3, 3)
+        e1 = v[:, 1] - v[:, 0]
+        e2 = v[:, 2] - v[:, 0]
+        dd = d[ray]
         pvec = np.cross(dd, e2)
-        det = np.einsum("mtk,mtk->mt", e1, pvec)
+        det = np.einsum("pk,pk->p", e1, pvec)
         ok = np.abs(det) > 1e-20
         inv_det = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-        tvec = o[sl][:, None, :] - v[:, :, 0]
-        u = np.einsum("mtk,mtk->mt", tvec, pvec) * inv_det
+        tvec = o[ray] - v[:, 0]
+        u = np.einsum("pk,pk->p", tvec, pvec) * inv_det
         qvec = np.cross(tvec, e1)
-        vv = np.einsum("mk,mtk->mt", d[sl], qvec) * inv_det
-        tt = np.einsum("mtk,mtk->mt", e2, qvec) * inv_det
-        valid = ok & (u >= 0) & (vv >= 0) & (u + vv <= 1) & (tt > 0) & (tt < t_best[sl][:, None])
-        tt = np.where(valid, tt, np.inf)
-        j = np.argmin(tt, axis=1)
-        rows = np.arange(len(j))
-        found = np.isfinite(tt[rows, j])
-        idx = np.arange(s, min(s + step, n))[found]
-        jf = j[found]
-        t_best[idx] = tt[rows[found], jf]
-        prim[idx] = jf
-        b1[idx] = u[rows[found], jf]
-        b2[idx] = vv[rows[found], jf]
-        ng[idx] = np.cross(e1[rows[found], jf], e2[rows[found], jf])
+        vv = np.einsum("pk,pk->p", dd, qvec) * inv_det
+        tt = np.einsum("pk,pk->p", e2, qvec) * inv_det
+        valid = ok & (u >= 0) & (vv >= 0) & (u + vv <= 1) & (tt > 0) & (tt < t_best[ray])
+        if not np.any(valid):
+            continue
+        ray, tri_id, tt, u, vv = ray[valid], tri_id[valid], tt[valid], u[valid], vv[valid]
+        e1, e2 = e1[valid], e2[valid]
+        # closest candidate per ray: sort by (ray, t) and take each ray's first
+        order = np.lexsort((tt, ray))
+        first = order[np.r_[True, ray[order][1:] != ray[order][:-1]]]
+        r = ray[first]
+        t_best[r] = tt[first]
+        prim[r] = tri_id[first]
+        b1[r] = u[first]
+        b2[r] = vv[first]
+        ng[r] = np.cross(e1[first], e2[first])
     return t_best, prim, b1, b2, ng
