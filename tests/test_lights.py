@@ -226,13 +226,19 @@ def test_rect_solid_angle_sampling_is_uniform():
     assert np.allclose(s.pdf, 1 / omega, rtol=1e-9)
 
 
-def test_area_back_side_is_dark_but_blocks():
+def test_area_back_side_is_dark_and_transparent():
+    """Cycles: seen from behind an area light does not exist (a camera looking at the back of a
+    visible area light sees the lit floor behind it: measured 1.036 at the centre pixel, bpy
+    5.0.1), so rays pass through."""
     ls = LightSet([SHAPES["rect"]], (0, 0, 0), None)
     p = np.array([[0.3, 0.2, 4.0]] * 100)                            # above: behind the emitter
     s = ls.sample(p, None, np.zeros(100), np.random.default_rng(1).random((100, 2)))
     assert not s.valid.any()
     h = ls.intersect(p, np.tile([0.0, 0.0, -1.0], (100, 1)), np.inf)
-    assert h.hit.all() and np.all(h.radiance == 0.0)
+    assert not h.hit.any()
+    below = np.array([[0.3, 0.2, 0.0]] * 100)
+    front = ls.intersect(below, np.tile([0.0, 0.0, 1.0], (100, 1)), np.inf)
+    assert front.hit.all() and np.all(front.radiance > 0.0)
 
 
 def test_emissive_pdf_agrees_with_sample():

@@ -162,7 +162,8 @@ class AreaLight:
         lx = 2.0 * (x @ self.ex) / self.len_x
         ly = 2.0 * (x @ self.ey) / self.len_y
         inside = (lx * lx + ly * ly <= 1.0) if self.is_ellipse else (np.abs(lx) <= 1.0) & (np.abs(ly) <= 1.0)
-        return np.where(inside, t, np.inf)
+        # like Cycles, an area light does not exist seen from behind: rays pass through it
+        return np.where(inside & (denom < 0), t, np.inf)
 
     def hit_radiance(self, o, d, t):
         return self.radiance[None, :] * self._emission(-(d @ self.normal))[:, None]
