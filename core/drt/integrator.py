@@ -183,6 +183,8 @@ class Integrator:
             w = power_heuristic(light_pdf, bsdf_pdf)
         return np.where(is_delta, 1.0, w)
 
+    # Clamping follows Cycles: light found at the first vertex (by next-event estimation there,
+    # or by the BSDF ray leaving it, whose path has bounce 1) is "direct"; deeper is "indirect".
     def _clamp(self, contrib: np.ndarray, indirect: np.ndarray) -> np.ndarray:
         limits = np.where(indirect, self.s.clamp_indirect, self.s.clamp_direct)
         if not np.any(limits > 0):
@@ -269,7 +271,7 @@ class Integrator:
             if np.any(light_hit):
                 w = self._hit_weight(st.prev_delta, st.prev_pdf, lh.pdf)[light_hit]
                 c = st.throughput[light_hit] * lh.radiance[light_hit] * w[:, None]
-                radiance[st.path[light_hit]] += self._clamp(c, st.bounce[light_hit] > 0)
+                radiance[st.path[light_hit]] += self._clamp(c, st.bounce[light_hit] > 1)
             # a sun disk is "hit" at t = inf: the world behind it still shines
             shape_hit = light_hit & np.isfinite(lh.t)
             miss = ~hits.hit & ~shape_hit
@@ -282,7 +284,7 @@ class Integrator:
                     wpdf = self.lights.world_pdf(st.prev_p[miss], st.prev_n[miss], st.d[miss])
                     w = self._hit_weight(st.prev_delta[miss], st.prev_pdf[miss], wpdf)
                     c = st.throughput[miss] * le * w[:, None]
-                    radiance[paths] += self._clamp(c, st.bounce[miss] > 0)
+                    radiance[paths] += self._clamp(c, st.bounce[miss] > 1)
 
             surf = hits.hit & ~shape_hit
             # emission of hit surfaces (also for paths that stop here at a bounce limit)
@@ -295,7 +297,7 @@ class Integrator:
                 lpdf = self.lights.emissive_pdf(hits.prim[e], st.prev_p[e], hits.p[e], hits.ng[e])
                 w = self._hit_weight(st.prev_delta[e], st.prev_pdf[e], lpdf)
                 c = st.throughput[e] * le * w[:, None]
-                radiance[st.path[e]] += self._clamp(c, st.bounce[e] > 0)
+                radiance[st.path[e]] += self._clamp(c, st.bounce[e] > 1)
 
             # --- paths that reached a bounce limit stop here (after collecting emission)
             go = surf & ~st.terminate_next
