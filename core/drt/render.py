@@ -18,6 +18,7 @@ import sys
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
@@ -111,6 +112,10 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
     return ctx
 
 
+class _Cancelled(Exception):
+    """Internal: the cancel callback said stop."""
+
+
 class _ThreadWorkers:
     """Batches on threads sharing one context (used inside Blender and for small jobs)."""
 
@@ -121,8 +126,12 @@ class _ThreadWorkers:
         self.emb0 = ctx.tracer.embree_seconds
 
     def submit(self, x, row, idx):
-        fut = self.pool.submit(self.ctx.integrator.render_batch, x, row, idx)
-        return fut.result
+        return self.pool.submit(self.ctx.integrator.render_batch, x, row, idx)
+
+    def abort(self):
+        """Stop now (cancel): queued batches are dropped; a running one finishes (< 1 s), so
+        no thread outlives the render."""
+        self.pool.shutdown(wait=True, cancel_futures=True)
 
     def counters(self) -> tuple[int, float]:
         return self.ctx.tracer.rays_traced - self.rays0, self.ctx.tracer.embree_seconds - self.emb0
@@ -246,22 +255,34 @@ def render(
     else:
         workers = _ThreadWorkers(ctx, threads)
 
-    def collect(result):
-        _collect(result(), film, stats, tick, total_paths, workers, t0)
+    def collect(future):
+        """Wait for a batch, polling cancel meanwhile (so Esc/Ctrl-C is seen within ~0.05 s)."""
+        while True:
+            try:
+                batch = future.result(timeout=0.05)
+                break
+            except FutureTimeout:
+                if cancel is not None and cancel():
+                    raise _Cancelled from None
+        _collect(batch, film, stats, tick, total_paths, workers, t0)
 
+    aborted = False
     try:
         for k in pass_schedule(count):
             pending = deque()
-            for b in batches(done, k):
-                if cancel is not None and cancel():
-                    cancelled = True
-                    break
-                pending.append(workers.submit(*b))
-                while len(pending) >= threads + 1:
+            try:
+                for b in batches(done, k):
+                    if cancel is not None and cancel():
+                        raise _Cancelled
+                    pending.append(workers.submit(*b))
+                    while len(pending) >= threads + 1:
+                        collect(pending.popleft())
+                while pending:
                     collect(pending.popleft())
-            while pending:
-                collect(pending.popleft())
-            if cancelled:
+            except _Cancelled:
+                cancelled = True
+                aborted = True
+                workers.abort()  # batches in flight are dropped: the film keeps finished ones
                 break
             done += k
             stats.samples_done = done - sample_offset
@@ -280,7 +301,8 @@ def render(
                 cancelled = stats.samples_done < count
                 break
     finally:
-        workers.close()
+        if not aborted:
+            workers.close()
     stats.cancelled = cancelled
     stats.seconds = time.perf_counter() - t0
     stats.rays, stats.embree_seconds = workers.counters()

@@ -29,8 +29,11 @@ def _serve() -> None:
     from .sampling.sequences import Sampler
 
     inp = sys.stdin.buffer
-    out = sys.stdout.buffer
-    sys.stdout = sys.stderr  # nothing else may write into the frame stream
+    # The frame stream gets a private copy of fd 1; fd 1 itself then points at stderr, so
+    # nothing else (a print, a C library's message) can corrupt the frames.
+    out = os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
     scene, overrides, spp = pickle.load(inp)
     ctx = prepare(scene, **overrides)
     integ = ctx.integrator
@@ -124,7 +127,17 @@ class WorkerPool:
         return batch
 
     def submit(self, x, row, idx):
-        return self.feeders.submit(self._run, x, row, idx).result
+        return self.feeders.submit(self._run, x, row, idx)
+
+    def abort(self):
+        """Stop now (cancel): queued batches are dropped and busy workers killed."""
+        self.feeders.shutdown(wait=False, cancel_futures=True)
+        for w in self.workers:
+            if w.proc.poll() is None:
+                w.proc.kill()
+        for w in self.workers:
+            w.proc.wait()
+        self.feeders.shutdown(wait=True)
 
     def counters(self):
         return self.rays, self.embree
