@@ -61,6 +61,11 @@ class DRTRenderEngine(bpy.types.RenderEngine):
 
     # --- final render -----------------------------------------------------------------------
 
+    def cancel_requested(self) -> bool:
+        """Esc in Blender. A Python method (test_break itself is an RNA function, which a
+        subclass attribute cannot override), so tests can simulate a user's cancel."""
+        return bool(self.test_break())
+
     def render(self, depsgraph):
         try:
             self._render(depsgraph)
@@ -78,7 +83,7 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         exported = export_depsgraph(depsgraph, frame_set=self.frame_set)
         for w in exported.warnings:
             self.report({"WARNING"}, f"DRT: {w}")
-        if self.test_break():
+        if self.cancel_requested():
             return
 
         scene_mod = compat.core_module("scene")
@@ -117,7 +122,7 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         try:
             film = render_mod.render(drt_scene, spp=spp, sample_offset=offset,
                                      sample_count=count, progress=progress,
-                                     cancel=self.test_break, context=context)
+                                     cancel=self.cancel_requested, context=context)
             fill_layer(result.layers[0], film, crop, wanted)
         finally:
             self.end_result(result)
