@@ -266,5 +266,21 @@ def export_npz(path):
     return res
 
 
+def make_linear(idblock):
+    """Set every keyframe of an ID's action to LINEAR (Cycles conventions: test with linear keys)."""
+    ad = idblock.animation_data
+    if ad is None or ad.action is None:
+        return
+    action = ad.action
+    if hasattr(action, "layers") and len(action.layers):  # 4.4+ layered actions
+        from bpy_extras.anim_utils import action_get_channelbag_for_slot
+        fcurves = action_get_channelbag_for_slot(action, ad.action_slot).fcurves
+    else:
+        fcurves = action.fcurves
+    for fc in fcurves:
+        for kp in fc.keyframe_points:
+            kp.interpolation = "LINEAR"
+
+
 def deg(x):
     return math.radians(x)

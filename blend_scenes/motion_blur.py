@@ -41,6 +41,8 @@ def build():
     for f, a in ((1, 0.0), (9, C.deg(8 * 20))):
         twist.angle = a
         twist.keyframe_insert("angle", frame=f)
+    for idblock in (mover, spinner, column):
+        C.make_linear(idblock)
     C.box("Static", (0.4, 0.4, 0.4), (-0.5, 1.2, 0.2), grey)
     C.light("Key", "POINT", (1.0, -2.0, 4.0), energy=600.0, shadow_soft_size=0.3)
     C.camera((0.0, -6.0, 2.5), (0.0, 0.0, 0.6), lens=35.0)

@@ -1,0 +1,263 @@
+"""The exporter (depsgraph → header + arrays) with the bpy module: committed exports, materials,
+motion, instancing, visibility, lights, camera. Skipped without bpy."""
+
+import json
+import math
+import os
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCENES = os.path.join(REPO, "blend_scenes")
+for p in (REPO, SCENES):
+    if p not in sys.path:
+        sys.path.insert(0, p)
+
+import _common as C  # noqa: E402  (blend_scenes helpers)
+from addon.export import ExportError, export_depsgraph  # noqa: E402
+from addon.export.blend import export_current  # noqa: E402
+from test_addon import ensure_registered, open_scene  # noqa: E402
+
+pytestmark = pytest.mark.blender
+
+SCENE_NAMES = ["cornell_box", "dof", "motion_blur", "glossy_glass", "all_lights"]
+
+
+def read_npz(path):
+    with np.load(path, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    header = json.loads(arrays.pop("header").tobytes().decode("utf-8"))
+    return header, arrays
+
+
+def assert_close(a, b, path="header"):
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and set(a) == set(b), f"{path}: keys {set(a) ^ set(b)}"
+        for k in a:
+            assert_close(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, list):
+        assert isinstance(b, list) and len(a) == len(b), f"{path}: length"
+        for i, (x, y) in enumerate(zip(a, b)):
+            assert_close(x, y, f"{path}[{i}]")
+    elif isinstance(a, float) or isinstance(b, float):
+        assert math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-9), f"{path}: {a} != {b}"
+    else:
+        assert a == b, f"{path}: {a!r} != {b!r}"
+
+
+@pytest.fixture
+def fresh():
+    ensure_registered()
+    scene = C.reset()
+    C.camera((0, -5, 1), (0, 0, 0))
+    return scene
+
+
+@pytest.mark.parametrize("name", SCENE_NAMES)
+def test_export_matches_committed_file(name):
+    open_scene(name)
+    res = export_current()
+    header, arrays = read_npz(os.path.join(SCENES, f"{name}.npz"))
+    assert_close(res.header, header)
+    assert set(res.arrays) == set(arrays)
+    for k, v in arrays.items():
+        np.testing.assert_array_equal(res.arrays[k], v, err_msg=k)
+
+
+def test_committed_exports_validate_in_core():
+    scene_file = pytest.importorskip("drt.scene_file")
+    for name in SCENE_NAMES:
+        scene_file.load_scene(os.path.join(SCENES, f"{name}.npz"))
+
+
+def test_instanced_meshes_stored_once():
+    open_scene("all_lights")
+    res = export_current()
+    posts = [o for o in res.header["objects"] if o["name"].startswith("Post")]
+    assert len(posts) == 6  # three linked duplicates + three through the collection instance
+    assert len({o["mesh"] for o in posts}) == 1
+
+
+def test_motion_only_for_moving_objects():
+    open_scene("motion_blur")
+    res = export_current()
+    h = res.header
+    assert h["render"]["shutter"] == [-0.25, 0.25]
+    motion = {o["name"]: o["motion"] for o in h["objects"]}
+    assert motion["Static"] is None and motion["Floor"] is None
+    m = motion["Mover"]
+    dx = m["matrix_close"][0][3] - m["matrix_open"][0][3]
+    assert dx == pytest.approx(0.5 * 0.25, rel=1e-4)  # 0.25 units/frame × 0.5 frame
+    assert motion["Spinner"] is not None
+    deforming = {mm["name"]: mm["deforming"] for mm in h["meshes"]}
+    assert deforming["Twister"] and not deforming["Mover"]
+    k = next(i for i, mm in enumerate(h["meshes"]) if mm["name"] == "Twister")
+    assert f"mesh{k}.positions_close" in res.arrays
+    assert bpy.context.scene.frame_current == 5  # time restored
+
+
+@pytest.mark.parametrize("position,centre", [("START", 0.25), ("CENTER", 0.0), ("END", -0.25)])
+def test_motion_blur_position(position, centre):
+    open_scene("motion_blur")
+    bpy.context.scene.render.motion_blur_position = position
+    s = export_current().header["render"]["shutter"]
+    assert (s[0] + s[1]) / 2 == pytest.approx(centre)
+    assert s[1] - s[0] == pytest.approx(0.5)
+
+
+def test_hidden_and_holdout_objects_excluded(fresh):
+    mat = C.diffuse("M", (0.5, 0.5, 0.5))
+    C.quad("Visible", (0, 0, 0), 1.0, mat)
+    C.quad("Hidden", (0, 0, 1), 1.0, mat).hide_render = True
+    C.quad("Holdout", (0, 0, 2), 1.0, mat).is_holdout = True
+    names = [o["name"] for o in export_current().header["objects"]]
+    assert names == ["Visible"]
+
+
+def test_no_camera_is_an_export_error():
+    ensure_registered()
+    C.reset()
+    with pytest.raises(ExportError, match="camera"):
+        export_depsgraph(bpy.context.evaluated_depsgraph_get())
+
+
+def test_smooth_normals_and_uvs(fresh):
+    C.uv_sphere("Ball", 1.0, (0, 0, 0), C.diffuse("M", (0.5, 0.5, 0.5)), segments=16, rings=8)
+    res = export_current()
+    n = res.arrays["mesh0.normals"]
+    pos = res.arrays["mesh0.positions"][res.arrays["mesh0.triangles"]]
+    # smooth sphere: corner normals are unit, nearly radial, shared by the corners of a vertex
+    np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-5)
+    radial = pos / np.linalg.norm(pos, axis=-1, keepdims=True)
+    assert np.min(np.sum(n * radial, axis=-1)) > 0.98
+    tri = res.arrays["mesh0.triangles"]
+    first = {}
+    for v, nv in zip(tri.reshape(-1), n.reshape(-1, 3)):
+        np.testing.assert_allclose(first.setdefault(v, nv), nv, atol=1e-6)
+    assert res.arrays["mesh0.uvs"].shape == (len(n), 3, 2)
+
+
+def test_flat_mesh_has_no_normals(fresh):
+    C.box("Box", (1, 1, 1), (0, 0, 0), C.diffuse("M", (0.5, 0.5, 0.5)))
+    res = export_current()
+    assert "mesh0.normals" not in res.arrays
+    assert res.arrays["mesh0.triangles"].shape == (12, 3)
+
+
+def _material(res, name):
+    return next(m for m in res.header["materials"] if m["name"] == name)
+
+
+def test_principled_mapping(fresh):
+    mat, nodes, out = C._new_material("P")
+    p = nodes.new("ShaderNodeBsdfPrincipled")
+    p.inputs["Base Color"].default_value = (0.5, 0.2, 0.1, 1)
+    p.inputs["Metallic"].default_value = 0.25
+    p.inputs["Alpha"].default_value = 0.8
+    mat.node_tree.links.new(p.outputs[0], out.inputs["Surface"])
+    C.quad("Q", (0, 0, 0), 1.0, mat)
+    m = _material(export_current(), "P")
+    kinds = [lb["type"] for lb in m["lobes"]]
+    assert kinds == ["GLOSSY", "DIFFUSE", "GLOSSY", "GLASS"]
+    metal, diffuse, spec, clear = m["lobes"]
+    np.testing.assert_allclose(metal["color"], 0.8 * 0.25 * np.array([0.5, 0.2, 0.1]), rtol=1e-5)
+    f0 = (0.5 / 2.5) ** 2
+    f = f0 + (1 - f0) / 21
+    np.testing.assert_allclose(diffuse["color"], 0.8 * 0.75 * (1 - f) * np.array([0.5, 0.2, 0.1]), rtol=1e-5)
+    np.testing.assert_allclose(spec["color"], [0.8 * 0.75 * f] * 3, rtol=1e-5)
+    assert clear["ior"] == 1.0 and clear["color"] == pytest.approx([0.2] * 3)
+
+
+def test_mix_add_emission_and_rgb_input(fresh):
+    mat, nodes, out = C._new_material("MixAdd")
+    rgb = nodes.new("ShaderNodeRGB")
+    rgb.outputs[0].default_value = (0.1, 0.2, 0.3, 1)
+    d = nodes.new("ShaderNodeBsdfDiffuse")
+    mat.node_tree.links.new(rgb.outputs[0], d.inputs["Color"])
+    e = nodes.new("ShaderNodeEmission")
+    e.inputs["Color"].default_value = (1, 0.5, 0.25, 1)
+    e.inputs["Strength"].default_value = 4.0
+    add = nodes.new("ShaderNodeAddShader")
+    mat.node_tree.links.new(d.outputs[0], add.inputs[0])
+    mat.node_tree.links.new(e.outputs[0], add.inputs[1])
+    g = nodes.new("ShaderNodeBsdfGlass")
+    mix = nodes.new("ShaderNodeMixShader")
+    mix.inputs[0].default_value = 0.25
+    mat.node_tree.links.new(add.outputs[0], mix.inputs[1])
+    mat.node_tree.links.new(g.outputs[0], mix.inputs[2])
+    mat.node_tree.links.new(mix.outputs[0], out.inputs["Surface"])
+    C.quad("Q", (0, 0, 0), 1.0, mat)
+    res = export_current()
+    m = _material(res, "MixAdd")
+    assert m["lobes"][0] == {"type": "DIFFUSE", "color": pytest.approx([0.075, 0.15, 0.225])}
+    assert m["lobes"][1]["type"] == "GLASS" and m["lobes"][1]["color"] == pytest.approx([0.25] * 3)
+    assert m["emission"] == pytest.approx([3.0, 1.5, 0.75])
+    assert not res.warnings
+
+
+def test_unsupported_node_warns_once_and_falls_back(fresh):
+    mat, nodes, out = C._new_material("Odd")
+    t = nodes.new("ShaderNodeBsdfToon")
+    t.inputs["Color"].default_value = (0.3, 0.4, 0.5, 1)
+    tex = nodes.new("ShaderNodeTexNoise")
+    p = nodes.new("ShaderNodeBsdfDiffuse")
+    mat.node_tree.links.new(tex.outputs["Color"], p.inputs["Color"])
+    mix = nodes.new("ShaderNodeMixShader")
+    mat.node_tree.links.new(t.outputs[0], mix.inputs[1])
+    mat.node_tree.links.new(p.outputs[0], mix.inputs[2])
+    mat.node_tree.links.new(mix.outputs[0], out.inputs["Surface"])
+    C.quad("Q", (0, 0, 0), 1.0, mat)
+    C.quad("Q2", (0, 0, 1), 1.0, mat)
+    res = export_current()
+    m = _material(res, "Odd")
+    assert m["lobes"][0] == {"type": "DIFFUSE", "color": pytest.approx([0.15, 0.2, 0.25])}
+    odd = [w for w in res.warnings if "'Odd'" in w]
+    assert len(odd) == 1 and "Toon" in odd[0] and "Noise" in odd[0]
+
+
+def test_lights_units(fresh):
+    C.light("Area", "AREA", (0, 0, 2), shape="DISK", size=0.5, energy=10.0)
+    C.light("Spot", "SPOT", (0, 0, 2), energy=100.0, spot_size=math.radians(45), spot_blend=0.2)
+    C.light("Sun", "SUN", (0, 0, 2), energy=3.0, angle=math.radians(2))
+    bpy.data.lights["Spot"].exposure = 1.0
+    lights = {lt["name"]: lt for lt in export_current().header["lights"]}
+    assert lights["Area"]["size_y"] == lights["Area"]["size"] == pytest.approx(0.5)
+    assert lights["Spot"]["power"] == pytest.approx(200.0)  # 2^exposure
+    assert lights["Spot"]["spot_size"] == pytest.approx(math.radians(45))
+    assert lights["Sun"]["strength"] == pytest.approx(3.0)
+    assert lights["Sun"]["angle"] == pytest.approx(math.radians(2))
+    assert lights["Area"]["spread"] <= math.pi
+
+
+def test_camera_focus_object_and_resolution(fresh):
+    cam = bpy.context.scene.camera
+    target = bpy.data.objects.new("T", None)
+    bpy.context.scene.collection.objects.link(target)
+    target.location = (0, 3, 1)  # camera at (0,-5,1) looking at the origin
+    cam.data.dof.use_dof = True
+    cam.data.dof.focus_object = target
+    r = bpy.context.scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = 1000, 500, 50
+    h = export_current().header
+    view = np.array([0, 5, -1]) / math.sqrt(26)
+    assert h["camera"]["dof"]["focus_distance"] == pytest.approx(float(np.dot(view, [0, 8, 0])), rel=1e-5)
+    assert h["render"]["resolution"] == [500, 250]
+
+
+@pytest.mark.slow
+def test_export_speed_one_million_triangles():
+    import time
+
+    import large_mesh
+    ensure_registered()
+    large_mesh.build()
+    export_current()
+    t0 = time.perf_counter()
+    res = export_current()
+    dt = time.perf_counter() - t0
+    assert len(res.arrays["mesh0.triangles"]) >= 1_000_000
+    assert dt < 2.0, f"export took {dt:.2f} s"
