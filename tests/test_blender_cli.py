@@ -1,0 +1,84 @@
+"""The real command line a render farm runs: ``blender -b FILE -E DRT -o //out_ -F OPEN_EXR -f 1``.
+
+Uses the Blender binary on PATH (Debian's 3.4.1 here; ``.ci/run`` installs it) with the legacy
+add-on staged into a temporary user scripts directory (BLENDER_USER_SCRIPTS). The .blend is
+built by that same Blender from blend_scenes/cornell_box.py (5.0 files do not open in 3.4).
+Debian's Blender ships without numpy: the test links this Python's numpy into the user
+``scripts/modules`` directory.
+"""
+
+import glob
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BLENDER = shutil.which("blender")
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(BLENDER is None, reason="no 'blender' binary on PATH "
+                       "(apt-get install blender); the bpy-module tests cover the add-on"),
+]
+
+
+@pytest.fixture(scope="module")
+def install(tmp_path_factory):
+    root = tmp_path_factory.mktemp("blender_user")
+    scripts = root / "scripts"
+    sys.path.insert(0, os.path.join(REPO, "scripts"))
+    import build_extension as b
+    wheels = b.download_wheels([w for w in b.manifest_wheels() if "manylinux" in w])
+    dest = b.stage_addon(str(scripts / "addons" / b.LEGACY_NAME), wheels)
+    os.remove(os.path.join(dest, "blender_manifest.toml"))
+    modules = scripts / "modules"
+    modules.mkdir(parents=True)
+    import numpy
+    site = os.path.dirname(os.path.dirname(numpy.__file__))
+    for name in ("numpy", "numpy.libs"):
+        if os.path.exists(os.path.join(site, name)):
+            os.symlink(os.path.join(site, name), modules / name)
+    env = dict(os.environ, BLENDER_USER_SCRIPTS=str(scripts))
+    subprocess.run([BLENDER, "-b", "--factory-startup", "--python",
+                    os.path.join(REPO, "blend_scenes", "cornell_box.py"), "--",
+                    "--out", str(root), "--no-npz"], env=env, check=True,
+                   capture_output=True, timeout=300)
+    return root, env, b.LEGACY_NAME
+
+
+def run(install, *extra):
+    root, env, name = install
+    cmd = [BLENDER, "-b", str(root / "cornell_box.blend"), "--addons", name, *extra]
+    return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600, cwd=root)
+
+
+def test_blender_b_renders_exr(install):
+    root = install[0]
+    for f in glob.glob(str(root / "out_*")):
+        os.remove(f)
+    p = run(install, "-E", "DRT", "-o", "//out_", "-F", "OPEN_EXR", "-f", "1")
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+    out = root / "out_0001.exr"
+    assert out.exists(), p.stdout[-2000:]
+    import OpenEXR
+    with OpenEXR.File(str(out)) as f:
+        rgba = np.array(f.parts[0].channels["RGBA"].pixels)
+    assert rgba.shape == (96, 96, 4)
+    assert 0.05 < rgba[..., :3].mean() < 1.0
+    left, right = rgba[30:70, 22:28, :3].mean((0, 1)), rgba[30:70, 68:74, :3].mean((0, 1))
+    assert left[0] > 2 * left[1] and right[1] > 1.5 * right[0]
+
+
+def test_blender_b_failure_exits_nonzero(install):
+    """An unrenderable scene must fail the farm job: exit code != 0, no image."""
+    root = install[0]
+    p = run(install, "-E", "DRT", "--python-expr",
+            "import bpy; bpy.context.scene.camera.data.type = 'PANO'",
+            "-o", "//bad_", "-F", "OPEN_EXR", "-f", "1")
+    assert p.returncode != 0
+    assert not (root / "bad_0001.exr").exists()
+    assert "DRT" in p.stdout + p.stderr
