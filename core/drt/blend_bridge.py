@@ -37,6 +37,10 @@ def _load_addon():
         module = importlib.util.module_from_spec(spec)
         sys.modules[ADDON_MODULE] = module
         spec.loader.exec_module(module)
+        import bpy
+
+        if not hasattr(bpy.types.Scene, "drt"):  # register first, so .blend files saved with
+            module.register()  # the DRT engine open with it (no "engine not available" report)
         return module
     try:
         return importlib.import_module(ADDON_MODULE)
