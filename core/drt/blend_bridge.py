@@ -37,10 +37,6 @@ def _load_addon():
         module = importlib.util.module_from_spec(spec)
         sys.modules[ADDON_MODULE] = module
         spec.loader.exec_module(module)
-        import bpy
-
-        if not hasattr(bpy.types.Scene, "drt"):  # register first, so .blend files saved with
-            module.register()  # the DRT engine open with it (no "engine not available" report)
         return module
     try:
         return importlib.import_module(ADDON_MODULE)
@@ -52,10 +48,20 @@ def export_blend_arrays(path: str, frame: int | None = None) -> tuple[dict, dict
     """Open ``path`` with bpy and export its scene: (header, arrays, warnings)."""
     addon = _load_addon()
     blend = importlib.import_module(f"{addon.__name__}.export.blend")
+    import bpy
+
+    # Register for the export only (so a .blend saved with the DRT engine opens with it), and
+    # leave Blender as we found it: a process that also loads the add-on itself keeps its own.
+    registered_here = not hasattr(bpy.types.Scene, "drt")
+    if registered_here:
+        addon.register()
     try:
         result = blend.export_blend_file(os.path.abspath(path), frame=frame)
     except Exception as e:  # bpy raises RuntimeError for unreadable files, ExportError for scenes
         raise BlendError(f"cannot export {path}: {e}") from None
+    finally:
+        if registered_here and hasattr(bpy.types.Scene, "drt"):
+            addon.unregister()
     return result.header, result.arrays, list(getattr(result, "warnings", []))
 
 
