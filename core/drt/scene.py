@@ -126,6 +126,14 @@ def _matrix(d, key, path, default=...):
     return m
 
 
+def _list(d, key, path):
+    """A list-valued field (missing = empty)."""
+    v = _get(d, key, path, [])
+    if not isinstance(v, list):
+        raise SceneError(_join(path, key), "must be a list")
+    return v
+
+
 def _motion(d, key, path):
     v = _get(d, key, path, None)
     if v is None:
@@ -328,17 +336,13 @@ def _camera(h: dict) -> CameraSpec:
 
 
 def _materials(h: dict) -> list[dict]:
-    mats = _get(h, "materials", "", [])
-    if not isinstance(mats, list):
-        raise SceneError("materials", "must be a list")
+    mats = _list(h, "materials", "")
     out = []
     for i, m in enumerate(mats):
         p = f"materials[{i}]"
         if not isinstance(m, dict):
             raise SceneError(p, "must be an object")
-        lobes = _get(m, "lobes", p, [])
-        if not isinstance(lobes, list):
-            raise SceneError(f"{p}.lobes", "must be a list")
+        lobes = _list(m, "lobes", p)
         clean = []
         for j, lobe in enumerate(lobes):
             lp = f"{p}.lobes[{j}]"
@@ -360,9 +364,7 @@ def _materials(h: dict) -> list[dict]:
 
 
 def _lights(h: dict) -> list[dict]:
-    lights = _get(h, "lights", "", [])
-    if not isinstance(lights, list):
-        raise SceneError("lights", "must be a list")
+    lights = _list(h, "lights", "")
     out = []
     for i, li in enumerate(lights):
         p = f"lights[{i}]"
@@ -412,9 +414,7 @@ def _array(arrays: dict, name: str, kinds: str, ndim: int, shape_tail=()) -> np.
 
 
 def _meshes(h: dict, arrays: dict, n_materials: int) -> list[MeshData]:
-    meshes = _get(h, "meshes", "", [])
-    if not isinstance(meshes, list):
-        raise SceneError("meshes", "must be a list")
+    meshes = _list(h, "meshes", "")
     out = []
     for k, m in enumerate(meshes):
         p = f"meshes[{k}]"
@@ -451,9 +451,7 @@ def _meshes(h: dict, arrays: dict, n_materials: int) -> list[MeshData]:
 
 
 def _objects(h: dict, n_meshes: int) -> list[ObjectSpec]:
-    objs = _get(h, "objects", "", [])
-    if not isinstance(objs, list):
-        raise SceneError("objects", "must be a list")
+    objs = _list(h, "objects", "")
     out = []
     for i, o in enumerate(objs):
         p = f"objects[{i}]"

@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .ggx import ggx_d, ggx_lambda, is_singular, reflect, sample_vndf
+from .ggx import ggx_d, ggx_lambda, reflect, sample_microfacet_normal
 
 #: |ior − 1| below which a glass lobe is a pass-through delta (Cycles: 1e-4).
 IOR_ONE_EPS = 1e-4
@@ -124,12 +124,7 @@ def sample_glass(wo: np.ndarray, alpha: np.ndarray, ior: np.ndarray, u_choice: n
     sample may end on the wrong side (wi.z·wo.z ≤ 0 for a reflection, ≥ 0 for a refraction):
     the caller discards it."""
     wo_u, _, eta, flip = _upper(wo, None, ior)
-    sing = is_singular(alpha)
-    h = np.empty_like(wo_u)
-    h[sing] = (0.0, 0.0, 1.0)
-    rough = ~sing
-    if np.any(rough):
-        h[rough] = sample_vndf(wo_u[rough], alpha[rough], u2[rough])
+    h = sample_microfacet_normal(wo_u, alpha, u2)
     c_o = np.sum(wo_u * h, axis=1)
     f = fresnel_dielectric(c_o, eta)
     refracted = u_choice >= f

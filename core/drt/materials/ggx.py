@@ -116,6 +116,18 @@ def eval_glossy(wo: np.ndarray, wi: np.ndarray, alpha: np.ndarray) -> tuple[np.n
     return value, pdf
 
 
+def sample_microfacet_normal(wo_u: np.ndarray, alpha: np.ndarray, u2: np.ndarray) -> np.ndarray:
+    """Microfacet normals h (n, 3) for wo_u on the upper side: visible-normal samples, or the
+    macro normal z where alpha is singular (a perfect mirror / smooth interface)."""
+    sing = is_singular(alpha)
+    h = np.empty_like(wo_u)
+    h[sing] = (0.0, 0.0, 1.0)
+    rough = ~sing
+    if np.any(rough):
+        h[rough] = sample_vndf(wo_u[rough], alpha[rough], u2[rough])
+    return h
+
+
 def sample_glossy(wo: np.ndarray, alpha: np.ndarray, u2: np.ndarray) -> np.ndarray:
     """wo: (n, 3) local (either side), alpha: (n,), u2: (n, 2). Returns wi (n, 3) on wo's side
     by visible-normal sampling, or the perfect mirror direction where alpha is singular. A sample
@@ -124,12 +136,6 @@ def sample_glossy(wo: np.ndarray, alpha: np.ndarray, u2: np.ndarray) -> np.ndarr
     flip = wo[:, 2] < 0.0
     wo_u = wo.copy()
     wo_u[:, 2] = np.abs(wo_u[:, 2])
-    sing = is_singular(alpha)
-    h = np.empty_like(wo_u)
-    h[sing] = (0.0, 0.0, 1.0)
-    rough = ~sing
-    if np.any(rough):
-        h[rough] = sample_vndf(wo_u[rough], alpha[rough], u2[rough])
-    wi = reflect(wo_u, h)
+    wi = reflect(wo_u, sample_microfacet_normal(wo_u, alpha, u2))
     wi[:, 2] = np.where(flip, -wi[:, 2], wi[:, 2])
     return wi
