@@ -51,31 +51,64 @@ def test_near_specular_surface_defeats_light_sampling():
 
 
 @pytest.mark.parametrize("plate", range(len(PLATE_ROUGHNESS)))
-@pytest.mark.parametrize("heuristic", ["MIS_BALANCE", "MIS_POWER"])
-def test_veach_plates_mis_matches_the_better_strategy(plate, heuristic):
+def test_veach_plates_mis_matches_the_better_strategy(plate):
     """Veach's plates: light sampling fails on the sharp plates, BSDF sampling on the small
-    lights; MIS (one light + one BSDF sample) stays within noise of the better one.
+    lights; the default MIS (power heuristic, one light + one BSDF sample) stays within noise
+    (4 standard errors of the two variance estimates) of the better one on every plate.
 
-    "Within noise" is Veach's bound (Theorem 9.2, n_light = n_bsdf = 1): the balance heuristic's
-    variance exceeds that of *any* strategy by at most (1 − 1/2)·μ², plus 4 standard errors of
-    the measured variances. Measured ratios MIS/best are ≈ 1.16, 0.58, 0.78, 0.88 (sharp to
-    rough): on the sharpest plate, where the tiniest light's disk and the lobe overlap, MIS
-    pays a little for the light samples it weights down."""
+    Measured MIS/best: ≈ 0.99, 0.55, 0.73, 0.85 (sharp to rough). Before light selection knew
+    the BSDF (`drt.lights.selection`) the sharpest plate gave 1.16: it picked the light the
+    plate reflects only a quarter of the time, and the light samples MIS weighted down cost
+    more than they gave."""
     setup = veach_points(plate)
-    v = {m: variance(setup, m) for m in ("LIGHT", "BSDF", heuristic)}
+    v = {m: variance(setup, m) for m in ("LIGHT", "BSDF", "MIS_POWER")}
     best = min(("LIGHT", "BSDF"), key=lambda m: v[m][0])
     worst = "BSDF" if best == "LIGHT" else "LIGHT"
-    v_mis, se_mis, mu2 = v[heuristic]
+    v_mis, se_mis, _ = v["MIS_POWER"]
+    v_best, se_best, _ = v[best]
+    assert v_mis <= v_best + 4 * math.hypot(se_mis, se_best), (best, v_mis, v_best)
+    # and MIS avoids the failing strategy's blow-up
+    assert v_mis <= 0.2 * v[worst][0]
+
+
+@pytest.mark.parametrize("plate", range(len(PLATE_ROUGHNESS)))
+def test_veach_plates_balance_heuristic_within_veachs_bound(plate):
+    """The balance heuristic is not always within noise of the better strategy (measured
+    MIS/best ≈ 0.85, 0.96, 1.08, 1.16: on the rough plates it keeps too much of the BSDF
+    samples), but it obeys Veach's bound (Theorem 9.2, n_light = n_bsdf = 1): its variance
+    exceeds that of any strategy by at most (1 − 1/2)·μ²."""
+    setup = veach_points(plate)
+    v = {m: variance(setup, m) for m in ("LIGHT", "BSDF", "MIS_BALANCE")}
+    best = min(("LIGHT", "BSDF"), key=lambda m: v[m][0])
+    v_mis, se_mis, mu2 = v["MIS_BALANCE"]
     v_best, se_best, _ = v[best]
     assert v_mis <= v_best + 0.5 * mu2 + 4 * math.hypot(se_mis, se_best), (best, v_mis, v_best, mu2)
-    # and MIS avoids the failing strategy's blow-up
-    assert v_mis <= 0.6 * v[worst][0]
+    assert v_mis <= 1.3 * v_best
+
+
+def test_veach_render_mis_and_bsdf_sampling_agree():
+    """The whole integrator on Veach's plates (fill light removed: BSDF sampling cannot reach a
+    delta light): MIS with the BSDF-aware light selection and pure BSDF sampling converge to the
+    same image mean. 4 seeds each; the tolerance is 5 standard errors of the seed means."""
+    from failure_scenes import veach_scene
+    h, a = veach_scene(32, 24)
+    h["lights"] = h["lights"][:4]
+    scene = scene_from_dict(h, a)
+    means, noise = {}, {}
+    for direct in ("MIS_POWER", "BSDF"):
+        films = [render(scene, spp=96, threads=2, direct=direct, seed=s) for s in range(4)]
+        m = [float((f.combined[..., :3] @ LUM).mean()) for f in films]
+        means[direct] = (np.mean(m), np.std(m, ddof=1) / 2)
+        noise[direct] = np.mean([f.variance.mean() for f in films])  # per-sample pixel variance
+    (a_mean, a_se), (b_mean, b_se) = means["MIS_POWER"], means["BSDF"]
+    assert abs(a_mean - b_mean) < 5 * math.hypot(a_se, b_se) + 1e-3 * b_mean, means
+    assert noise["MIS_POWER"] < 0.75 * noise["BSDF"], noise  # and MIS is the less noisy
 
 
 def test_veach_plates_each_strategy_fails_somewhere():
     sharp, rough = veach_points(0), veach_points(len(PLATE_ROUGHNESS) - 1)
-    assert variance(sharp, "LIGHT")[0] > 10 * variance(sharp, "BSDF")[0]
-    assert variance(rough, "BSDF")[0] > 10 * variance(rough, "LIGHT")[0]
+    assert variance(sharp, "LIGHT")[0] > 4 * variance(sharp, "BSDF")[0]
+    assert variance(rough, "BSDF")[0] > 100 * variance(rough, "LIGHT")[0]
     assert LIGHT_RADII[-1] / LIGHT_RADII[0] >= 30
 
 

@@ -42,6 +42,7 @@ from typing import Callable
 
 import numpy as np
 
+from .lights.selection import ShadingHint
 from .sampling.sequences import Sampler
 from .sampling.warps import (
     build_frame,
@@ -120,16 +121,17 @@ class DirectLight:
         self.epsilon = epsilon
 
     # ------------------------------------------------------------------ radiance along rays
-    def incident(self, p, n, wi) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def incident(self, p, n, wi, hint=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Radiance arriving at p (m, 3) along −wi (m, 3) from the lights (no surfaces but the
         optional occluder). Returns (light radiance (m, 3), its MIS pdf (m,), world radiance
-        (m, 3), its MIS pdf (m,)): the two are weighted separately, as in the integrator."""
-        lh = self.lights.intersect(p, wi, np.full(len(p), np.inf))
+        (m, 3), its MIS pdf (m,)): the two are weighted separately, as in the integrator. The
+        pdfs are light sampling's with the points' `ShadingHint` ``hint``."""
+        lh = self.lights.intersect(p, wi, np.full(len(p), np.inf), hint=hint)
         shape = lh.hit & np.isfinite(lh.t)
         rad = np.where(lh.hit[:, None], lh.radiance, 0.0)
         pdf = np.where(lh.hit, lh.pdf, 0.0)
         world = np.where(shape[:, None], 0.0, self.lights.world_radiance(wi))
-        wpdf = np.where(shape, 0.0, self.lights.world_pdf(p, n, wi))
+        wpdf = np.where(shape, 0.0, self.lights.world_pdf(p, n, wi, hint))
         if self.occluded is not None:
             o = p + n * self.epsilon * np.sign(np.einsum("ij,ij->i", n, wi))[:, None]
             tmax = np.where(shape, lh.t * (1 - 1e-4), np.inf)
@@ -172,7 +174,7 @@ class DirectLight:
         ``pts`` repeated K times. heuristic: None (pure light sampling), 'balance' or 'power'."""
         t, b, wo_l, side = self._frames(pts)
         n_wo = pts.n * side[:, None]
-        ls = self.lights.sample(pts.p, n_wo, u_sel, u_l)
+        ls = self.lights.sample(pts.p, n_wo, u_sel, u_l, ShadingHint.from_materials(self.materials, pts.mat, n_wo, pts.wo))
         wi_l = to_local(ls.wi, t, b, pts.n)
         f, pdf_b = self.materials.eval(pts.mat, wo_l, wi_l)
         ok = ls.valid & (ls.pdf > 0) & (wi_l[:, 2] * wo_l[:, 2] > 0)
@@ -188,7 +190,8 @@ class DirectLight:
         n_wo = pts.n * side[:, None]
         bs = self.materials.sample(pts.mat, wo_l, u_lobe, u_dir)
         wi = to_world(bs.wi, t, b, pts.n)
-        rad, lpdf, world, wpdf = self.incident(pts.p, n_wo, wi)
+        hint = ShadingHint.from_materials(self.materials, pts.mat, n_wo, pts.wo)
+        rad, lpdf, world, wpdf = self.incident(pts.p, n_wo, wi, hint)
         if heuristic is None:
             w_l = w_w = np.ones(len(wi))
         else:

@@ -36,7 +36,7 @@ import numpy as np
 from .camera import Camera
 from .film import SampleBatch
 from .geometry import SceneGeometry
-from .lights import LightSet
+from .lights import LightSet, ShadingHint
 from .motion import invert_linear
 from .materials import LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, MaterialTable
 from .sampling.pixel_filter import PixelFilter
@@ -93,6 +93,8 @@ class PathState:
     prev_delta: np.ndarray  # the ray came from the camera or a specular bounce: no MIS
     prev_p: np.ndarray
     prev_n: np.ndarray
+    prev_wo: np.ndarray  # with prev_n and prev_mat: the light-selection hint of the last vertex
+    prev_mat: np.ndarray
     bounce: np.ndarray
     diffuse: np.ndarray
     glossy: np.ndarray
@@ -160,6 +162,14 @@ class Integrator:
         n[flip] = -n[flip]
         ns[smooth] = n
         return ns
+
+    def _hint(self, mat, n_wo, wo, rows=None) -> ShadingHint | None:
+        """The light-selection hint of shading points (None when selection ignores it)."""
+        if not self.lights.uses_hint:
+            return None
+        if rows is not None:
+            mat, n_wo, wo = mat[rows], n_wo[rows], wo[rows]
+        return ShadingHint.from_materials(self.materials, np.maximum(mat, 0), n_wo, wo)
 
     def _hit_weight(self, prev_delta, bsdf_pdf, light_pdf):
         """MIS weight of an emitter found by a BSDF-sampled ray (1 after camera/specular rays)."""
@@ -249,6 +259,8 @@ class Integrator:
             prev_delta=np.ones(n, dtype=bool),
             prev_p=rays.o.copy(),
             prev_n=np.zeros((n, 3)),
+            prev_wo=np.zeros((n, 3)),
+            prev_mat=np.full(n, -1, dtype=np.intp),
             bounce=np.zeros(n, dtype=np.int32),
             diffuse=np.zeros(n, dtype=np.int32),
             glossy=np.zeros(n, dtype=np.int32),
@@ -264,7 +276,9 @@ class Integrator:
             t_geom = hits.t
 
             # --- emitters hit by this ray: light shapes, emissive triangles, the world
-            lh = self.lights.intersect(st.o, st.d, t_geom)
+            # MIS pdfs of emitters this ray finds: light sampling's at the vertex it left
+            prev_hint = self._hint(st.prev_mat, st.prev_n, st.prev_wo)
+            lh = self.lights.intersect(st.o, st.d, t_geom, origin=st.prev_p, hint=prev_hint)
             light_hit = lh.hit.copy()
             if camera_ray and np.any(light_hit):
                 light_hit &= self.lights.visible_to_camera[np.maximum(lh.light, 0)]
@@ -281,7 +295,8 @@ class Integrator:
                     alpha[paths] = 0.0
                 else:
                     le = self.lights.world_radiance(st.d[miss])
-                    wpdf = self.lights.world_pdf(st.prev_p[miss], st.prev_n[miss], st.d[miss])
+                    wpdf = self.lights.world_pdf(st.prev_p[miss], st.prev_n[miss], st.d[miss],
+                                                 None if prev_hint is None else prev_hint.subset(miss))
                     w = self._hit_weight(st.prev_delta[miss], st.prev_pdf[miss], wpdf)
                     c = st.throughput[miss] * le * w[:, None]
                     radiance[paths] += self._clamp(c, st.bounce[miss] > 1)
@@ -294,7 +309,8 @@ class Integrator:
             if np.any(em):
                 e = si[em]
                 le = self.materials.emission[mat_all[em]]
-                lpdf = self.lights.emissive_pdf(hits.prim[e], st.prev_p[e], hits.p[e], hits.ng[e])
+                lpdf = self.lights.emissive_pdf(hits.prim[e], st.prev_p[e], hits.p[e], hits.ng[e],
+                                                None if prev_hint is None else prev_hint.subset(e))
                 w = self._hit_weight(st.prev_delta[e], st.prev_pdf[e], lpdf)
                 c = st.throughput[e] * le * w[:, None]
                 radiance[st.path[e]] += self._clamp(c, st.bounce[e] > 1)
@@ -335,7 +351,7 @@ class Integrator:
             if self.direct != "BSDF" and np.any(can_nee) and self.lights.strategies:
                 k = np.nonzero(can_nee)[0]
                 u_l = self.sampler.sample_2d(pid_b[k], idx_b[k], base + 1)
-                ls = self.lights.sample(p[k], n_wo[k], u_sel[k, 0], u_l)
+                ls = self.lights.sample(p[k], n_wo[k], u_sel[k, 0], u_l, self._hint(mat, n_wo, wo, k))
                 wi = ls.wi
                 wi_l = to_local(wi, t_ax[k], b_ax[k], ns[k])
                 f, pdf_b = self.materials.eval(mat[k], wo_l[k], wi_l)
@@ -395,6 +411,8 @@ class Integrator:
                 prev_delta=bs.is_delta,
                 prev_p=p,
                 prev_n=n_wo,
+                prev_wo=wo,
+                prev_mat=mat,
                 bounce=bounce,
                 diffuse=diffuse.astype(np.int32),
                 glossy=glossy.astype(np.int32),

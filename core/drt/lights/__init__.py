@@ -4,10 +4,11 @@ from .area import AreaLight
 from .emissive import EmissiveGroup, EmissiveTriangles
 from .light_set import LightHit, LightSample, LightSet, select, selection_distribution
 from .point import PointLight
+from .selection import ShadingHint
 from .spot import SpotLight
 from .sun import SunLight
 from .world import WorldLight
 
 __all__ = ["AreaLight", "EmissiveGroup", "EmissiveTriangles", "LightHit", "LightSample",
-           "LightSet", "PointLight", "SpotLight", "SunLight", "WorldLight", "select",
+           "LightSet", "PointLight", "ShadingHint", "SpotLight", "SunLight", "WorldLight", "select",
            "selection_distribution"]

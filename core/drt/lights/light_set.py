@@ -33,6 +33,7 @@ import numpy as np
 from .area import AreaLight
 from .emissive import EmissiveGroup, EmissiveTriangles
 from .point import PointLight
+from .selection import ShadingHint, bsdf_factor, mix_with_defensive, normalise_rows
 from .spot import SpotLight
 from .sun import SunLight
 from .world import WorldLight
@@ -200,6 +201,9 @@ class LightSet:
         scale = np.zeros(k)
         local = np.zeros(k, dtype=bool)
         facing = np.zeros((k, 3))
+        # for the BSDF factor: direction to a sun (its centre seen at distance 1)
+        sun_dir = np.zeros((k, 3))
+        sun_sin2 = np.zeros(k)
         for i, strat in enumerate(self.strategies):
             if isinstance(strat, AreaLight):
                 centre[i], local[i] = strat.center, True
@@ -219,13 +223,23 @@ class LightSet:
                 scale[i] = strat.power / (2.0 * np.pi)
             else:  # sun, world: flux over the scene's disk πR²
                 scale[i] = strat.power / (np.pi * self.scene_radius ** 2)
+                if isinstance(strat, SunLight):
+                    sun_dir[i] = strat.to_sun
+                    sun_sin2[i] = min(strat.one_minus_cos * (2.0 - strat.one_minus_cos), 1.0)
         self._sel_centre, self._sel_radius2, self._sel_scale = centre, radius2, scale
+        self._sel_sun_dir, self._sel_sun_sin2 = sun_dir, sun_sin2
+        self._sel_is_sun = np.any(sun_dir != 0.0, axis=1)
+        self._sel_is_world = np.zeros(k, dtype=bool)
+        if self.world is not None:
+            self._sel_is_world[self.world_index] = True
         self._sel_local, self._sel_facing = local, facing
         self._sel_one_sided = np.any(facing != 0.0, axis=1)
 
-    def selection_pmf(self, p) -> np.ndarray:
+    def selection_pmf(self, p, hint: ShadingHint | None = None) -> np.ndarray:
         """(m, k) probability of choosing each strategy at points p (m, 3) (see the module
-        docstring). Rows whose estimates are all zero fall back to the power distribution."""
+        docstring). Rows whose estimates are all zero fall back to the power distribution.
+        With a `ShadingHint` (normal, wo, material of each point), the distance estimate is
+        weighted by the BSDF's guessed response to each light (`drt.lights.selection`)."""
         p = np.asarray(p, dtype=np.float64)
         if not self._per_point:
             return np.broadcast_to(self.pmf, (len(p), len(self.pmf)))
@@ -236,17 +250,36 @@ class LightSet:
         if self._sel_one_sided.any():
             behind = np.einsum("mkj,kj->mk", rel, self._sel_facing) <= 0.0
             w = np.where(self._sel_one_sided & behind, 0.0, w)
-        total = w.sum(axis=1, keepdims=True)
-        pmf = np.where(total > 0, w / np.where(total > 0, total, 1.0), self.pmf[None, :])
-        return pmf
+        pmf = normalise_rows(w, self.pmf[None, :])
+        if hint is None:
+            return pmf
+        return mix_with_defensive(w * self._bsdf_factor(rel, hint), pmf)
 
-    def selection_prob(self, p, index) -> np.ndarray:
-        """(m,) probability that `sample` at points p (m, 3) chooses strategy ``index`` (int or
-        (m,) ints)."""
+    def _bsdf_factor(self, rel, hint: ShadingHint) -> np.ndarray:
+        """(m, k) `bsdf_factor` for every strategy; rel (m, k, 3) = point − light centre."""
+        to_light = np.where(self._sel_is_sun[None, :, None], self._sel_sun_dir[None], -rel)
+        radius2 = np.where(self._sel_is_sun, self._sel_sun_sin2, self._sel_radius2)
+        local = self._sel_local | self._sel_is_sun
+        to_light = np.where(local[None, :, None], to_light, hint.n[:, None, :])
+        b = bsdf_factor(to_light, np.where(local, radius2, 1.0), hint)
+        if self._sel_is_world.any():  # hemisphere average of f·cos: albedo / 4π of E = 4πL
+            flat = (hint.kd + hint.kg + hint.kt) / (4.0 * np.pi)
+            b = np.where(self._sel_is_world[None, :], flat[:, None], b)
+        return b
+
+    def selection_prob(self, p, index, hint: ShadingHint | None = None) -> np.ndarray:
+        """(m,) probability that `sample` at points p (m, 3) with the same ``hint`` chooses
+        strategy ``index`` (int or (m,) ints)."""
         index = np.broadcast_to(np.asarray(index), (len(p),))
         if not self._per_point:
             return self.pmf[index]
-        return self.selection_pmf(p)[np.arange(len(p)), index]
+        return self.selection_pmf(p, hint)[np.arange(len(p)), index]
+
+    @property
+    def uses_hint(self) -> bool:
+        """Selection depends on the shading point (several strategies, DISTANCE mode), so a
+        `ShadingHint` changes it; otherwise callers may skip building one."""
+        return self._per_point
 
     @property
     def count(self) -> int:
@@ -265,9 +298,10 @@ class LightSet:
         return max(1.0, 0.5 * float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))))
 
     # ------------------------------------------------------------------------------------------
-    def sample(self, p, n, u_select, u2) -> LightSample:
+    def sample(self, p, n, u_select, u2, hint: ShadingHint | None = None) -> LightSample:
         """p (m,3) shading points; n (m,3) normals of the hemisphere to light (or None);
-        u_select (m,), u2 (m,2) in [0, 1)."""
+        u_select (m,), u2 (m,2) in [0, 1); hint: the points' BSDFs, for selection (MIS pdfs of
+        `intersect` / `world_pdf` / `emissive_pdf` must then get the same hint)."""
         p = np.asarray(p, dtype=np.float64)
         m = len(p)
         out = LightSample(wi=np.zeros((m, 3)), dist=np.zeros(m), radiance=np.zeros((m, 3)),
@@ -278,7 +312,7 @@ class LightSet:
             return out
         u_select = np.asarray(u_select, dtype=np.float64)
         if self._per_point:
-            idx, prob, u_rem = select_rows(self.selection_pmf(p), u_select)
+            idx, prob, u_rem = select_rows(self.selection_pmf(p, hint), u_select)
         else:
             idx, prob, u_rem = select(self.pmf, self.cdf, u_select)
         u2 = np.asarray(u2, dtype=np.float64)
@@ -303,14 +337,17 @@ class LightSet:
         out.valid &= out.pdf > 0.0
         return out
 
-    def intersect(self, o, d, tmax) -> LightHit:
+    def intersect(self, o, d, tmax, origin=None, hint: ShadingHint | None = None) -> LightHit:
         """Nearest light shape with t < tmax along unit rays o + t d (world/tracer space).
+        MIS pdfs are those of `sample` at ``origin`` (default o: pass the exact shading point
+        when o is offset from it) with ``hint``.
         Area lights are hit from both sides (radiance 0 from the back). Suns with an angle are
         reported (t = inf) for rays whose tmax is inf and that hit no shape; the integrator adds
         `world_radiance` separately. Camera rays should ignore hits where
         ``visible_to_camera[light]`` is False."""
         o = np.asarray(o, dtype=np.float64)
         d = np.asarray(d, dtype=np.float64)
+        origin = o if origin is None else np.asarray(origin, dtype=np.float64)
         m = len(o)
         tmax = np.broadcast_to(np.asarray(tmax, dtype=np.float64), (m,))
         best_t = np.array(tmax, dtype=np.float64, copy=True)
@@ -329,14 +366,18 @@ class LightSet:
             if sel.any():
                 lt = self.lights[i]
                 radiance[sel] = lt.hit_radiance(o[sel], d[sel], t_out[sel])
-                pdf[sel] = lt.pdf(o[sel], d[sel], t_out[sel]) * self.selection_prob(o[sel], i)
+                # as seen from origin: the hit point o + t d lies at t + (o − origin)·d from it
+                t_origin = t_out[sel] + np.einsum("ij,ij->i", o[sel] - origin[sel], d[sel])
+                pdf[sel] = lt.pdf(origin[sel], d[sel], t_origin) * self.selection_prob(
+                    origin[sel], i, _rows(hint, sel))
         open_sky = ~hit & np.isinf(tmax)
         for i in self._suns:
             sel = open_sky & (best < 0) & self.lights[i].in_cone(d)
             if sel.any():
                 best[sel] = i
                 radiance[sel] = self.lights[i].radiance
-                pdf[sel] = self.lights[i].pdf_dir(d[sel]) * self.selection_prob(o[sel], i)
+                pdf[sel] = self.lights[i].pdf_dir(d[sel]) * self.selection_prob(
+                    origin[sel], i, _rows(hint, sel))
         return LightHit(hit=best >= 0, t=t_out, radiance=radiance, pdf=pdf, light=best)
 
     def world_radiance(self, d) -> np.ndarray:
@@ -344,14 +385,15 @@ class LightSet:
         color = self.world.radiance if self.world is not None else np.zeros(3)
         return np.broadcast_to(color, (len(d), 3)).copy()
 
-    def world_pdf(self, p, n, d) -> np.ndarray:
+    def world_pdf(self, p, n, d, hint: ShadingHint | None = None) -> np.ndarray:
         """(m,) solid-angle pdf × selection probability of the world producing direction d at p
         with normal n (None → uniform sphere), as `sample` would."""
         if self.world is None:
             return np.zeros(len(d))
-        return self.world.pdf(n, np.asarray(d, dtype=np.float64)) * self.selection_prob(p, self.world_index)
+        return (self.world.pdf(n, np.asarray(d, dtype=np.float64))
+                * self.selection_prob(p, self.world_index, hint))
 
-    def emissive_pdf(self, tri, o, p_hit, ng_hit) -> np.ndarray:
+    def emissive_pdf(self, tri, o, p_hit, ng_hit, hint: ShadingHint | None = None) -> np.ndarray:
         """(m,) MIS pdf (solid angle × selection) of sampling p_hit on emissive triangle `tri`
         (global id) from o; 0 for non-emissive triangles."""
         if self.emissive is None:
@@ -359,4 +401,8 @@ class LightSet:
         pdf = self.emissive.pdf(tri, np.asarray(o, dtype=np.float64),
                                 np.asarray(p_hit, dtype=np.float64),
                                 np.asarray(ng_hit, dtype=np.float64))
-        return pdf * self.selection_prob(o, self.emissive_index)
+        return pdf * self.selection_prob(o, self.emissive_index, hint)
+
+
+def _rows(hint: ShadingHint | None, rows) -> ShadingHint | None:
+    return None if hint is None else hint.subset(rows)

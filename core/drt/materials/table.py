@@ -131,6 +131,20 @@ class MaterialTable:
                             for t in (BSDF_DIFFUSE, BSDF_GLOSSY, BSDF_GLASS)
                             if np.any((self.lobe_type[:, s] == t) & ~self.lobe_delta[:, s])]
         self._types_present = {int(t) for t in np.unique(self.lobe_type[used])}
+        self._lobe_summary = self._summarise_lobes(used)
+
+    def _summarise_lobes(self, used):
+        """Per material, what light selection needs to guess where the BSDF is large (see
+        `lobe_summary`): weights of the non-delta diffuse, glossy and glass lobes and the
+        weight-averaged alpha of the glossy ones."""
+        weight = np.where(used & ~self.lobe_delta, self.lobe_color.mean(axis=2), 0.0) \
+            if self.lobe_type.shape[1] else np.zeros(self.lobe_type.shape)
+        kd = np.where(self.lobe_type == BSDF_DIFFUSE, weight, 0.0).sum(axis=1)
+        wg = np.where(self.lobe_type == BSDF_GLOSSY, weight, 0.0)
+        kg = wg.sum(axis=1)
+        alpha = np.divide((wg * self.lobe_alpha).sum(axis=1), kg, out=np.ones_like(kg), where=kg > 0)
+        kt = np.where(self.lobe_type == BSDF_GLASS, weight, 0.0).sum(axis=1)
+        return kd, kg, alpha, kt
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -198,6 +212,14 @@ class MaterialTable:
     def albedo(self, mat: np.ndarray) -> np.ndarray:
         """mat (n,) int; returns (n, 3) the sum of the lobe colours (for the albedo pass)."""
         return self._albedo[np.asarray(mat, dtype=np.intp)]
+
+    def lobe_summary(self, mat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """mat (n,) int; (kd, kg, alpha, kt), each (n,): the summed average colour of the
+        material's diffuse, glossy and glass lobes (delta lobes excluded: next-event estimation
+        cannot reach them) and the colour-weighted GGX alpha of its glossy lobes (1 if none).
+        A rough description for light selection (`drt.lights.selection`), not for shading."""
+        mat = np.asarray(mat, dtype=np.intp)
+        return tuple(a[mat] for a in self._lobe_summary)
 
     def is_delta_only(self, mat: np.ndarray) -> np.ndarray:
         """mat (n,) int; (n,) bool: no lobe can be evaluated, so no NEE (also True for
