@@ -102,7 +102,11 @@ class PathState:
     terminate_next: np.ndarray  # only collect emission at the next hit (a bounce limit is reached)
 
     def select(self, keep: np.ndarray) -> "PathState":
-        return PathState(**{k: v[keep] for k, v in self.__dict__.items()})
+        """The paths where ``keep`` (n,) bool is True (self when all are)."""
+        if keep.all():
+            return self
+        rows = np.flatnonzero(keep)  # one mask-to-index pass instead of one per field
+        return PathState(**{k: v[rows] for k, v in self.__dict__.items()})
 
 
 class Integrator:
