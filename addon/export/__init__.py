@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .libraries import missing_link_warnings
 from .materials import MaterialExporter
 from .mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays, evaluated_positions
 from .scene_parts import (ExportError, camera_dict, light_dict, matrix_list, render_settings,
@@ -95,6 +96,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
 
     if scene.camera is None:
         raise ExportError("the scene has no active camera")
+    warnings += missing_link_warnings(depsgraph)
 
     meshes: list[dict] = []
     arrays: dict[str, np.ndarray] = {}
