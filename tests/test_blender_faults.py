@@ -309,6 +309,29 @@ def test_unloadable_library_warns_and_renders_the_rest(driver, tmp_path, fault):
     assert red_pixels(rgba) == 0
 
 
+def test_unloadable_library_on_the_command_line(driver, tmp_path):
+    """``python -m drt render`` on a .blend whose library is truncated: bpy raises while opening
+    the file, but the file is open; the CLI renders the rest with the warning, like F12."""
+    build(driver, "library", tmp_path)
+    lib = tmp_path / "lib.blend"
+    lib.write_bytes(lib.read_bytes()[:3000])
+    out = tmp_path / "cli.exr"
+    p = run([sys.executable, "-m", "drt", "render", str(tmp_path / "library.blend"),
+             "-o", str(out), "--spp", "2"], cwd=REPO)
+    assert p.returncode == 0, p.output[-3000:]
+    assert "Library 'lib.blend' could not be loaded" in p.output
+    rgba = read_rgba(out)
+    assert np.isfinite(rgba).all() and rgba[..., :3].max() > 0 and red_pixels(rgba) == 0
+
+
+def test_unreadable_blend_on_the_command_line_is_still_an_error(tmp_path):
+    bad = tmp_path / "bad.blend"
+    bad.write_bytes(b"BLENDER-v500 not really")
+    p = run([sys.executable, "-m", "drt", "render", str(bad), "-o", str(tmp_path / "x.exr"),
+             "--spp", "1"], cwd=REPO)
+    assert p.returncode == 2 and "Traceback" not in p.output, p.output[-3000:]
+
+
 # --- no camera: Blender itself refuses; the headless exporter stops with its own message ------
 
 def test_no_camera_stops_cleanly(driver, tmp_path):

@@ -6,6 +6,7 @@ depsgraph; objects hidden for rendering are skipped as in a render.
 """
 
 import json
+import os
 
 import bpy
 import numpy as np
@@ -26,12 +27,26 @@ def export_current(scene=None, frame: int | None = None, preview: bool = False) 
 
 
 def export_blend_file(path: str, frame: int | None = None) -> ExportResult:
-    """Open a .blend (replacing the current file) and export its scene."""
-    bpy.ops.wm.open_mainfile(filepath=str(path))
+    """Open a .blend (replacing the current file) and export its scene.
+
+    Blender raises when a file opens *with errors* (a linked library it could not read): the
+    file is open then, with placeholders the exporter reports as warnings, so the export goes
+    on, as F12 and ``blender -b`` do. A file that did not open at all stays an error."""
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(path))
+    except RuntimeError:
+        if not _is_open(path):
+            raise
     from .. import register  # scene.drt must exist for the settings
     if not hasattr(bpy.types.Scene, "drt"):
         register()
     return export_current(frame=frame)
+
+
+def _is_open(path) -> bool:
+    current = bpy.data.filepath
+    return bool(current) and os.path.normcase(os.path.realpath(current)) == \
+        os.path.normcase(os.path.realpath(str(path)))
 
 
 def save_npz(path: str, header: dict, arrays: dict) -> None:
