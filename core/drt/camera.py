@@ -22,6 +22,7 @@ import numpy as np
 from .motion import RigidMotion, apply_linear
 from .sampling.warps import square_to_disk_concentric, square_to_polygon
 from .scene import CameraSpec, RenderSettings
+from .vecmath import row_norm, transform_rows
 
 
 @dataclass
@@ -109,7 +110,7 @@ class Camera:
                 focus = d * s.focus_distance  # d.z = −1: the point on the focus plane
                 o = np.column_stack([lens, np.zeros(n)])
                 d = focus - o
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        d /= row_norm(d)[:, None]
         # start on the near clip plane, stop at the far one (planes, not spheres, like Cycles)
         cos_axis = -d[:, 2]
         t_near = np.where(cos_axis > 0, (s.clip_start + o[:, 2]) / np.maximum(cos_axis, 1e-12), 0.0)
@@ -123,14 +124,15 @@ class Camera:
             eye_w = apply_linear(lin, eye) + trans
             d_w = apply_linear(lin, d)
             fwd = -lin[:, :, 2]
+            fwd = fwd / row_norm(fwd)[:, None]
         else:
             lin = self.matrix[:3, :3]
-            o_w = o @ lin.T + self.matrix[:3, 3]
-            eye_w = eye @ lin.T + self.matrix[:3, 3]
-            d_w = d @ lin.T
-            fwd = np.broadcast_to(-lin[:, 2], (n, 3))
-        scale = np.linalg.norm(d_w, axis=1)
+            o_w = transform_rows(o, lin) + self.matrix[:3, 3]
+            eye_w = transform_rows(eye, lin) + self.matrix[:3, 3]
+            d_w = transform_rows(d, lin)
+            axis = -self.matrix[:3, 2]
+            fwd = np.broadcast_to(axis / np.linalg.norm(axis), (n, 3))
+        scale = row_norm(d_w)
         d_w /= scale[:, None]
-        fwd = fwd / np.linalg.norm(fwd, axis=1, keepdims=True)
         # a scaled camera object scales distances too: keep tmax in world units
         return CameraRays(o_w, d_w, tmax * scale, fwd, eye_w)

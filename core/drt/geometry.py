@@ -20,6 +20,7 @@ import numpy as np
 
 from .motion import RigidMotion, invert_linear
 from .scene import Scene
+from .vecmath import transform_rows
 
 
 @dataclass
@@ -61,7 +62,7 @@ def _shift_matrix(m: np.ndarray, shift: np.ndarray) -> np.ndarray:
 
 def _transform_normals(n: np.ndarray, m: np.ndarray) -> np.ndarray:
     inv_t = invert_linear(m[:3, :3]).T
-    out = n.reshape(-1, 3).astype(np.float64) @ inv_t.T
+    out = transform_rows(n.reshape(-1, 3).astype(np.float64), inv_t)
     length = np.linalg.norm(out, axis=1, keepdims=True)
     out = np.where(length > 0, out / np.where(length > 0, length, 1), 0.0)
     return out.reshape(n.shape)
@@ -99,11 +100,11 @@ def build_geometry(scene: Scene) -> SceneGeometry:
             mats_moving.append(m), nrm_moving.append(n), hasn_moving.append(h), uv_moving.append(u)
             for mat in (m_open, m_close):
                 for pos in (mesh.positions, mesh.positions_close if mesh.positions_close is not None else mesh.positions):
-                    w = pos @ np.asarray(mat)[:3, :3].T + np.asarray(mat)[:3, 3] - shift
+                    w = transform_rows(pos, np.asarray(mat)[:3, :3]) + np.asarray(mat)[:3, 3] - shift
                     lo, hi = np.minimum(lo, w.min(0)), np.maximum(hi, w.max(0))
             continue
         m = _shift_matrix(obj.matrix, shift)
-        world = mesh.positions @ m[:3, :3].T + m[:3, 3]
+        world = transform_rows(mesh.positions, m[:3, :3]) + m[:3, 3]
         lo, hi = np.minimum(lo, world.min(0)), np.maximum(hi, world.max(0))
         static_pos.append(world.astype(np.float32))
         static_tri.append((mesh.triangles + v_offset).astype(np.int32))

@@ -45,6 +45,7 @@ from .sampling.warps import build_frame, square_to_cosine_hemisphere, square_to_
 from . import scene as scene_module
 from .scene import RenderSettings
 from .trace import Tracer, offset_origin
+from .vecmath import row_norm
 
 D_PIXEL, D_LENS, D_TIME, D_BOUNCE0, DIMS_PER_BOUNCE = 0, 1, 2, 3, 4
 RR_START_BOUNCE = 3
@@ -157,7 +158,7 @@ class Integrator:
         if linear is not None:
             inv_t = invert_linear(linear[smooth])
             n = np.einsum("nji,nj->ni", inv_t, n)
-        length = np.linalg.norm(n, axis=1)
+        length = row_norm(n)
         ok = length > 1e-12
         n[ok] /= length[ok, None]
         n[~ok] = ng[smooth][~ok]

@@ -24,6 +24,7 @@ from embreex.mesh_construction import TriangleMesh
 
 from .geometry import SceneGeometry
 from .motion import apply_linear, apply_linear_transposed, invert_linear
+from .vecmath import row_norm
 
 # Spawn offset: relative part scales with |p| (float32 spacing is 6e-8·|p|, Embree's hit error
 # a small multiple of it); the absolute part covers points near the origin.
@@ -170,7 +171,6 @@ class Tracer:
     def _surface_geometry(self, hits, o, d, tau, translation):
         """Fill ``hits.p`` and ``hits.ng`` from the triangles themselves, in float64: more
         accurate than Embree's float32 values, and the winding (front side) is ours to define."""
-        n = len(hits.t)
         hits.p = o + np.where(np.isfinite(hits.t), hits.t, 0.0)[:, None] * d
         g = self.geom
         st = (hits.prim >= 0) & (hits.prim < g.static_count)
@@ -196,7 +196,7 @@ class Tracer:
             hits.p[sel] = apply_linear(lin, p_local) + translation[sel]
             # normals transform by the inverse transpose of the local→world map
             hits.ng[sel] = apply_linear_transposed(invert_linear(lin), np.cross(e1, e2))
-        length = np.linalg.norm(hits.ng, axis=1)
+        length = row_norm(hits.ng)
         good = length > 0
         hits.ng[good] /= length[good, None]
         # a degenerate (zero-area) triangle has no normal: face the ray so shading stays finite

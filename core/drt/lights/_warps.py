@@ -10,6 +10,7 @@ import numpy as np
 from ..sampling.warps import (build_frame, square_to_cosine_hemisphere,  # noqa: F401 (re-exported)
                               square_to_disk_concentric, square_to_triangle,
                               square_to_uniform_sphere)
+from ..vecmath import row_norm
 
 
 def to_world(local: np.ndarray, axis: np.ndarray) -> np.ndarray:
@@ -33,6 +34,6 @@ def square_to_uniform_cone(u: np.ndarray, one_minus_cos_max: np.ndarray) -> np.n
 
 def normalize(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors and lengths of v (m, 3); zero vectors stay zero."""
-    length = np.linalg.norm(v, axis=1)
+    length = row_norm(v)
     safe = np.where(length > 0.0, length, 1.0)
     return v / safe[:, None], length

@@ -14,6 +14,7 @@ import numpy as np
 
 from . import _warps
 from .common import luminance
+from ..vecmath import row_norm
 
 
 @dataclass
@@ -87,7 +88,7 @@ class EmissiveGroup:
         kk = np.where(ok, k, 0)
         w = p_hit - o
         d2 = (w * w).sum(axis=1)
-        ng = ng_hit / np.maximum(np.linalg.norm(ng_hit, axis=1), 1e-300)[:, None]
+        ng = ng_hit / np.maximum(row_norm(ng_hit), 1e-300)[:, None]
         cos_l = np.abs((w * ng).sum(axis=1)) / np.sqrt(np.maximum(d2, 1e-300))
         with np.errstate(divide="ignore", invalid="ignore"):
             pdf = self.pmf[kk] * d2 / (self.area[kk] * cos_l) if len(self.area) else np.zeros(len(o))

@@ -20,6 +20,7 @@ import numpy as np
 
 from . import _warps
 from .common import T_EPSILON, camera_visible, light_frame, luminance, one_minus_cos_from_sin2
+from ..vecmath import row_norm
 
 
 class PointLight:
@@ -126,7 +127,7 @@ class PointLight:
         return np.where(ok & inside & (tt > T_EPSILON), tt, np.inf)
 
     def hit_radiance(self, o, d, t):
-        dist_c = np.linalg.norm(o - self.position, axis=1)
+        dist_c = row_norm(o - self.position)
         mask = np.where(dist_c <= self.radius, 1.0, self._mask(-d))
         return self.radiance[None, :] * mask[:, None]
 
@@ -134,7 +135,7 @@ class PointLight:
         if self.is_delta:
             return np.zeros(len(o))
         oc = o - self.position
-        dist_c = np.linalg.norm(oc, axis=1)
+        dist_c = row_norm(oc)
         r = self.radius
         if self.is_sphere:
             outside = dist_c > r

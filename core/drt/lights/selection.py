@@ -31,6 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..vecmath import row_norm
+
 #: share of the distance-only pmf kept in the BSDF-aware selection (robustness to a bad guess)
 DEFENSIVE_SHARE = 0.1
 _COS_FLOOR = 1e-2  # keeps D/(4 cos θo) finite at grazing view
@@ -79,7 +81,7 @@ def bsdf_factor(to_light: np.ndarray, radius2: np.ndarray, hint: ShadingHint) ->
     value = (hint.kd / np.pi)[:, None] * np.maximum(cos_bound, 0.0)
     if np.any(hint.kg > 0):
         h = wi + hint.wo[:, None, :]
-        h_len = np.linalg.norm(h, axis=2)
+        h_len = row_norm(h)
         cos_h = np.einsum("mkj,mj->mk", h, hint.n) / np.where(h_len > 1e-12, h_len, 1.0)
         a2 = hint.alpha[:, None] ** 2 + 0.25 * sin_l ** 2
         denom = np.maximum(cos_h, 0.0) ** 2 * (a2 - 1.0) + 1.0

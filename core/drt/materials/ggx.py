@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..sampling.warps import square_to_disk_concentric
+from ..vecmath import row_norm
 
 #: alpha² at or below which a microfacet lobe is a delta (mirror / smooth dielectric). Cycles 5.0:
 #: ``BSDF_ROUGHNESS_SQ_THRESH = 2e-10`` compared with alpha_x·alpha_y.
@@ -61,7 +62,7 @@ def sample_vndf(wo: np.ndarray, alpha: np.ndarray, u2: np.ndarray) -> np.ndarray
     with density D_wo(h) = G1(wo) max(0, wo·h) D(h) / wo.z."""
     a = alpha[:, None]
     v = wo * np.concatenate([a, a, np.ones_like(a)], axis=1)
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    v /= row_norm(v)[:, None]
     lensq = v[:, 0] ** 2 + v[:, 1] ** 2
     has_t = lensq > 1e-14
     inv = np.where(has_t, 1.0 / np.sqrt(np.where(has_t, lensq, 1.0)), 0.0)
@@ -76,7 +77,7 @@ def sample_vndf(wo: np.ndarray, alpha: np.ndarray, u2: np.ndarray) -> np.ndarray
     p3 = np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))
     nh = p1[:, None] * t1 + p2[:, None] * t2 + p3[:, None] * v
     h = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 0.0)], axis=1)
-    return h / np.linalg.norm(h, axis=1, keepdims=True)
+    return h / row_norm(h)[:, None]
 
 
 def reflect(wo: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -103,7 +104,7 @@ def eval_glossy(wo: np.ndarray, wi: np.ndarray, alpha: np.ndarray) -> tuple[np.n
     cos_i = wi_u[:, 2]
     ok = (cos_o > 0.0) & (cos_i > 0.0)
     h = wo_u + wi_u
-    hn = np.linalg.norm(h, axis=1)
+    hn = row_norm(h)
     ok &= hn > 0.0
     h = h / np.where(ok, hn, 1.0)[:, None]
     d = ggx_d(h[:, 2], alpha)

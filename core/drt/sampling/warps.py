@@ -398,8 +398,12 @@ def build_frame(n) -> tuple[np.ndarray, np.ndarray]:
 def to_local(v, t, b, n) -> np.ndarray:
     """World vectors v (n, 3) -> local coordinates (v·t, v·b, v·n), (n, 3) float64."""
     v = _f64(v)
-    return np.stack([np.sum(v * t, axis=-1), np.sum(v * b, axis=-1), np.sum(v * n, axis=-1)],
-                    axis=-1)
+    out = np.empty(np.broadcast_shapes(v.shape, np.shape(t)))
+    # one einsum pass per axis: no (n, 3) product temporaries (this runs several times a bounce)
+    out[..., 0] = np.einsum("...j,...j->...", v, t)
+    out[..., 1] = np.einsum("...j,...j->...", v, b)
+    out[..., 2] = np.einsum("...j,...j->...", v, n)
+    return out
 
 
 def to_world(v, t, b, n) -> np.ndarray:
