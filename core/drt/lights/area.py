@@ -132,14 +132,17 @@ class AreaLight:
         return self.center + xy[:, :1] * self.ex + xy[:, 1:] * self.ey
 
     def sample(self, p, n, u2):
-        q = self._area_point(u2)
+        sr = None
         if self.solid_angle_sampling:
             sr = self._spherical_rect(p)
             use = self._use_solid_angle(sr)
-            if use.any():
-                q = np.where(use[:, None], self._sample_spherical_rect(p, u2, sr), q)
+            q = self._sample_spherical_rect(p, u2, sr)
+            if not use.all():  # tiny or edge-on: uniform over the area there
+                q[~use] = self._area_point(u2[~use])
+        else:
+            q = self._area_point(u2)
         wi, dist = _warps.normalize(q - p)
-        pdf = self._pdf_given(p, wi, dist, sr if self.solid_angle_sampling else None)
+        pdf = self._pdf_given(p, wi, dist, sr)
         cos_e = -(wi @ self.normal)
         radiance = self.radiance[None, :] * self._emission(cos_e)[:, None]
         valid = (cos_e > 0.0) & (radiance.max(axis=1) > 0.0) & np.isfinite(pdf) & (pdf > 0.0)

@@ -132,6 +132,8 @@ class MaterialTable:
                             if np.any((self.lobe_type[:, s] == t) & ~self.lobe_delta[:, s])]
         self._types_present = {int(t) for t in np.unique(self.lobe_type[used])}
         self._lobe_summary = self._summarise_lobes(used)
+        self._pure_diffuse = (self.lobe_count == 1) & (self.lobe_type[:, 0] == BSDF_DIFFUSE) \
+            if n_slots else np.zeros(m, dtype=bool)
 
     def _summarise_lobes(self, used):
         """Per material, what light selection needs to guess where the BSDF is large (see
@@ -330,8 +332,17 @@ class MaterialTable:
                 fr = fresnel_dielectric(wo[g, 2], eta)
                 pdf[g] *= np.where(refracted[g], 1.0 - fr, fr)
 
-        # Non-delta events: the whole material's f and pdf at the sampled wi.
+        # Non-delta events: the whole material's f and pdf at the sampled wi. A material that is
+        # one Lambert lobe needs no evaluation: pdf = |cos θi|/π, weight = its colour.
         c = np.nonzero(valid & ~is_delta)[0]
+        if c.size and self._pure_diffuse.any():
+            pure = self._pure_diffuse[mat[c]]
+            p_idx = c[pure]
+            pdf[p_idx] = np.abs(wi[p_idx, 2]) * (1.0 / np.pi)
+            ok = pdf[p_idx] > 0.0
+            weight[p_idx] = np.where(ok[:, None], self.lobe_color[mat[p_idx], 0], 0.0)
+            valid[p_idx] &= ok
+            c = c[~pure]
         if c.size:
             f_c, pdf_c = self.eval(mat[c], wo[c], wi[c])
             ok = pdf_c > 0.0
