@@ -296,3 +296,47 @@ def test_origin_shift_and_camera_visibility():
     h = ls.intersect(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), np.inf)
     assert h.hit[0] and abs(h.t[0] - 2.0) < 1e-12
     assert np.allclose(h.radiance[0], 100 / math.pi)
+
+
+def test_lights_are_transparent_emitters_along_a_ray():
+    """Cycles (integrator/shade_light.h) adds a light's emission and continues the ray past it.
+    `hits_along` yields every light a ray passes, nearest first, each once: two stacked area
+    lights facing down are both collected by an upward ray; a sphere light is passed once
+    (its far side is not hit again from inside)."""
+    area = lambda z, power: {"type": "AREA", "matrix_world": translate(0, 0, z),  # noqa: E731
+                             "power": power, "size": 2.0}
+    sphere = {"type": "POINT", "matrix_world": translate(0, 0, 6.0), "power": 30.0, "radius": 0.5,
+              "soft_falloff": False}
+    ls = LightSet([area(2.0, 10.0), area(4.0, 40.0), sphere], (0, 0, 0), None)
+    p = np.zeros((3, 3))
+    d = np.tile([0.0, 0.0, 1.0], (3, 1))
+    tmax = np.array([np.inf, 3.0, np.inf])  # ray 1 stops at a surface between the lights
+    layers = list(ls.hits_along(p, d, tmax))
+    seen = {r: [] for r in range(3)}
+    for rows, lh in layers:
+        for r, hit, light, t in zip(rows, lh.hit, lh.light, lh.t):
+            if hit:
+                seen[int(r)].append((int(light), round(float(t), 6)))
+    assert seen[0] == [(0, 2.0), (1, 4.0), (2, 5.5)]
+    assert seen[1] == [(0, 2.0)]
+    # radiance of each layer is that light's own
+    first = layers[0][1]
+    assert np.allclose(first.radiance[0], ls.lights[0].radiance)
+
+
+def test_camera_sees_through_a_visible_area_light():
+    """A visible area light filling the view, in front of a white world: each pixel is the
+    light's radiance plus the world's (the light does not block what is behind it)."""
+    import sys
+    sys.path.insert(0, __file__.rsplit("/", 1)[0])
+    from scene_builders import base_header, look_at
+    from drt.render import render
+    from drt.scene import scene_from_dict
+    h = base_header(4, 4, 4, camera={"type": "PERSP", "matrix_world": look_at((0, 0, 1), (0, 0, 5)),
+                                     "lens": 50.0}, world=(0.25, 0.25, 0.25))
+    h["lights"].append({"type": "AREA", "matrix_world": translate(0, 0, 2.0),  # emits down, at the camera
+                        "power": 2000.0, "size": 50.0, "visible_camera": True})
+    film = render(scene_from_dict(h, {}), threads=1)
+    light = LightSet(h["lights"], (0, 0, 0), None).lights[0]
+    expected = light.radiance + 0.25
+    assert np.allclose(film.combined[..., :3], expected, rtol=1e-6)

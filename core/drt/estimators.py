@@ -121,24 +121,39 @@ class DirectLight:
         self.epsilon = epsilon
 
     # ------------------------------------------------------------------ radiance along rays
-    def incident(self, p, n, wi, hint=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Radiance arriving at p (m, 3) along −wi (m, 3) from the lights (no surfaces but the
-        optional occluder). Returns (light radiance (m, 3), its MIS pdf (m,), world radiance
-        (m, 3), its MIS pdf (m,)): the two are weighted separately, as in the integrator. The
-        pdfs are light sampling's with the points' `ShadingHint` ``hint``."""
-        lh = self.lights.intersect(p, wi, np.full(len(p), np.inf), hint=hint)
-        shape = lh.hit & np.isfinite(lh.t)
-        rad = np.where(lh.hit[:, None], lh.radiance, 0.0)
-        pdf = np.where(lh.hit, lh.pdf, 0.0)
-        world = np.where(shape[:, None], 0.0, self.lights.world_radiance(wi))
-        wpdf = np.where(shape, 0.0, self.lights.world_pdf(p, n, wi, hint))
-        if self.occluded is not None:
-            o = p + n * self.epsilon * np.sign(np.einsum("ij,ij->i", n, wi))[:, None]
-            tmax = np.where(shape, lh.t * (1 - 1e-4), np.inf)
-            blocked = self.occluded(o, wi, tmax)
-            rad[blocked] = 0.0
-            world[blocked | shape] = 0.0
-        return rad, pdf, world, wpdf
+    def incident(self, p, n, wi, hint=None, mis=None) -> tuple[np.ndarray, np.ndarray]:
+        """Radiance arriving at p (m, 3) along −wi (m, 3): (from the lights (m, 3), from the
+        world (m, 3)), no surfaces but the optional occluder. Lights are transparent emitters,
+        as in the integrator: a ray sums every light it passes, and the world behind them.
+
+        mis: None (plain sums) or (bsdf_pdf (m,), no_mis (m,) bool, heuristic): each light's and
+        the world's radiance is weighted against light sampling's pdf with the points'
+        `ShadingHint` ``hint`` (weight 1 where no_mis)."""
+        m = len(p)
+        light = np.zeros((m, 3))
+        o = p + n * self.epsilon * np.sign(np.einsum("ij,ij->i", n, wi))[:, None]
+
+        def weight(rows, lpdf):
+            if mis is None:
+                return np.ones(len(rows))
+            bsdf_pdf, no_mis, heuristic = mis
+            return np.where(no_mis[rows], 1.0, _mis(bsdf_pdf[rows], lpdf, heuristic))
+
+        for rows, lh in self.lights.hits_along(p, wi, np.full(m, np.inf), hint=hint):
+            r = rows[lh.hit]
+            if not len(r):
+                continue
+            val = lh.radiance[lh.hit] * weight(r, lh.pdf[lh.hit])[:, None]
+            if self.occluded is not None:
+                t = lh.t[lh.hit]
+                val[self.occluded(o[r], wi[r], np.where(np.isfinite(t), t * (1 - 1e-4), np.inf))] = 0.0
+            light[r] += val
+        world = self.lights.world_radiance(wi)
+        if self.lights.world is not None:
+            world *= weight(np.arange(m), self.lights.world_pdf(p, n, wi, hint))[:, None]
+            if self.occluded is not None:
+                world[self.occluded(o, wi, np.full(m, np.inf))] = 0.0
+        return light, world
 
     def _frames(self, pts: ShadingPoints):
         t, b = build_frame(pts.n)
@@ -165,7 +180,7 @@ class DirectLight:
         f, _ = self.materials.eval(rep(pts.mat), rep(wo_l), wi_flat)
         wi_w = to_world(wi_flat, rep(t), rep(b), rep(pts.n))
         n_wo = rep(pts.n * side[:, None])
-        rad, _, world, _ = self.incident(rep(pts.p), n_wo, wi_w)
+        rad, world = self.incident(rep(pts.p), n_wo, wi_w)
         w = np.broadcast_to(weight, (n, K)).reshape(-1)
         return (f * (rad + world) * w[:, None]).reshape(n, K, 3)
 
@@ -191,15 +206,9 @@ class DirectLight:
         bs = self.materials.sample(pts.mat, wo_l, u_lobe, u_dir)
         wi = to_world(bs.wi, t, b, pts.n)
         hint = ShadingHint.from_materials(self.materials, pts.mat, n_wo, pts.wo)
-        rad, lpdf, world, wpdf = self.incident(pts.p, n_wo, wi, hint)
-        if heuristic is None:
-            w_l = w_w = np.ones(len(wi))
-        else:
-            w_l = _mis(bs.pdf, lpdf, heuristic)
-            w_w = _mis(bs.pdf, wpdf, heuristic)
-        w_l = np.where(bs.is_delta, 1.0, w_l)
-        w_w = np.where(bs.is_delta, 1.0, w_w)
-        val = bs.weight * (rad * w_l[:, None] + world * w_w[:, None])
+        rad, world = self.incident(pts.p, n_wo, wi, hint,
+                                   None if heuristic is None else (bs.pdf, bs.is_delta, heuristic))
+        val = bs.weight * (rad + world)
         return np.where(bs.valid[:, None], val, 0.0)
 
     def direct_samples(self, method: str, pts: ShadingPoints, count: int, *, sampler: str = "RANDOM",

@@ -174,7 +174,7 @@ class Integrator:
             return None
         if rows is not None:
             mat, n_wo, wo = mat[rows], n_wo[rows], wo[rows]
-        return ShadingHint.from_materials(self.materials, np.maximum(mat, 0), n_wo, wo)
+        return ShadingHint.from_materials(self.materials, mat, n_wo, wo)
 
     def _hit_weight(self, prev_delta, bsdf_pdf, light_pdf):
         """MIS weight of an emitter found by a BSDF-sampled ray (1 after camera/specular rays)."""
@@ -283,17 +283,18 @@ class Integrator:
             # --- emitters hit by this ray: light shapes, emissive triangles, the world
             # MIS pdfs of emitters this ray finds: light sampling's at the vertex it left
             prev_hint = self._hint(st.prev_mat, st.prev_n, st.prev_wo)
-            lh = self.lights.intersect(st.o, st.d, t_geom, origin=st.prev_p, hint=prev_hint)
-            light_hit = lh.hit.copy()
-            if camera_ray and np.any(light_hit):
-                light_hit &= self.lights.visible_to_camera[np.maximum(lh.light, 0)]
-            if np.any(light_hit):
-                w = self._hit_weight(st.prev_delta, st.prev_pdf, lh.pdf)[light_hit]
-                c = st.throughput[light_hit] * lh.radiance[light_hit] * w[:, None]
-                radiance[st.path[light_hit]] += self._clamp(c, st.bounce[light_hit] > 1)
-            # a sun disk is "hit" at t = inf: the world behind it still shines
-            shape_hit = light_hit & np.isfinite(lh.t)
-            miss = ~hits.hit & ~shape_hit
+            # Lights are transparent emitters (as in Cycles): the ray collects each light it
+            # passes and goes on to the surface behind, or the world.
+            for rows, lh in self.lights.hits_along(st.o, st.d, t_geom, origin=st.prev_p, hint=prev_hint):
+                light_hit = lh.hit
+                if camera_ray and np.any(light_hit):
+                    light_hit = light_hit & self.lights.visible_to_camera[np.maximum(lh.light, 0)]
+                if np.any(light_hit):
+                    r = rows[light_hit]
+                    w = self._hit_weight(st.prev_delta[r], st.prev_pdf[r], lh.pdf[light_hit])
+                    c = st.throughput[r] * lh.radiance[light_hit] * w[:, None]
+                    np.add.at(radiance, st.path[r], self._clamp(c, st.bounce[r] > 1))
+            miss = ~hits.hit
             if np.any(miss):
                 paths = st.path[miss]
                 if camera_ray and s.film_transparent:
@@ -306,7 +307,7 @@ class Integrator:
                     c = st.throughput[miss] * le * w[:, None]
                     radiance[paths] += self._clamp(c, st.bounce[miss] > 1)
 
-            surf = hits.hit & ~shape_hit
+            surf = hits.hit
             # emission of hit surfaces (also for paths that stop here at a bounce limit)
             si = np.nonzero(surf)[0]
             mat_all = self.geom.material[hits.prim[si]]

@@ -337,7 +337,38 @@ class LightSet:
         out.valid &= out.pdf > 0.0
         return out
 
-    def intersect(self, o, d, tmax, origin=None, hint: ShadingHint | None = None) -> LightHit:
+    def hits_along(self, o, d, tmax, origin=None, hint: ShadingHint | None = None):
+        """Every light a ray passes before ``tmax``, nearest first, as Cycles sees them: a light
+        is a transparent emitter, so a ray collects its radiance and goes on (to the next light,
+        the surface behind, or the world). Yields ``(rows, LightHit)`` per layer: ``rows``
+        indexes the input rays, the hit's ``t`` is from the original ``o``. A convex light is
+        passed once (the far side of a sphere light is not hit again)."""
+        o = np.asarray(o, dtype=np.float64)
+        d = np.asarray(d, dtype=np.float64)
+        origin = o if origin is None else np.asarray(origin, dtype=np.float64)
+        m = len(o)
+        tmax = np.broadcast_to(np.asarray(tmax, dtype=np.float64), (m,))
+        rows = np.arange(m)
+        t0 = np.zeros(m)
+        exclude = None  # (len(rows), n_lights) bool after the first layer: lights passed
+        while len(rows):
+            if exclude is None:
+                lh = self.intersect(o, d, tmax, origin, hint)
+            else:
+                o_k = o[rows] + t0[:, None] * d[rows]
+                lh = self.intersect(o_k, d[rows], tmax[rows] - t0, origin[rows], _rows(hint, rows), exclude)
+                lh.t = lh.t + t0
+            yield rows, lh
+            more = lh.hit & np.isfinite(lh.t)  # a sun disk ends the ray
+            if not more.any():
+                return
+            exclude = np.zeros((int(more.sum()), self.n_lights), dtype=bool) if exclude is None \
+                else exclude[more]
+            exclude[np.arange(len(exclude)), lh.light[more]] = True
+            rows, t0 = rows[more], lh.t[more]
+
+    def intersect(self, o, d, tmax, origin=None, hint: ShadingHint | None = None,
+                  exclude=None) -> LightHit:
         """Nearest light shape with t < tmax along unit rays o + t d (world/tracer space).
         MIS pdfs are those of `sample` at ``origin`` (default o: pass the exact shading point
         when o is offset from it) with ``hint``.
@@ -354,6 +385,8 @@ class LightSet:
         best = np.full(m, -1)
         for i in self._shapes:
             t = self.lights[i].intersect(o, d)
+            if exclude is not None:  # (m, n_lights) bool: lights this ray already passed
+                t = np.where(exclude[:, i], np.inf, t)
             closer = t < best_t
             best_t = np.where(closer, t, best_t)
             best = np.where(closer, i, best)

@@ -216,12 +216,18 @@ class MaterialTable:
         return self._albedo[np.asarray(mat, dtype=np.intp)]
 
     def lobe_summary(self, mat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """mat (n,) int; (kd, kg, alpha, kt), each (n,): the summed average colour of the
+        """mat (n,) int (−1: none); (kd, kg, alpha, kt), each (n,): the summed average colour of the
         material's diffuse, glossy and glass lobes (delta lobes excluded: next-event estimation
         cannot reach them) and the colour-weighted GGX alpha of its glossy lobes (1 if none).
         A rough description for light selection (`drt.lights.selection`), not for shading."""
         mat = np.asarray(mat, dtype=np.intp)
-        return tuple(a[mat] for a in self._lobe_summary)
+        known = (mat >= 0) & (mat < len(self.names))
+        if known.all():
+            return tuple(a[mat] for a in self._lobe_summary)
+        # no material (camera rays, an empty table): nothing is known, all zero
+        safe = np.where(known, mat, 0)
+        return tuple(np.where(known, a[safe], 0.0) if len(a) else np.zeros(len(mat))
+                     for a in self._lobe_summary)
 
     def is_delta_only(self, mat: np.ndarray) -> np.ndarray:
         """mat (n,) int; (n,) bool: no lobe can be evaluated, so no NEE (also True for
