@@ -1,6 +1,7 @@
 """Render worker processes: ``python -m drt.worker`` serves batches over its stdin/stdout.
 
-Why processes: much of the numpy shading code holds the GIL, so threads alone leave cores idle.
+Why processes: the numpy shading code holds the GIL between operations; on big jobs two worker
+processes are a few percent faster than two threads (docs/decisions.md has the figures).
 Why not ``multiprocessing``: its spawn mode re-imports the caller's ``__main__`` (a script
 without an ``if __name__ == "__main__"`` guard would recurse), and fork is unsafe after Embree's
 task system has started. A plain subprocess running this module has neither problem.
