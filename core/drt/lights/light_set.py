@@ -394,6 +394,17 @@ class LightSet:
         t_out = np.where(hit, best_t, np.inf)
         radiance = np.zeros((m, 3))
         pdf = np.zeros(m)
+        open_sky = ~hit & np.isinf(tmax)
+        for i in self._suns:
+            sel = open_sky & (best < 0) & self.lights[i].in_cone(d)
+            if sel.any():
+                best[sel] = i
+        found = np.flatnonzero(best >= 0)
+        if len(found) == 0:
+            return LightHit(hit=best >= 0, t=t_out, radiance=radiance, pdf=pdf, light=best)
+        # selection probabilities of the lights found, all rows at once (one pmf evaluation)
+        sel_prob = np.zeros(m)
+        sel_prob[found] = self.selection_prob(origin[found], best[found], _rows(hint, found))
         for i in self._shapes:
             sel = best == i
             if sel.any():
@@ -401,16 +412,12 @@ class LightSet:
                 radiance[sel] = lt.hit_radiance(o[sel], d[sel], t_out[sel])
                 # as seen from origin: the hit point o + t d lies at t + (o − origin)·d from it
                 t_origin = t_out[sel] + np.einsum("ij,ij->i", o[sel] - origin[sel], d[sel])
-                pdf[sel] = lt.pdf(origin[sel], d[sel], t_origin) * self.selection_prob(
-                    origin[sel], i, _rows(hint, sel))
-        open_sky = ~hit & np.isinf(tmax)
+                pdf[sel] = lt.pdf(origin[sel], d[sel], t_origin) * sel_prob[sel]
         for i in self._suns:
-            sel = open_sky & (best < 0) & self.lights[i].in_cone(d)
+            sel = best == i
             if sel.any():
-                best[sel] = i
                 radiance[sel] = self.lights[i].radiance
-                pdf[sel] = self.lights[i].pdf_dir(d[sel]) * self.selection_prob(
-                    origin[sel], i, _rows(hint, sel))
+                pdf[sel] = self.lights[i].pdf_dir(d[sel]) * sel_prob[sel]
         return LightHit(hit=best >= 0, t=t_out, radiance=radiance, pdf=pdf, light=best)
 
     def world_radiance(self, d) -> np.ndarray:
