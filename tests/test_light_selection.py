@@ -174,3 +174,31 @@ def test_guided_selection_is_unbiased_on_veachs_plates():
         for m in ("LIGHT", "MIS_POWER"):
             se = np.hypot(x[m].std(axis=1), x["BSDF"].std(axis=1)) / math.sqrt(8192)
             assert np.all(np.abs(x[m].mean(axis=1) - ref) < 4 * se), (plate, m)
+
+
+def test_guided_pdfs_agree_for_suns_world_and_emissive_triangles():
+    """With a hint, the selection of a sun (a direction), the world (hemisphere average) and the
+    emissive group is the same function in `sample` as in `intersect` / `world_pdf` /
+    `emissive_pdf`."""
+    v = np.array([[[-0.5, -0.5, 1.0], [0.5, -0.5, 1.0], [0.5, 0.5, 1.0]]])
+    tris = EmissiveTriangles(v, np.array([[4.0, 4.0, 4.0]]), np.array([7]))
+    sun = {"type": "SUN", "matrix_world": translation(0, 0, 0), "strength": 3.0, "angle": 0.2}
+    ls = LightSet([sphere(3, 0, 0.5), sun], (0.2, 0.2, 0.2), tris)
+    rng = np.random.default_rng(11)
+    m = 6000
+    p = np.concatenate([rng.uniform(-2, 4, size=(m, 2)), np.zeros((m, 1))], axis=1)
+    n = np.tile([0.0, 0.0, 1.0], (m, 1))
+    hint = _glossy_hint(m, roughness=0.4, kd=0.3)
+    s = ls.sample(p, n, rng.random(m), rng.random((m, 2)), hint)
+    counts = np.bincount(s.light[s.valid], minlength=ls.count)
+    assert np.all(counts > 100), counts  # every strategy is still chosen (defensive share)
+    em = s.valid & (s.light == ls.emissive_index)
+    ng = np.tile([0.0, 0.0, -1.0], (em.sum(), 1))
+    assert np.allclose(ls.emissive_pdf(s.prim[em], p[em], p[em] + s.wi[em] * s.dist[em, None], ng,
+                                       hint.subset(em)), s.pdf[em], rtol=1e-9)
+    w = s.valid & (s.light == ls.world_index)
+    assert np.allclose(ls.world_pdf(p[w], n[w], s.wi[w], hint.subset(w)), s.pdf[w], rtol=1e-9)
+    su = s.valid & (s.light == 1)
+    h = ls.intersect(p[su], s.wi[su], np.inf, hint=hint.subset(su))
+    ok = h.light == 1
+    assert ok.mean() > 0.9 and np.allclose(h.pdf[ok], s.pdf[su][ok], rtol=1e-9)

@@ -256,15 +256,21 @@ class LightSet:
         return mix_with_defensive(w * self._bsdf_factor(rel, hint), pmf)
 
     def _bsdf_factor(self, rel, hint: ShadingHint) -> np.ndarray:
-        """(m, k) `bsdf_factor` for every strategy; rel (m, k, 3) = point − light centre."""
-        to_light = np.where(self._sel_is_sun[None, :, None], self._sel_sun_dir[None], -rel)
-        radius2 = np.where(self._sel_is_sun, self._sel_sun_sin2, self._sel_radius2)
-        local = self._sel_local | self._sel_is_sun
-        to_light = np.where(local[None, :, None], to_light, hint.n[:, None, :])
-        b = bsdf_factor(to_light, np.where(local, radius2, 1.0), hint)
-        if self._sel_is_world.any():  # hemisphere average of f·cos: albedo / 4π of E = 4πL
-            flat = (hint.kd + hint.kg + hint.kt) / (4.0 * np.pi)
-            b = np.where(self._sel_is_world[None, :], flat[:, None], b)
+        """(m, k) `bsdf_factor` for every strategy; rel (m, k, 3) = point − light centre. Local
+        lights and suns have a direction; the world gets the hemisphere average of f·cos."""
+        m, k = rel.shape[0], rel.shape[1]
+        aimed = self._sel_local | self._sel_is_sun
+        cols = np.flatnonzero(aimed)
+        b = np.empty((m, k))
+        if len(cols):
+            sun = self._sel_is_sun[cols]
+            to_light = -rel if len(cols) == k else -rel[:, cols]
+            if sun.any():
+                to_light = np.where(sun[None, :, None], self._sel_sun_dir[cols][None], to_light)
+            radius2 = np.where(sun, self._sel_sun_sin2[cols], self._sel_radius2[cols])
+            b[:, cols] = bsdf_factor(to_light, radius2, hint)
+        if self._sel_is_world.any():  # albedo / 4π: the world's E estimate is 4πL
+            b[:, self._sel_is_world] = ((hint.kd + hint.kg + hint.kt) / (4.0 * np.pi))[:, None]
         return b
 
     def selection_prob(self, p, index, hint: ShadingHint | None = None) -> np.ndarray:
