@@ -85,6 +85,38 @@ class _RigidObject:
         if mm.positions_close is None:
             self.scene = rtcs.EmbreeScene()
             TriangleMesh(self.scene, mm.positions.astype(np.float32), mm.triangles.astype(np.int32))
+        self.box_lo, self.box_hi = _swept_box(mm)
+
+    def candidates(self, o, d, tmax, rows=None) -> np.ndarray:
+        """Indices (into o) of the rays whose segment (0, tmax) meets the swept box; ``rows``
+        restricts the test to those indices. Rays that miss it cannot hit the object at any τ,
+        so they skip the per-ray transform and the trace."""
+        if rows is not None:
+            o, d, tmax = o[rows], d[rows], tmax[rows]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv_d = 1.0 / d
+            t0 = (self.box_lo - o) * inv_d
+            t1 = (self.box_hi - o) * inv_d
+        near = np.fmax.reduce(np.fmin(t0, t1), axis=1)
+        far = np.fmin.reduce(np.fmax(t0, t1), axis=1)
+        hit = np.flatnonzero((near <= far) & (far >= 0) & (near <= tmax))
+        return hit if rows is None else rows[hit]
+
+
+def _swept_box(mm) -> tuple[np.ndarray, np.ndarray]:
+    """World box (tracer space) containing the object at every shutter fraction: local points
+    lie within R of the local origin, the linear part stretches them by at most the larger end
+    scale (scale is interpolated per axis, rotation is a rotation), and the translation runs
+    along the segment between its ends. Padded by a relative 1e-6 for rounding."""
+    pts = mm.positions if mm.positions_close is None else np.concatenate([mm.positions, mm.positions_close])
+    radius = float(np.sqrt((np.asarray(pts, dtype=np.float64) ** 2).sum(axis=1).max())) if len(pts) else 0.0
+    m = mm.motion
+    stretch = float(max(np.abs(m.open.scale).max(), np.abs(m.close.scale).max()))
+    rho = radius * stretch
+    t0, t1 = m.open.translation, m.close.translation
+    lo, hi = np.minimum(t0, t1) - rho, np.maximum(t0, t1) + rho
+    pad = 1e-6 * (np.abs(lo) + np.abs(hi) + rho) + 1e-9
+    return lo - pad, hi + pad
 
 
 class Tracer:
@@ -142,27 +174,32 @@ class Tracer:
         if self.moving and n:
             tau = np.zeros(n) if tau is None else tau
             for obj in self.moving:
-                lin, trans = obj.mesh.motion.at(tau)
+                rows = obj.candidates(o, d, t)
+                if not len(rows):
+                    continue
+                lin, trans = obj.mesh.motion.at(tau[rows])
                 inv = invert_linear(lin)
-                o_l = apply_linear(inv, o - trans)
-                d_l = apply_linear(inv, d)
+                o_l = apply_linear(inv, o[rows] - trans)
+                d_l = apply_linear(inv, d[rows])
+                t_rows = t[rows]
                 if obj.scene is not None:
-                    r = self._run(obj.scene, o_l, d_l, t)
-                    hit = (r["primID"] >= 0) & (r["tfar"] < t)
+                    r = self._run(obj.scene, o_l, d_l, t_rows)
+                    hit = (r["primID"] >= 0) & (r["tfar"] < t_rows)
                     tl, pl, u, v = r["tfar"], r["primID"], r["u"], r["v"]
                 else:
-                    tl, pl, u, v, _ = _intersect_deforming(obj.mesh, o_l, d_l, tau, t)
+                    tl, pl, u, v, _ = _intersect_deforming(obj.mesh, o_l, d_l, tau[rows], t_rows)
                     hit = pl >= 0
                 if not np.any(hit):
                     continue
                 if linear is None:
                     linear = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
                     translation = np.zeros((n, 3))
-                t[hit] = tl[hit]
-                prim[hit] = pl[hit] + obj.mesh.prim_offset
-                b1[hit], b2[hit] = u[hit], v[hit]
-                linear[hit] = lin[hit]
-                translation[hit] = trans[hit]
+                r_hit = rows[hit]
+                t[r_hit] = tl[hit]
+                prim[r_hit] = pl[hit] + obj.mesh.prim_offset
+                b1[r_hit], b2[r_hit] = u[hit], v[hit]
+                linear[r_hit] = lin[hit]
+                translation[r_hit] = trans[hit]
         t[prim < 0] = np.inf
         hits = Hits(t, prim, b1, b2, ng, linear)
         self._surface_geometry(hits, o, d, tau, translation if linear is not None else None)
@@ -216,6 +253,9 @@ class Tracer:
                 idx = np.nonzero(~blocked)[0]
                 if not len(idx):
                     break
+                idx = obj.candidates(o, d, tmax, idx)
+                if not len(idx):
+                    continue
                 lin, trans = obj.mesh.motion.at(tau[idx])
                 inv = invert_linear(lin)
                 o_l = apply_linear(inv, o[idx] - trans)
@@ -271,8 +311,15 @@ def _intersect_deforming(mm, o, d, tau, tmax, chunk_elems=2_000_000):
     step = max(1, chunk_elems // max(n_clusters, 1))
     with np.errstate(divide="ignore", invalid="ignore"):
         inv_d = 1.0 / d
-    for s in range(0, n, step):
-        rows = np.arange(s, min(s + step, n))
+        # first the box around every cluster: most rays of a frame miss a small deforming mesh,
+        # and the per-cluster test below costs n_rays × n_clusters
+        g0 = (bounds.lo.min(axis=0) - o) * inv_d
+        g1 = (bounds.hi.max(axis=0) - o) * inv_d
+    g_near = np.fmax.reduce(np.fmin(g0, g1), axis=1)
+    g_far = np.fmin.reduce(np.fmax(g0, g1), axis=1)
+    candidates = np.flatnonzero((g_near <= g_far) & (g_far > 0) & (g_near < t_best))
+    for s in range(0, len(candidates), step):
+        rows = candidates[s:s + step]
         # slab test of every ray of the chunk against every cluster box
         t0 = (bounds.lo[None] - o[rows, None]) * inv_d[rows, None]
         t1 = (bounds.hi[None] - o[rows, None]) * inv_d[rows, None]
