@@ -363,6 +363,11 @@ def _materials(h: dict) -> list[dict]:
     return out
 
 
+#: largest light radius / size in metres (10¹⁵ m, ~7000 au): beyond any scene, and small enough
+#: that squares and areas stay finite in float64
+MAX_LIGHT_SIZE = 1e15
+
+
 def _lights(h: dict) -> list[dict]:
     lights = _list(h, "lights", "")
     out = []
@@ -383,15 +388,15 @@ def _lights(h: dict) -> list[dict]:
         else:
             e["power"] = _number(li, "power", p, 10.0, lo=0)
         if t in ("POINT", "SPOT"):
-            e["radius"] = _number(li, "radius", p, 0.1, lo=0)
+            e["radius"] = _number(li, "radius", p, 0.1, lo=0, hi=MAX_LIGHT_SIZE)
             e["soft_falloff"] = _bool(li, "soft_falloff", p, True)
         if t == "SPOT":
             e["spot_size"] = _number(li, "spot_size", p, math.radians(45), lo=0, hi=math.pi)
             e["spot_blend"] = _number(li, "spot_blend", p, 0.15, lo=0, hi=1)
         if t == "AREA":
             e["shape"] = _enum(li, "shape", p, AREA_SHAPES, "SQUARE")
-            e["size"] = _number(li, "size", p, 1.0, lo=0)
-            e["size_y"] = _number(li, "size_y", p, e["size"], lo=0)
+            e["size"] = _number(li, "size", p, 1.0, lo=0, hi=MAX_LIGHT_SIZE)
+            e["size_y"] = _number(li, "size_y", p, e["size"], lo=0, hi=MAX_LIGHT_SIZE)
             e["spread"] = _number(li, "spread", p, math.pi, lo=0, hi=math.pi)
         out.append(e)
     return out

@@ -90,6 +90,11 @@ h, a = small_scene()
 h["objects"][1]["matrix_world"][0][0] = 0.0  # the sphere (with normals) scaled to zero in x
 scene_archive("zero_scale_object.npz", h, a)
 expected["zero_scale_object.npz"] = {"renders": True}
+# a point light of radius 1e308: radius ** 2 raised OverflowError (found by the bounded fuzz run)
+h, a = small_scene()
+h["lights"].append({"type": "POINT", "matrix_world": translation(0, 0, 2), "power": 10.0, "radius": 1e308})
+scene_archive("light_radius_1e308.npz", h, a)
+expected["light_radius_1e308.npz"] = {"field": "lights[0].radius"}
 
 with open(os.path.join(HERE, "expected.json"), "w") as f:
     json.dump(expected, f, indent=1, sort_keys=True)
