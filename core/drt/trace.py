@@ -93,14 +93,20 @@ class _RigidObject:
         so they skip the per-ray transform and the trace."""
         if rows is not None:
             o, d, tmax = o[rows], d[rows], tmax[rows]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv_d = 1.0 / d
-            t0 = (self.box_lo - o) * inv_d
-            t1 = (self.box_hi - o) * inv_d
-        near = np.fmax.reduce(np.fmin(t0, t1), axis=1)
-        far = np.fmin.reduce(np.fmax(t0, t1), axis=1)
+        with np.errstate(divide="ignore"):
+            near, far = _slab(self.box_lo, self.box_hi, o, 1.0 / d)
         hit = np.flatnonzero((near <= far) & (far >= 0) & (near <= tmax))
         return hit if rows is None else rows[hit]
+
+
+def _slab(lo, hi, o, inv_d) -> tuple[np.ndarray, np.ndarray]:
+    """Entry and exit distances of rays o + t·d (``inv_d`` = 1/d) through boxes [lo, hi]; all
+    arguments broadcast, the last axis is xyz. A ray misses where near > far."""
+    with np.errstate(invalid="ignore"):
+        t0 = (lo - o) * inv_d
+        t1 = (hi - o) * inv_d
+    # fmin/fmax skip the NaN of 0·inf (a ray in a slab's boundary plane)
+    return np.fmax.reduce(np.fmin(t0, t1), axis=-1), np.fmin.reduce(np.fmax(t0, t1), axis=-1)
 
 
 def _swept_box(mm) -> tuple[np.ndarray, np.ndarray]:
@@ -309,23 +315,16 @@ def _intersect_deforming(mm, o, d, tau, tmax, chunk_elems=2_000_000):
     ng = np.zeros((n, 3))
     n_clusters = len(bounds.lo)
     step = max(1, chunk_elems // max(n_clusters, 1))
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore"):
         inv_d = 1.0 / d
-        # first the box around every cluster: most rays of a frame miss a small deforming mesh,
-        # and the per-cluster test below costs n_rays × n_clusters
-        g0 = (bounds.lo.min(axis=0) - o) * inv_d
-        g1 = (bounds.hi.max(axis=0) - o) * inv_d
-    g_near = np.fmax.reduce(np.fmin(g0, g1), axis=1)
-    g_far = np.fmin.reduce(np.fmax(g0, g1), axis=1)
+    # first the box around every cluster: most rays of a frame miss a small deforming mesh,
+    # and the per-cluster test below costs n_rays × n_clusters
+    g_near, g_far = _slab(bounds.lo.min(axis=0), bounds.hi.max(axis=0), o, inv_d)
     candidates = np.flatnonzero((g_near <= g_far) & (g_far > 0) & (g_near < t_best))
     for s in range(0, len(candidates), step):
         rows = candidates[s:s + step]
         # slab test of every ray of the chunk against every cluster box
-        t0 = (bounds.lo[None] - o[rows, None]) * inv_d[rows, None]
-        t1 = (bounds.hi[None] - o[rows, None]) * inv_d[rows, None]
-        # fmin/fmax skip the NaN of 0·inf (a ray in a slab's boundary plane)
-        near = np.fmax.reduce(np.fmin(t0, t1), axis=2)
-        far = np.fmin.reduce(np.fmax(t0, t1), axis=2)
+        near, far = _slab(bounds.lo[None], bounds.hi[None], o[rows, None], inv_d[rows, None])
         ri, ci = np.nonzero((near <= far) & (far > 0) & (near < t_best[rows, None]))
         if not len(ri):
             continue
