@@ -87,6 +87,13 @@ class _RigidObject:
             TriangleMesh(self.scene, mm.positions.astype(np.float32), mm.triangles.astype(np.int32))
         self.box_lo, self.box_hi = _swept_box(mm)
 
+    def rays_to_local(self, o, d, tau, rows):
+        """The object's transform at each ray's τ (linear parts, translations) and rays ``rows``
+        of (o, d) in its local space (directions not renormalised: t stays a world distance)."""
+        lin, trans = self.mesh.motion.at(tau[rows])
+        inv = invert_linear(lin)
+        return lin, trans, apply_linear(inv, o[rows] - trans), apply_linear(inv, d[rows])
+
     def candidates(self, o, d, tmax, rows=None) -> np.ndarray:
         """Indices (into o) of the rays whose segment (0, tmax) meets the swept box; ``rows``
         restricts the test to those indices. Rays that miss it cannot hit the object at any τ,
@@ -183,10 +190,7 @@ class Tracer:
                 rows = obj.candidates(o, d, t)
                 if not len(rows):
                     continue
-                lin, trans = obj.mesh.motion.at(tau[rows])
-                inv = invert_linear(lin)
-                o_l = apply_linear(inv, o[rows] - trans)
-                d_l = apply_linear(inv, d[rows])
+                lin, trans, o_l, d_l = obj.rays_to_local(o, d, tau, rows)
                 t_rows = t[rows]
                 if obj.scene is not None:
                     r = self._run(obj.scene, o_l, d_l, t_rows)
@@ -262,10 +266,7 @@ class Tracer:
                 idx = obj.candidates(o, d, tmax, idx)
                 if not len(idx):
                     continue
-                lin, trans = obj.mesh.motion.at(tau[idx])
-                inv = invert_linear(lin)
-                o_l = apply_linear(inv, o[idx] - trans)
-                d_l = apply_linear(inv, d[idx])
+                _, _, o_l, d_l = obj.rays_to_local(o, d, tau, idx)
                 if obj.scene is not None:
                     blocked[idx] = self._run(obj.scene, o_l, d_l, tmax[idx], occluded=True) >= 0
                 else:
