@@ -18,7 +18,11 @@ matters for Sobol / stratified samples.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from ..kernels import kernel
 
 __all__ = [
     "square_to_disk_concentric", "square_to_disk_concentric_pdf", "disk_concentric_to_square",
@@ -42,6 +46,75 @@ _PI_4 = 0.25 * np.pi
 
 # Largest float64 below 1: inverse maps clamp into [0, 1) so their output is a valid sample.
 _ONE_MINUS_EPS = np.nextafter(1.0, 0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# scalar kernels: one sample at a time, called from the compiled integrator, BSDFs and lights.
+# They are the implementation; the vectorized functions below apply them to arrays.
+# ---------------------------------------------------------------------------------------------
+
+
+@kernel
+def disk_concentric(u0, u1):
+    """Shirley-Chiu concentric map of (u0, u1) ∈ [0,1)² onto the unit disk → (x, y)."""
+    a = 2.0 * u0 - 1.0
+    b = 2.0 * u1 - 1.0
+    if a == 0.0 and b == 0.0:
+        return 0.0, 0.0
+    if abs(a) > abs(b):
+        r = a
+        phi = _PI_4 * (b / a)
+    else:
+        r = b
+        phi = 0.5 * _PI - _PI_4 * (a / b)
+    return r * math.cos(phi), r * math.sin(phi)
+
+
+@kernel
+def disk_to_cone(x, y, one_minus_cos):
+    """Area-preserving lift of a unit-disk point onto the cone cos θ ≥ 1 − one_minus_cos about
+    +z (Cycles's ``sample_uniform_cone``): cos θ = 1 − r²·one_minus_cos."""
+    r2 = x * x + y * y
+    s = math.sqrt(max(0.0, one_minus_cos * (2.0 - one_minus_cos * r2)))
+    return (x * s, y * s, 1.0 - r2 * one_minus_cos)
+
+
+@kernel
+def cosine_hemisphere(u0, u1):
+    """Cosine-weighted direction, z ≥ 0 (Malley); pdf = z/π."""
+    x, y = disk_concentric(u0, u1)
+    return (x, y, math.sqrt(max(0.0, 1.0 - x * x - y * y)))
+
+
+@kernel
+def uniform_hemisphere(u0, u1):
+    """Uniform direction, z ≥ 0; pdf = 1/(2π)."""
+    x, y = disk_concentric(u0, u1)
+    return disk_to_cone(x, y, 1.0)
+
+
+@kernel
+def uniform_cone(u0, u1, one_minus_cos):
+    """Uniform direction in the cone 1 − cos θ ≤ one_minus_cos about +z (concentric lift);
+    pdf = 1/(2π·one_minus_cos)."""
+    x, y = disk_concentric(u0, u1)
+    return disk_to_cone(x, y, one_minus_cos)
+
+
+@kernel
+def uniform_sphere(u0, u1):
+    """Uniform direction on the sphere (z = 1 − 2u0, φ = 2πu1); pdf = 1/(4π)."""
+    z = 1.0 - 2.0 * u0
+    r = math.sqrt(max(0.0, 1.0 - z * z))
+    phi = 2.0 * _PI * u1
+    return (r * math.cos(phi), r * math.sin(phi), z)
+
+
+@kernel
+def uniform_triangle(u0, u1):
+    """Uniform barycentrics (b1, b2) (point = (1 − b1 − b2)·v0 + b1·v1 + b2·v2)."""
+    s = math.sqrt(u0)
+    return s * (1.0 - u1), s * u1
 
 
 def _f64(x) -> np.ndarray:
