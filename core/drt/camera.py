@@ -11,18 +11,135 @@ Conventions (measured against Cycles, see ``docs/conventions.md``):
   rotated by ``rotation``, x squeezed by ``ratio``) of radius lens·0.001/(2·fstop) metres, aimed
   at the point where the pinhole ray meets the focus *plane* at ``focus_distance``;
 * rays start on the plane z = −clip_start and end at z = −clip_end (camera space).
+
+One ray is the scalar kernel ``camera_ray(cd, px, py, ul0, ul1, tau)`` with ``cd = Camera.data``
+(a ``CameraData``); ``Camera.generate`` applies it to arrays.
 """
 
 from __future__ import annotations
 
+import math
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
 
-from .motion import RigidMotion, apply_linear
-from .sampling.warps import square_to_disk_concentric, square_to_polygon
+from .kernels import kernel
+from .motion import RigidMotion, apply_rows, motion_at, static_motion_data
+from .sampling.warps import disk_concentric, polygon
 from .scene import CameraSpec, RenderSettings
-from .vecmath import row_norm, transform_rows
+
+PROJECTION_PERSP, PROJECTION_ORTHO = 0, 1  # CameraData.projection
+
+CameraData = namedtuple("CameraData", [
+    "projection", "width", "height", "plane_w", "plane_h", "shift_x", "shift_y",
+    "lens_radius", "focus_distance", "blades", "rotation", "ratio", "clip_start", "clip_end",
+    "matrix", "moving", "motion"])
+CameraData.__doc__ = """The camera for the kernels.  projection: int64 (0 PERSP, 1 ORTHO); width,
+height: float64 image size in pixels; plane_w, plane_h: float64 extent of the image on the plane
+at distance 1 (perspective) or in scene units (ortho); shift_x, shift_y: float64 in the same
+units; lens_radius (float64, 0 = pinhole), focus_distance (float64), blades (int64, ≥ 3 for a
+polygonal aperture), rotation (float64, radians), ratio (float64): the aperture; clip_start,
+clip_end: float64; matrix: (4, 4) float64 camera → (shifted) world; moving: bool; motion: a
+``drt.motion.MotionData`` of the (shifted) camera transform over the shutter (identity if not
+moving)."""
+
+
+@kernel
+def lens_offset(cd, ul0, ul1):
+    """A point (x, y) of the aperture (camera space, metres) for uniforms (ul0, ul1)."""
+    if cd.blades >= 3:
+        x, y = polygon(ul0, ul1, float(cd.blades), cd.rotation)
+    else:
+        x, y = disk_concentric(ul0, ul1)
+    return x * cd.lens_radius / cd.ratio, y * cd.lens_radius
+
+
+@kernel
+def camera_ray(cd, px, py, ul0, ul1, tau):
+    """The primary ray through continuous pixel position (px from the left, py from the bottom)
+    with aperture uniforms (ul0, ul1) at shutter fraction tau, in the shifted world frame:
+    (o, d, tmax, eye, forward) — origin on the near clip plane, unit direction, distance to the
+    far clip plane, the lens point the ray left from and the camera's unit view axis."""
+    x = (px / cd.width - 0.5) * cd.plane_w + cd.shift_x
+    y = (py / cd.height - 0.5) * cd.plane_h + cd.shift_y
+    fd = cd.focus_distance
+    if cd.projection == 1:  # ORTHO
+        o = (x, y, 0.0)
+        d = (0.0, 0.0, -1.0)
+        if cd.lens_radius > 0:
+            lx, ly = lens_offset(cd, ul0, ul1)
+            focus = (o[0] + d[0] * fd, o[1] + d[1] * fd, o[2] + d[2] * fd)
+            o = (o[0] + lx, o[1] + ly, o[2] + 0.0)
+            d = (focus[0] - o[0], focus[1] - o[1], focus[2] - o[2])
+    else:
+        d = (x, y, -1.0)
+        o = (0.0, 0.0, 0.0)
+        if cd.lens_radius > 0:
+            lx, ly = lens_offset(cd, ul0, ul1)
+            focus = (d[0] * fd, d[1] * fd, d[2] * fd)  # d.z = −1: the point on the focus plane
+            o = (lx, ly, 0.0)
+            d = (focus[0] - o[0], focus[1] - o[1], focus[2] - o[2])
+    n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    d = (d[0] / n, d[1] / n, d[2] / n)
+    # start on the near clip plane, stop at the far one (planes, not spheres, like Cycles)
+    cos_axis = -d[2]
+    if cos_axis > 0:
+        c = max(cos_axis, 1e-12)
+        t_near = (cd.clip_start + o[2]) / c
+        t_far = (cd.clip_end + o[2]) / c
+    else:
+        t_near = 0.0
+        t_far = np.inf
+    eye = o
+    o = (o[0] + d[0] * t_near, o[1] + d[1] * t_near, o[2] + d[2] * t_near)
+    tmax = t_far - t_near
+    if tmax < 0.0:
+        tmax = 0.0
+    if cd.moving:
+        r0, r1, r2, t = motion_at(cd.motion, tau)
+    else:
+        m = cd.matrix
+        r0 = (m[0, 0], m[0, 1], m[0, 2])
+        r1 = (m[1, 0], m[1, 1], m[1, 2])
+        r2 = (m[2, 0], m[2, 1], m[2, 2])
+        t = (m[0, 3], m[1, 3], m[2, 3])
+    ol = apply_rows(r0, r1, r2, o)
+    el = apply_rows(r0, r1, r2, eye)
+    o_w = (ol[0] + t[0], ol[1] + t[1], ol[2] + t[2])
+    eye_w = (el[0] + t[0], el[1] + t[1], el[2] + t[2])
+    d_w = apply_rows(r0, r1, r2, d)
+    fwd = (-r0[2], -r1[2], -r2[2])
+    fn = math.sqrt(fwd[0] * fwd[0] + fwd[1] * fwd[1] + fwd[2] * fwd[2])
+    fwd = (fwd[0] / fn, fwd[1] / fn, fwd[2] / fn)
+    scale = math.sqrt(d_w[0] * d_w[0] + d_w[1] * d_w[1] + d_w[2] * d_w[2])
+    d_w = (d_w[0] / scale, d_w[1] / scale, d_w[2] / scale)
+    # a scaled camera object scales distances too: keep tmax in world units
+    return o_w, d_w, tmax * scale, eye_w, fwd
+
+
+@kernel
+def _camera_rows(cd, px, py, u_lens, tau, o, d, tmax, fwd, eye):
+    for k in range(px.shape[0]):
+        ro, rd, rt, re, rf = camera_ray(cd, px[k], py[k], u_lens[k, 0], u_lens[k, 1], tau[k])
+        for j in range(3):
+            o[k, j] = ro[j]
+            d[k, j] = rd[j]
+            eye[k, j] = re[j]
+            fwd[k, j] = rf[j]
+        tmax[k] = rt
+
+
+@kernel
+def _lens_rows(cd, u, out):
+    for k in range(u.shape[0]):
+        out[k, 0], out[k, 1] = lens_offset(cd, u[k, 0], u[k, 1])
+
+
+def _f64(a) -> np.ndarray:
+    """float64, C-contiguous, writeable: one compiled signature serves every call."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()
 
 
 @dataclass
@@ -73,66 +190,40 @@ class Camera:
             m0[:3, 3] -= origin_shift
             m1[:3, 3] -= origin_shift
             self.motion = RigidMotion(m0, m1)
+        self.data = CameraData(
+            projection=int(PROJECTION_ORTHO if spec.type == "ORTHO" else PROJECTION_PERSP),
+            width=float(w), height=float(h),
+            plane_w=float(self.plane_w), plane_h=float(self.plane_h),
+            shift_x=float(self.shift[0]), shift_y=float(self.shift[1]),
+            lens_radius=float(self.lens_radius), focus_distance=float(spec.focus_distance),
+            blades=int(spec.blades), rotation=float(spec.rotation), ratio=float(spec.ratio),
+            clip_start=float(spec.clip_start), clip_end=float(spec.clip_end),
+            matrix=_f64(m).copy(), moving=self.motion is not None,
+            motion=self.motion.data if self.motion is not None else static_motion_data())
 
     def lens_offsets(self, u: np.ndarray) -> np.ndarray:
         """(n, 2) points on the aperture (camera-space x, y, metres) from (n, 2) uniforms."""
-        s = self.spec
-        if s.blades >= 3:
-            p = square_to_polygon(u, s.blades, s.rotation)
-        else:
-            p = square_to_disk_concentric(u)
-        p = p * self.lens_radius
-        p[:, 0] /= s.ratio
-        return p
+        u = _f64(np.asarray(u, dtype=np.float64).reshape(-1, 2))
+        out = np.empty_like(u)
+        _lens_rows(self.data, u, out)
+        return out
 
     def generate(self, px: np.ndarray, py: np.ndarray, u_lens: np.ndarray, tau: np.ndarray) -> CameraRays:
         """Rays through continuous pixel positions ``px`` (from the left), ``py`` (from the bottom).
 
         u_lens: (n, 2) uniforms for the aperture; tau: (n,) shutter fractions.
         """
-        s = self.spec
-        x = (px / self.width - 0.5) * self.plane_w + self.shift[0]
-        y = (py / self.height - 0.5) * self.plane_h + self.shift[1]
-        n = len(px)
-        if s.type == "ORTHO":
-            o = np.stack([x, y, np.zeros(n)], axis=1)
-            d = np.tile([0.0, 0.0, -1.0], (n, 1))
-            if self.lens_radius > 0:
-                lens = self.lens_offsets(u_lens)
-                focus = o + d * s.focus_distance
-                o = o + np.column_stack([lens, np.zeros(n)])
-                d = focus - o
-        else:
-            d = np.stack([x, y, -np.ones(n)], axis=1)
-            o = np.zeros((n, 3))
-            if self.lens_radius > 0:
-                lens = self.lens_offsets(u_lens)
-                focus = d * s.focus_distance  # d.z = −1: the point on the focus plane
-                o = np.column_stack([lens, np.zeros(n)])
-                d = focus - o
-        d /= row_norm(d)[:, None]
-        # start on the near clip plane, stop at the far one (planes, not spheres, like Cycles)
-        cos_axis = -d[:, 2]
-        t_near = np.where(cos_axis > 0, (s.clip_start + o[:, 2]) / np.maximum(cos_axis, 1e-12), 0.0)
-        t_far = np.where(cos_axis > 0, (s.clip_end + o[:, 2]) / np.maximum(cos_axis, 1e-12), np.inf)
-        eye = o
-        o = o + d * t_near[:, None]
-        tmax = np.maximum(t_far - t_near, 0.0)
-        if self.motion is not None:
-            lin, trans = self.motion.at(tau)
-            o_w = apply_linear(lin, o) + trans
-            eye_w = apply_linear(lin, eye) + trans
-            d_w = apply_linear(lin, d)
-            fwd = -lin[:, :, 2]
-            fwd = fwd / row_norm(fwd)[:, None]
-        else:
-            lin = self.matrix[:3, :3]
-            o_w = transform_rows(o, lin) + self.matrix[:3, 3]
-            eye_w = transform_rows(eye, lin) + self.matrix[:3, 3]
-            d_w = transform_rows(d, lin)
-            axis = -self.matrix[:3, 2]
-            fwd = np.broadcast_to(axis / np.linalg.norm(axis), (n, 3))
-        scale = row_norm(d_w)
-        d_w /= scale[:, None]
-        # a scaled camera object scales distances too: keep tmax in world units
-        return CameraRays(o_w, d_w, tmax * scale, fwd, eye_w)
+        px = _f64(np.asarray(px, dtype=np.float64).reshape(-1))
+        n = px.shape[0]
+        py = _f64(np.broadcast_to(np.asarray(py, dtype=np.float64).reshape(-1), (n,)))
+        u_lens = np.zeros((n, 2)) if u_lens is None else _f64(
+            np.broadcast_to(np.asarray(u_lens, dtype=np.float64).reshape(-1, 2), (n, 2)))
+        tau = np.zeros(n) if tau is None else _f64(
+            np.broadcast_to(np.asarray(tau, dtype=np.float64).reshape(-1), (n,)))
+        o = np.empty((n, 3))
+        d = np.empty((n, 3))
+        eye = np.empty((n, 3))
+        fwd = np.empty((n, 3))
+        tmax = np.empty(n)
+        _camera_rows(self.data, px, py, u_lens, tau, o, d, tmax, fwd, eye)
+        return CameraRays(o, d, tmax, fwd, eye)

@@ -4,13 +4,84 @@ A transform at shutter open and one at close are decomposed into translation, ro
 quaternion) and scale; at shutter fraction τ ∈ [0, 1] translation and scale interpolate linearly
 and rotation by quaternion slerp. Every ray carries its own τ, so motion blur is exact for rigid
 motion: no time slices, no banding.
+
+The interpolation is the scalar kernel ``motion_at(md, tau)`` (``md = RigidMotion.data``, a
+``MotionData``); ``RigidMotion.at`` applies it to arrays of τ.
 """
 
 from __future__ import annotations
 
+import math
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
+
+from .kernels import kernel
+
+MotionData = namedtuple("MotionData", ["q0", "q1", "omega", "scale0", "scale1",
+                                       "trans0", "trans1"])
+MotionData.__doc__ = """A rigid motion for the kernels: unit quaternions (w, x, y, z) q0, q1 (4,) float64
+at shutter open / close (q1 on q0's side), omega (float64) the angle between them, scale0, scale1
+(3,) float64 and trans0, trans1 (3,) float64."""
+
+
+@kernel
+def motion_at(md, tau):
+    """The transform at shutter fraction tau: (row0, row1, row2, translation), 3-tuples; the
+    linear part is R(slerp(q0, q1, τ))·diag(lerp(scale0, scale1, τ))."""
+    om = md.omega
+    q0 = md.q0
+    q1 = md.q1
+    if om < 1e-8:
+        a = 1.0 - tau
+        w = a * q0[0] + tau * q1[0]
+        x = a * q0[1] + tau * q1[1]
+        y = a * q0[2] + tau * q1[2]
+        z = a * q0[3] + tau * q1[3]
+    else:
+        a = math.sin((1.0 - tau) * om)
+        b = math.sin(tau * om)
+        so = math.sin(om)
+        w = (a * q0[0] + b * q1[0]) / so
+        x = (a * q0[1] + b * q1[1]) / so
+        y = (a * q0[2] + b * q1[2]) / so
+        z = (a * q0[3] + b * q1[3]) / so
+    norm = math.sqrt(w * w + x * x + y * y + z * z)
+    w /= norm
+    x /= norm
+    y /= norm
+    z /= norm
+    c = 1.0 - tau
+    s0 = c * md.scale0[0] + tau * md.scale1[0]
+    s1 = c * md.scale0[1] + tau * md.scale1[1]
+    s2 = c * md.scale0[2] + tau * md.scale1[2]
+    t = (c * md.trans0[0] + tau * md.trans1[0],
+         c * md.trans0[1] + tau * md.trans1[1],
+         c * md.trans0[2] + tau * md.trans1[2])
+    r0 = ((1 - 2 * (y * y + z * z)) * s0, 2 * (x * y - z * w) * s1, 2 * (x * z + y * w) * s2)
+    r1 = (2 * (x * y + z * w) * s0, (1 - 2 * (x * x + z * z)) * s1, 2 * (y * z - x * w) * s2)
+    r2 = (2 * (x * z - y * w) * s0, 2 * (y * z + x * w) * s1, (1 - 2 * (x * x + y * y)) * s2)
+    return r0, r1, r2, t
+
+
+@kernel
+def apply_rows(r0, r1, r2, v):
+    """Matrix (rows r0, r1, r2) × vector v."""
+    return (r0[0] * v[0] + r0[1] * v[1] + r0[2] * v[2],
+            r1[0] * v[0] + r1[1] * v[1] + r1[2] * v[2],
+            r2[0] * v[0] + r2[1] * v[1] + r2[2] * v[2])
+
+
+@kernel
+def _motion_at_rows(md, tau, linear, translation):
+    for k in range(tau.shape[0]):
+        r0, r1, r2, t = motion_at(md, tau[k])
+        for j in range(3):
+            linear[k, 0, j] = r0[j]
+            linear[k, 1, j] = r1[j]
+            linear[k, 2, j] = r2[j]
+            translation[k, j] = t[j]
 
 
 def _quat_from_rotation(r: np.ndarray) -> np.ndarray:
@@ -30,22 +101,6 @@ def _quat_from_rotation(r: np.ndarray) -> np.ndarray:
         q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
     q = np.asarray(q, dtype=np.float64)
     return q / np.linalg.norm(q)
-
-
-def _rotation_from_quats(q: np.ndarray) -> np.ndarray:
-    """(n, 4) unit quaternions (w, x, y, z) → (n, 3, 3) rotation matrices."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    r = np.empty((len(q), 3, 3))
-    r[:, 0, 0] = 1 - 2 * (y * y + z * z)
-    r[:, 0, 1] = 2 * (x * y - z * w)
-    r[:, 0, 2] = 2 * (x * z + y * w)
-    r[:, 1, 0] = 2 * (x * y + z * w)
-    r[:, 1, 1] = 1 - 2 * (x * x + z * z)
-    r[:, 1, 2] = 2 * (y * z - x * w)
-    r[:, 2, 0] = 2 * (x * z - y * w)
-    r[:, 2, 1] = 2 * (y * z + x * w)
-    r[:, 2, 2] = 1 - 2 * (x * x + y * y)
-    return r
 
 
 @dataclass
@@ -79,20 +134,31 @@ class RigidMotion:
             q1 = -q1
         self._q0, self._q1 = q0, q1
         self._omega = np.arccos(np.clip(np.dot(q0, q1), -1.0, 1.0))
+        f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64).copy()  # noqa: E731
+        self.data = MotionData(q0=f64(q0), q1=f64(q1), omega=float(self._omega),
+                               scale0=f64(self.open.scale), scale1=f64(self.close.scale),
+                               trans0=f64(self.open.translation),
+                               trans1=f64(self.close.translation))
 
     def at(self, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Transforms at shutter fractions ``tau`` (n,): linear parts (n, 3, 3) and translations (n, 3)."""
-        tau = np.asarray(tau, dtype=np.float64)[:, None]
-        om = self._omega
-        if om < 1e-8:
-            q = (1 - tau) * self._q0 + tau * self._q1
-        else:
-            q = (np.sin((1 - tau) * om) * self._q0 + np.sin(tau * om) * self._q1) / np.sin(om)
-        q /= np.linalg.norm(q, axis=1, keepdims=True)
-        scale = (1 - tau) * self.open.scale + tau * self.close.scale
-        translation = (1 - tau) * self.open.translation + tau * self.close.translation
-        linear = _rotation_from_quats(q) * scale[:, None, :]
+        tau = np.ascontiguousarray(np.asarray(tau, dtype=np.float64).reshape(-1))
+        if not tau.flags.writeable:
+            tau = tau.copy()
+        linear = np.empty((tau.shape[0], 3, 3))
+        translation = np.empty((tau.shape[0], 3))
+        _motion_at_rows(self.data, tau, linear, translation)
         return linear, translation
+
+
+def static_motion_data() -> MotionData:
+    """The identity as a ``MotionData`` (a placeholder where nothing moves, so data namedtuples
+    keep one type)."""
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    one = np.ones(3)
+    zero = np.zeros(3)
+    return MotionData(q0=q, q1=q.copy(), omega=0.0, scale0=one, scale1=one.copy(),
+                      trans0=zero, trans1=zero.copy())
 
 
 def apply_linear(linear: np.ndarray, v: np.ndarray) -> np.ndarray:

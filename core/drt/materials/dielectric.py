@@ -35,16 +35,167 @@ reflection with probability F(wo·h), refraction otherwise; so the pdf is F·pdf
 Delta limit: alpha² ≤ ``ALPHA_SQ_SINGULAR`` (roughness ≤ 0.00376), as for the glossy lobe. Like
 Cycles, a refraction with |ior − 1| < 1e-4 is treated as a delta (the rough transmission lobe is
 degenerate there): the material table marks such glass lobes delta.
+
+Scalar kernels (one sample, 3-tuples): ``fresnel``, ``refract_through``, ``glass_eval``,
+``glass_sample``; ``fresnel_dielectric``, ``refract``, ``eval_glass`` and ``sample_glass`` apply
+them to arrays.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from .ggx import ggx_d, ggx_lambda, reflect, sample_microfacet_normal
+from ..kernels import kernel
+from ..kernels.vec3 import dot, load, store
+from .ggx import (
+    elementwise,
+    f64_array,
+    ggx_ndf,
+    ggx_smith_lambda,
+    microfacet_normal,
+    reflect_about,
+    scalar_rows,
+    vec3_rows,
+)
 
 #: |ior − 1| below which a glass lobe is a pass-through delta (Cycles: 1e-4).
 IOR_ONE_EPS = 1e-4
+
+
+# ---------------------------------------------------------------------------------------------
+# scalar kernels
+# ---------------------------------------------------------------------------------------------
+
+
+@kernel
+def fresnel(cos_i, eta):
+    """Exact unpolarised Fresnel reflectance. cos_i: cosine between the incident direction and
+    the (micro)normal on the incident side (sign ignored); eta: index of the far side relative to
+    the incident side. Returns F in [0, 1]; 1 under total internal reflection. At normal
+    incidence F = ((eta − 1) / (eta + 1))² exactly."""
+    c = abs(cos_i)
+    g2 = eta * eta - 1.0 + c * c
+    if g2 <= 0.0:
+        return 1.0
+    g = math.sqrt(g2)
+    a = (g - c) / (g + c)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    return 0.5 * a * a * (1.0 + b * b)
+
+
+@kernel
+def refract_through(wo, h, eta):
+    """Refract wo (pointing away on h's side, wo·h > 0) through the interface with unit normal h
+    into the medium of relative index eta. Returns wi, unit, on the far side of h; under total
+    internal reflection NaN-free but meaningless (check F < 1 first)."""
+    c = dot(wo, h)
+    inv_eta = 1.0 / eta
+    cos_t = math.sqrt(max(0.0, 1.0 - inv_eta * inv_eta * (1.0 - c * c)))
+    k = inv_eta * c - cos_t
+    return (-inv_eta * wo[0] + k * h[0], -inv_eta * wo[1] + k * h[1], -inv_eta * wo[2] + k * h[2])
+
+
+@kernel
+def glass_eval(wo, wi, alpha, ior):
+    """White rough dielectric. wo, wi: local unit 3-tuples; alpha above the singular threshold;
+    ior > 0, not ≈ 1. Returns (f·|cos θi|, pdf per unit solid angle of ``glass_sample``),
+    reflection when wi is on wo's side, transmission otherwise."""
+    # Upper frame: wo on +z, eta = index of the −z side relative to the +z side.
+    flip = wo[2] < 0.0
+    eta = 1.0 / ior if flip else ior
+    cos_o = abs(wo[2])
+    cos_i = -wi[2] if flip else wi[2]
+    if not (cos_o > 0.0 and cos_i != 0.0):
+        return 0.0, 0.0
+    wo_u = (wo[0], wo[1], cos_o)
+    wi_u = (wi[0], wi[1], cos_i)
+    is_t = cos_i < 0.0
+    if is_t:  # generalised half vector of a refraction (Walter et al. eq. 16)
+        hv = (wo_u[0] + eta * wi_u[0], wo_u[1] + eta * wi_u[1], wo_u[2] + eta * wi_u[2])
+    else:
+        hv = (wo_u[0] + wi_u[0], wo_u[1] + wi_u[1], wo_u[2] + wi_u[2])
+    hlen2 = hv[0] * hv[0] + hv[1] * hv[1] + hv[2] * hv[2]
+    if not hlen2 > 1e-300:
+        return 0.0, 0.0
+    hl = math.sqrt(hlen2)
+    h = (hv[0] / hl, hv[1] / hl, hv[2] / hl)
+    if h[2] < 0.0:
+        h = (-h[0], -h[1], -h[2])
+    c_o = dot(wo_u, h)
+    c_i = dot(wi_u, h)
+    # Microfacet must be front-facing for wo, and wi on the matching side of it.
+    if not c_o > 0.0:
+        return 0.0, 0.0
+    if not (c_i < 0.0 if is_t else c_i > 0.0):
+        return 0.0, 0.0
+    f = fresnel(c_o, eta)
+    d = ggx_ndf(h[2], alpha)
+    lam_o = ggx_smith_lambda(cos_o, alpha)
+    lam_i = ggx_smith_lambda(cos_i, alpha)
+    if is_t:
+        common = d / cos_o * (eta * eta * abs(c_o * c_i) / hlen2)
+        lobe = 1.0 - f
+    else:
+        common = d / cos_o * 0.25
+        lobe = f
+    return lobe * common / (1.0 + lam_o + lam_i), lobe * common / (1.0 + lam_o)
+
+
+@kernel
+def glass_sample(wo, alpha, ior, u_choice, u0, u1):
+    """wo: local unit 3-tuple; u_choice in [0, 1) picks reflect / refract; (u0, u1) in [0, 1)²
+    picks h. Returns (wi, refracted). Rough: visible-normal h, then reflect with probability
+    F(wo·h). Delta (singular alpha): h = z, same choice; the weight of a white lobe is then
+    exactly 1 either way. A rough sample may end on the wrong side (wi.z·wo.z ≤ 0 for a
+    reflection, ≥ 0 for a refraction): the caller discards it."""
+    flip = wo[2] < 0.0
+    eta = 1.0 / ior if flip else ior
+    wo_u = (wo[0], wo[1], abs(wo[2]))
+    h = microfacet_normal(wo_u, alpha, u0, u1)
+    f = fresnel(dot(wo_u, h), eta)
+    refracted = u_choice >= f
+    if refracted:
+        wi = refract_through(wo_u, h, eta)
+    else:
+        wi = reflect_about(wo_u, h)
+    if flip:
+        return (wi[0], wi[1], -wi[2]), refracted
+    return wi, refracted
+
+
+# ---------------------------------------------------------------------------------------------
+# array wrappers
+# ---------------------------------------------------------------------------------------------
+
+
+@kernel
+def _fresnel_rows(cos_i, eta, out):
+    for i in range(cos_i.shape[0]):
+        out[i] = fresnel(cos_i[i], eta[i])
+
+
+@kernel
+def _refract_rows(wo, h, eta, out):
+    for i in range(wo.shape[0]):
+        store(out, i, refract_through(load(wo, i), load(h, i), eta[i]))
+
+
+@kernel
+def _eval_glass_rows(wo, wi, alpha, ior, value, pdf):
+    for i in range(wo.shape[0]):
+        v, p = glass_eval(load(wo, i), load(wi, i), alpha[i], ior[i])
+        value[i] = v
+        pdf[i] = p
+
+
+@kernel
+def _sample_glass_rows(wo, alpha, ior, u_choice, u2, wi, refracted):
+    for i in range(wo.shape[0]):
+        w, r = glass_sample(load(wo, i), alpha[i], ior[i], u_choice[i], u2[i, 0], u2[i, 1])
+        store(wi, i, w)
+        refracted[i] = r
 
 
 def fresnel_dielectric(cos_i: np.ndarray, eta: np.ndarray) -> np.ndarray:
@@ -52,36 +203,17 @@ def fresnel_dielectric(cos_i: np.ndarray, eta: np.ndarray) -> np.ndarray:
     and the (micro)normal on the incident side (sign ignored); eta: (n,) index of the far side
     relative to the incident side. Returns F (n,) in [0, 1]; 1 under total internal reflection.
     At normal incidence F = ((eta − 1) / (eta + 1))² exactly."""
-    c = np.abs(cos_i)
-    g2 = eta * eta - 1.0 + c * c
-    tir = g2 <= 0.0
-    g = np.sqrt(np.where(tir, 1.0, g2))
-    a = (g - c) / (g + c)
-    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-    return np.where(tir, 1.0, 0.5 * a * a * (1.0 + b * b))
+    return elementwise(_fresnel_rows, cos_i, eta)
 
 
 def refract(wo: np.ndarray, h: np.ndarray, eta: np.ndarray) -> np.ndarray:
     """Refract wo (n, 3, pointing away on h's side, wo·h > 0) through the interface with normal h
     into the medium of relative index eta. Returns wi (n, 3) unit, on the far side of h; rows under
     total internal reflection are NaN-free but meaningless (check F < 1 first)."""
-    c = np.sum(wo * h, axis=1)
-    inv_eta = 1.0 / eta
-    cos_t = np.sqrt(np.maximum(0.0, 1.0 - inv_eta * inv_eta * (1.0 - c * c)))
-    return -inv_eta[:, None] * wo + (inv_eta * c - cos_t)[:, None] * h
-
-
-def _upper(wo: np.ndarray, wi: np.ndarray | None, ior: np.ndarray):
-    """Mirror to the upper frame: returns (wo', wi', eta, flip)."""
-    flip = wo[:, 2] < 0.0
-    eta = np.where(flip, 1.0 / ior, ior)
-    wo_u = wo.copy()
-    wo_u[:, 2] = np.abs(wo_u[:, 2])
-    wi_u = None
-    if wi is not None:
-        wi_u = wi.copy()
-        wi_u[:, 2] = np.where(flip, -wi_u[:, 2], wi_u[:, 2])
-    return wo_u, wi_u, eta, flip
+    wo = vec3_rows(wo)
+    out = np.empty_like(wo)
+    _refract_rows(wo, vec3_rows(h), scalar_rows(eta, wo.shape[0]), out)
+    return out
 
 
 def eval_glass(wo: np.ndarray, wi: np.ndarray, alpha: np.ndarray,
@@ -89,30 +221,11 @@ def eval_glass(wo: np.ndarray, wi: np.ndarray, alpha: np.ndarray,
     """White rough dielectric. wo, wi: (n, 3) local; alpha: (n,) above the singular threshold;
     ior: (n,) > 0, not ≈ 1. Returns (f·|cos θi| (n,), pdf (n,) per unit solid angle of
     ``sample_glass``), covering both reflection (wi on wo's side) and transmission."""
-    wo_u, wi_u, eta, _ = _upper(wo, wi, ior)
-    cos_o = wo_u[:, 2]
-    cos_i = wi_u[:, 2]
-    ok = (cos_o > 0.0) & (cos_i != 0.0)
-    is_t = cos_i < 0.0
-    hv = np.where(is_t[:, None], wo_u + eta[:, None] * wi_u, wo_u + wi_u)
-    hlen2 = np.sum(hv * hv, axis=1)
-    ok &= hlen2 > 1e-300
-    h = hv / np.sqrt(np.where(ok, hlen2, 1.0))[:, None]
-    h = np.where((h[:, 2] < 0.0)[:, None], -h, h)
-    c_o = np.sum(wo_u * h, axis=1)
-    c_i = np.sum(wi_u * h, axis=1)
-    # Microfacet must be front-facing for wo, and wi on the matching side of it.
-    ok &= (c_o > 0.0) & np.where(is_t, c_i < 0.0, c_i > 0.0)
-    f = fresnel_dielectric(c_o, eta)
-    d = ggx_d(h[:, 2], alpha)
-    lam_o = ggx_lambda(cos_o, alpha)
-    lam_i = ggx_lambda(cos_i, alpha)
-    safe_cos_o = np.where(ok, cos_o, 1.0)
-    jac_t = eta * eta * np.abs(c_o * c_i) / np.where(ok, hlen2, 1.0)
-    common = d / safe_cos_o * np.where(is_t, jac_t, 0.25)
-    lobe = np.where(is_t, 1.0 - f, f)
-    value = np.where(ok, lobe * common / (1.0 + lam_o + lam_i), 0.0)
-    pdf = np.where(ok, lobe * common / (1.0 + lam_o), 0.0)
+    wo = vec3_rows(wo)
+    n = wo.shape[0]
+    value = np.empty(n)
+    pdf = np.empty(n)
+    _eval_glass_rows(wo, vec3_rows(wi), scalar_rows(alpha, n), scalar_rows(ior, n), value, pdf)
     return value, pdf
 
 
@@ -123,11 +236,10 @@ def sample_glass(wo: np.ndarray, alpha: np.ndarray, ior: np.ndarray, u_choice: n
     alpha): h = z, same choice; the weight of a white lobe is then exactly 1 either way. A rough
     sample may end on the wrong side (wi.z·wo.z ≤ 0 for a reflection, ≥ 0 for a refraction):
     the caller discards it."""
-    wo_u, _, eta, flip = _upper(wo, None, ior)
-    h = sample_microfacet_normal(wo_u, alpha, u2)
-    c_o = np.sum(wo_u * h, axis=1)
-    f = fresnel_dielectric(c_o, eta)
-    refracted = u_choice >= f
-    wi = np.where(refracted[:, None], refract(wo_u, h, eta), reflect(wo_u, h))
-    wi[:, 2] = np.where(flip, -wi[:, 2], wi[:, 2])
+    wo = vec3_rows(wo)
+    n = wo.shape[0]
+    wi = np.empty_like(wo)
+    refracted = np.empty(n, dtype=np.bool_)
+    _sample_glass_rows(wo, scalar_rows(alpha, n), scalar_rows(ior, n), scalar_rows(u_choice, n),
+                       f64_array(u2), wi, refracted)
     return wi, refracted

@@ -17,6 +17,11 @@ the remaining lobes are packed into the first slots):
     emission    (M, 3)          emitted radiance W/(m²·sr) (colour × strength)
     has_emission (M,) bool
 
+``MaterialTable.data`` (a ``MaterialData``) holds the same arrays with the dtypes the compiled
+kernels expect, plus the derived per-material flags; it is the first argument of the scalar
+kernels ``bsdf_eval`` and ``bsdf_sample``, which the integrator calls per path and which
+``MaterialTable.eval`` / ``sample`` apply to batches.
+
 Directions are unit vectors in the *local shading frame* (z = shading normal on the geometric
 front side, see docs/architecture.md): ``wo`` points toward where the path came from, ``wi``
 toward the next vertex. Diffuse and glossy lobes reflect on whichever side wo is; glass enters
@@ -35,13 +40,23 @@ density: consumers must not use it for MIS.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
 
-from .dielectric import IOR_ONE_EPS, eval_glass, fresnel_dielectric, sample_glass
-from .diffuse import eval_diffuse, sample_diffuse
-from .ggx import ALPHA_SQ_SINGULAR, eval_glossy, sample_glossy
+from ..kernels import kernel
+from ..kernels.vec3 import load, store
+from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample
+from .diffuse import INV_PI, diffuse_eval, diffuse_sample
+from .ggx import (
+    ALPHA_SQ_SINGULAR,
+    f64_array,
+    glossy_eval,
+    glossy_sample,
+    scalar_rows,
+    vec3_rows,
+)
 
 # lobe_type values
 BSDF_NONE = 0
@@ -76,6 +91,141 @@ class BSDFSample:
     lobe_kind: np.ndarray
     is_delta: np.ndarray
     valid: np.ndarray
+
+
+#: Largest float64 below 1: the rescaled lobe-selection number stays a valid sample.
+_ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
+
+#: Per-scene material arrays for the compiled kernels (``MaterialTable.data``); M materials,
+#: L lobe slots (either may be 0). Lobe arrays as in the module docstring; dtypes fixed so that
+#: one compiled variant serves every scene:
+#:   lobe_type (M, L) int64, lobe_color (M, L, 3) f64, lobe_alpha (M, L) f64, lobe_ior (M, L)
+#:   f64, lobe_delta (M, L) bool, lobe_select (M, L) f64,
+#:   lobe_cdf (M, L) f64: cumulative lobe_select, exactly 1 at the last used slot, +inf in unused
+#:   slots; lobe_count (M,) int64; emission (M, 3) f64 W/(m²·sr); has_emission (M,) bool;
+#:   albedo (M, 3) f64: sum of the lobe colours; delta_only (M,) bool: no lobe can be evaluated;
+#:   pure_diffuse (M,) bool: exactly one lobe, Lambert; transmission_or_delta (M,) bool: a glass
+#:   or delta lobe is present; has_diffuse (M,) bool;
+#:   summary (M, 4) f64: (kd, kg, alpha, kt) as ``MaterialTable.lobe_summary`` gives.
+MaterialData = namedtuple("MaterialData", [
+    "lobe_type", "lobe_color", "lobe_alpha", "lobe_ior", "lobe_delta", "lobe_select", "lobe_cdf",
+    "lobe_count", "emission", "has_emission", "albedo", "delta_only", "pure_diffuse",
+    "transmission_or_delta", "has_diffuse", "summary"])
+
+
+@kernel
+def bsdf_eval(md, m, wo, wi):
+    """md: MaterialData; m: material index; wo, wi: local unit 3-tuples. Returns (f, pdf): f the
+    3-tuple Σ color_l·f_l·|cos θi| over the material's non-delta lobes, pdf = Σ p_l·pdf_l per
+    unit solid angle of wi (exactly what ``bsdf_sample`` reports for a non-delta sample)."""
+    f0 = 0.0
+    f1 = 0.0
+    f2 = 0.0
+    pdf = 0.0
+    for s in range(md.lobe_type.shape[1]):
+        t = md.lobe_type[m, s]
+        if t == BSDF_NONE or md.lobe_delta[m, s]:
+            continue  # a delta lobe has no density to evaluate
+        if t == BSDF_DIFFUSE:
+            v, p = diffuse_eval(wo, wi)
+        elif t == BSDF_GLOSSY:
+            v, p = glossy_eval(wo, wi, md.lobe_alpha[m, s])
+        elif t == BSDF_GLASS:
+            v, p = glass_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
+        else:
+            continue
+        f0 += md.lobe_color[m, s, 0] * v
+        f1 += md.lobe_color[m, s, 1] * v
+        f2 += md.lobe_color[m, s, 2] * v
+        pdf += md.lobe_select[m, s] * p
+    return (f0, f1, f2), pdf
+
+
+@kernel
+def bsdf_sample(md, m, wo, u_lobe, u0, u1):
+    """md: MaterialData; m: material index; wo: local unit 3-tuple; u_lobe in [0, 1) picks the
+    lobe (and, rescaled inside the picked interval, glass's reflect/refract choice); (u0, u1) in
+    [0, 1)² picks the direction. Returns (wi, weight, pdf, lobe_kind, is_delta, valid):
+    weight = f·|cos θi| / pdf (3-tuple), pdf the whole material's solid-angle pdf, or for a delta
+    event its discrete probability; lobe_kind a LOBE_* value. Invalid samples have zero weight
+    and pdf, LOBE_NONE and is_delta False (wi is kept where one was drawn)."""
+    zero = (0.0, 0.0, 0.0)
+    count = md.lobe_count[m]
+    if count == 0 or wo[2] == 0.0:
+        return zero, zero, 0.0, LOBE_NONE, False, False
+    slot = 0
+    for j in range(md.lobe_cdf.shape[1]):
+        if u_lobe >= md.lobe_cdf[m, j]:
+            slot += 1
+    slot = min(slot, count - 1)
+    p_sel = md.lobe_select[m, slot]
+    cdf_lo = md.lobe_cdf[m, slot - 1] if slot > 0 else 0.0
+    u_rest = (u_lobe - cdf_lo) / (p_sel if p_sel > 0.0 else 1.0)
+    u_rest = min(max(u_rest, 0.0), _ONE_MINUS_EPS)
+    t = md.lobe_type[m, slot]
+    is_delta = md.lobe_delta[m, slot]
+    # alpha 0 makes the lobe functions take their delta path (also for glass with ior ≈ 1)
+    alpha = 0.0 if is_delta else md.lobe_alpha[m, slot]
+    ior = md.lobe_ior[m, slot]
+    refracted = False
+    if t == BSDF_DIFFUSE:
+        wi = diffuse_sample(wo, u0, u1)
+        kind = LOBE_DIFFUSE
+    elif t == BSDF_GLOSSY:
+        wi = glossy_sample(wo, alpha, u0, u1)
+        kind = LOBE_GLOSSY
+    elif t == BSDF_GLASS:
+        wi, refracted = glass_sample(wo, alpha, ior, u_rest, u0, u1)
+        kind = LOBE_TRANSMISSION if refracted else LOBE_GLOSSY
+    else:
+        return zero, zero, 0.0, LOBE_NONE, False, False
+    side = wo[2] * wi[2]
+    if not (side < 0.0 if refracted else side > 0.0):
+        return wi, zero, 0.0, LOBE_NONE, False, False
+
+    if is_delta:
+        # weight colour / p_sel (the Fresnel choice cancels F); pdf = the event's probability
+        weight = (md.lobe_color[m, slot, 0] / p_sel, md.lobe_color[m, slot, 1] / p_sel,
+                  md.lobe_color[m, slot, 2] / p_sel)
+        pdf = p_sel
+        if t == BSDF_GLASS:
+            fr = fresnel(wo[2], 1.0 / ior if wo[2] < 0.0 else ior)
+            pdf *= (1.0 - fr) if refracted else fr
+        return wi, weight, pdf, kind, True, True
+
+    if md.pure_diffuse[m]:
+        # One Lambert lobe needs no evaluation: pdf = |cos θi|/π, weight = its colour.
+        pdf = abs(wi[2]) * INV_PI
+        if not pdf > 0.0:
+            return wi, zero, 0.0, LOBE_NONE, False, False
+        color = (md.lobe_color[m, 0, 0], md.lobe_color[m, 0, 1], md.lobe_color[m, 0, 2])
+        return wi, color, pdf, kind, False, True
+
+    # One-sample MIS over lobes: the whole material's f and pdf at the sampled wi.
+    f, pdf = bsdf_eval(md, m, wo, wi)
+    if not pdf > 0.0:
+        return wi, zero, 0.0, LOBE_NONE, False, False
+    return wi, (f[0] / pdf, f[1] / pdf, f[2] / pdf), pdf, kind, False, True
+
+
+@kernel
+def _eval_rows(md, mat, wo, wi, f, pdf):
+    for i in range(mat.shape[0]):
+        fi, p = bsdf_eval(md, mat[i], load(wo, i), load(wi, i))
+        store(f, i, fi)
+        pdf[i] = p
+
+
+@kernel
+def _sample_rows(md, mat, wo, u_lobe, u2, wi, weight, pdf, kind, is_delta, valid):
+    for i in range(mat.shape[0]):
+        w, wt, p, k, d, ok = bsdf_sample(md, mat[i], load(wo, i), u_lobe[i], u2[i, 0], u2[i, 1])
+        store(wi, i, w)
+        store(weight, i, wt)
+        pdf[i] = p
+        kind[i] = k
+        is_delta[i] = d
+        valid[i] = ok
 
 
 def _fail(where: str, msg: str) -> ValueError:
@@ -120,20 +270,36 @@ class MaterialTable:
         cdf[~used] = np.inf
         last = np.maximum(self.lobe_count - 1, 0)
         rows = np.nonzero(self.lobe_count > 0)[0]
-        cdf[rows, last[rows]] = 1.0
-        self._lobe_cdf = cdf
+        cdf[rows, last[rows]] = 1.0  # rounding must not leave a gap below u_lobe = 1
         self.has_emission = np.any(self.emission > 0.0, axis=1)
-        self._albedo = np.where(used[..., None], self.lobe_color, 0.0).sum(axis=1) if n_slots \
+        albedo = np.where(used[..., None], self.lobe_color, 0.0).sum(axis=1) if n_slots \
             else np.zeros((m, 3))
-        self._delta_only = ~np.any(used & ~self.lobe_delta, axis=1)
-        # (slot, type) pairs present in the table, non-delta only: eval visits nothing else.
-        self._eval_pairs = [(s, t) for s in range(n_slots)
-                            for t in (BSDF_DIFFUSE, BSDF_GLOSSY, BSDF_GLASS)
-                            if np.any((self.lobe_type[:, s] == t) & ~self.lobe_delta[:, s])]
-        self._types_present = {int(t) for t in np.unique(self.lobe_type[used])}
-        self._lobe_summary = self._summarise_lobes(used)
-        self._pure_diffuse = (self.lobe_count == 1) & (self.lobe_type[:, 0] == BSDF_DIFFUSE) \
+        pure_diffuse = (self.lobe_count == 1) & (self.lobe_type[:, 0] == BSDF_DIFFUSE) \
             if n_slots else np.zeros(m, dtype=bool)
+
+        def c(a, dtype):
+            return np.array(a, dtype=dtype, order="C", copy=True)
+
+        self.data = MaterialData(
+            lobe_type=c(self.lobe_type, np.int64),
+            lobe_color=c(self.lobe_color.reshape(m, n_slots, 3), np.float64),
+            lobe_alpha=c(self.lobe_alpha, np.float64),
+            lobe_ior=c(self.lobe_ior, np.float64),
+            lobe_delta=c(self.lobe_delta, np.bool_),
+            lobe_select=c(self.lobe_select, np.float64),
+            lobe_cdf=c(cdf, np.float64),
+            lobe_count=c(self.lobe_count, np.int64),
+            emission=c(self.emission.reshape(m, 3), np.float64),
+            has_emission=c(self.has_emission, np.bool_),
+            albedo=c(albedo, np.float64),
+            delta_only=c(~np.any(used & ~self.lobe_delta, axis=1), np.bool_),
+            pure_diffuse=c(pure_diffuse, np.bool_),
+            transmission_or_delta=c(
+                np.any(used & ((self.lobe_type == BSDF_GLASS) | self.lobe_delta), axis=1),
+                np.bool_),
+            has_diffuse=c(np.any(self.lobe_type == BSDF_DIFFUSE, axis=1), np.bool_),
+            summary=c(np.stack(self._summarise_lobes(used), axis=1).reshape(m, 4), np.float64),
+        )
 
     def _summarise_lobes(self, used):
         """Per material, what light selection needs to guess where the BSDF is large (see
@@ -211,9 +377,20 @@ class MaterialTable:
         return cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission)
 
     # ------------------------------------------------------------------ queries
+    def _mat_rows(self, mat) -> np.ndarray:
+        """mat as (n,) contiguous int64 in [0, M), negative indices wrapped as numpy does; an index
+        out of range raises IndexError (the kernels do not check bounds)."""
+        mat = np.array(mat, dtype=np.int64, order="C", copy=True).reshape(-1)
+        m = len(self.names)
+        if mat.size and (mat.min() < -m or mat.max() >= m):
+            raise IndexError(f"material index out of range for {m} materials")
+        if mat.size and mat.min() < 0:
+            mat[mat < 0] += m
+        return mat
+
     def albedo(self, mat: np.ndarray) -> np.ndarray:
         """mat (n,) int; returns (n, 3) the sum of the lobe colours (for the albedo pass)."""
-        return self._albedo[np.asarray(mat, dtype=np.intp)]
+        return self.data.albedo[np.asarray(mat, dtype=np.intp)]
 
     def lobe_summary(self, mat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """mat (n,) int (−1: none); (kd, kg, alpha, kt), each (n,): the summed average colour of the
@@ -221,143 +398,57 @@ class MaterialTable:
         cannot reach them) and the colour-weighted GGX alpha of its glossy lobes (1 if none).
         A rough description for light selection (`drt.lights.selection`), not for shading."""
         mat = np.asarray(mat, dtype=np.intp)
+        summary = self.data.summary
         known = (mat >= 0) & (mat < len(self.names))
         if known.all():
-            return tuple(a[mat] for a in self._lobe_summary)
+            return tuple(summary[mat, k] for k in range(4))
         # no material (camera rays, an empty table): nothing is known, all zero
+        if not len(summary):
+            return tuple(np.zeros(len(mat)) for _ in range(4))
         safe = np.where(known, mat, 0)
-        return tuple(np.where(known, a[safe], 0.0) if len(a) else np.zeros(len(mat))
-                     for a in self._lobe_summary)
+        return tuple(np.where(known, summary[safe, k], 0.0) for k in range(4))
 
     def is_delta_only(self, mat: np.ndarray) -> np.ndarray:
         """mat (n,) int; (n,) bool: no lobe can be evaluated, so no NEE (also True for
         materials without lobes)."""
-        return self._delta_only[np.asarray(mat, dtype=np.intp)]
+        return self.data.delta_only[np.asarray(mat, dtype=np.intp)]
 
     def has_transmission_or_delta(self, mat: np.ndarray) -> np.ndarray:
         """mat (n,) int; (n,) bool: a glass lobe or a mirror-like (delta) lobe is present, so
         only the material's own sampling reaches all of its directions."""
-        used = self.lobe_type != BSDF_NONE
-        flag = np.any(used & ((self.lobe_type == BSDF_GLASS) | self.lobe_delta), axis=1)
-        return flag[np.asarray(mat, dtype=np.intp)]
+        return self.data.transmission_or_delta[np.asarray(mat, dtype=np.intp)]
 
     def has_diffuse(self, mat: np.ndarray) -> np.ndarray:
         """mat (n,) int; (n,) bool: the material has a diffuse lobe."""
-        return np.any(self.lobe_type == BSDF_DIFFUSE, axis=1)[np.asarray(mat, dtype=np.intp)]
+        return self.data.has_diffuse[np.asarray(mat, dtype=np.intp)]
 
     def eval(self, mat: np.ndarray, wo: np.ndarray,
              wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """mat (n,) int; wo, wi (n, 3) local unit vectors. Returns (f·|cos θi| (n, 3) summed over
         the non-delta lobes, pdf (n,) per unit solid angle of wi, Σ p_l pdf_l, exactly what
-        sample() reports for a non-delta sample)."""
-        mat = np.asarray(mat, dtype=np.intp)
-        wo = np.asarray(wo, dtype=np.float64)
-        wi = np.asarray(wi, dtype=np.float64)
+        sample() reports for a non-delta sample). Applies ``bsdf_eval`` to each row."""
+        mat = self._mat_rows(mat)
         n = mat.shape[0]
-        f = np.zeros((n, 3))
-        pdf = np.zeros(n)
-        for slot, t in self._eval_pairs:
-            mask = (self.lobe_type[mat, slot] == t) & ~self.lobe_delta[mat, slot]
-            idx = np.nonzero(mask)[0]
-            if idx.size == 0:
-                continue
-            mi = mat[idx]
-            value, p = self._eval_lobe(t, wo[idx], wi[idx], self.lobe_alpha[mi, slot],
-                                       self.lobe_ior[mi, slot])
-            f[idx] += self.lobe_color[mi, slot] * value[:, None]
-            pdf[idx] += self.lobe_select[mi, slot] * p
+        f = np.empty((n, 3))
+        pdf = np.empty(n)
+        _eval_rows(self.data, mat, vec3_rows(wo), vec3_rows(wi), f, pdf)
         return f, pdf
-
-    @staticmethod
-    def _eval_lobe(t, wo, wi, alpha, ior):
-        if t == BSDF_DIFFUSE:
-            return eval_diffuse(wo, wi)
-        if t == BSDF_GLOSSY:
-            return eval_glossy(wo, wi, alpha)
-        return eval_glass(wo, wi, alpha, ior)
 
     def sample(self, mat: np.ndarray, wo: np.ndarray, u_lobe: np.ndarray,
                u2: np.ndarray) -> BSDFSample:
         """mat (n,) int; wo (n, 3) local; u_lobe (n,) in [0, 1) picks the lobe (and, rescaled
         inside the picked interval, glass's reflect/refract choice); u2 (n, 2) in [0, 1)² picks
-        the direction. See BSDFSample and the module docstring for weight and pdf."""
-        mat = np.asarray(mat, dtype=np.intp)
-        wo = np.asarray(wo, dtype=np.float64)
-        u_lobe = np.asarray(u_lobe, dtype=np.float64)
-        u2 = np.asarray(u2, dtype=np.float64)
+        the direction. See BSDFSample and the module docstring for weight and pdf. Applies
+        ``bsdf_sample`` to each row; wi is 0 in rows where no lobe could be sampled."""
+        mat = self._mat_rows(mat)
         n = mat.shape[0]
-        wi = np.zeros((n, 3))
-        weight = np.zeros((n, 3))
-        pdf = np.zeros(n)
-        kind = np.zeros(n, np.int8)
-        is_delta = np.zeros(n, bool)
-        refracted = np.zeros(n, bool)
-        count = self.lobe_count[mat]
-        has = (count > 0) & (wo[:, 2] != 0.0)
-        if self.lobe_type.shape[1] == 0 or not np.any(has):
-            return BSDFSample(wi, weight, pdf, kind, is_delta, np.zeros(n, bool))
-
-        cdf = self._lobe_cdf[mat]
-        slot = np.minimum(np.sum(u_lobe[:, None] >= cdf, axis=1), np.maximum(count - 1, 0))
-        p_sel = self.lobe_select[mat, slot]
-        cdf_lo = np.where(slot > 0, cdf[np.arange(n), np.maximum(slot - 1, 0)], 0.0)
-        u_rest = np.clip((u_lobe - cdf_lo) / np.where(p_sel > 0, p_sel, 1.0), 0.0,
-                         np.nextafter(1.0, 0.0))
-        t_sel = np.where(has, self.lobe_type[mat, slot], BSDF_NONE)
-        is_delta = has & self.lobe_delta[mat, slot]
-        # alpha 0 makes the lobe functions take their delta path (also for glass with ior ≈ 1)
-        alpha = np.where(is_delta, 0.0, self.lobe_alpha[mat, slot])
-        ior = self.lobe_ior[mat, slot]
-
-        for t in self._types_present:
-            idx = np.nonzero(t_sel == t)[0]
-            if idx.size == 0:
-                continue
-            if t == BSDF_DIFFUSE:
-                wi[idx] = sample_diffuse(wo[idx], u2[idx])
-                kind[idx] = LOBE_DIFFUSE
-            elif t == BSDF_GLOSSY:
-                wi[idx] = sample_glossy(wo[idx], alpha[idx], u2[idx])
-                kind[idx] = LOBE_GLOSSY
-            else:
-                wi[idx], refracted[idx] = sample_glass(wo[idx], alpha[idx], ior[idx],
-                                                       u_rest[idx], u2[idx])
-                kind[idx] = np.where(refracted[idx], LOBE_TRANSMISSION, LOBE_GLOSSY)
-
-        side = wo[:, 2] * wi[:, 2]
-        valid = has & np.where(refracted, side < 0.0, side > 0.0)
-
-        # Delta events: weight colour / p_sel; pdf = discrete probability of the event.
-        d = np.nonzero(valid & is_delta)[0]
-        if d.size:
-            weight[d] = self.lobe_color[mat[d], slot[d]] / p_sel[d, None]
-            pdf[d] = p_sel[d]
-            g = d[t_sel[d] == BSDF_GLASS]
-            if g.size:
-                eta = np.where(wo[g, 2] < 0.0, 1.0 / ior[g], ior[g])
-                fr = fresnel_dielectric(wo[g, 2], eta)
-                pdf[g] *= np.where(refracted[g], 1.0 - fr, fr)
-
-        # Non-delta events: the whole material's f and pdf at the sampled wi. A material that is
-        # one Lambert lobe needs no evaluation: pdf = |cos θi|/π, weight = its colour.
-        c = np.nonzero(valid & ~is_delta)[0]
-        if c.size and self._pure_diffuse.any():
-            pure = self._pure_diffuse[mat[c]]
-            p_idx = c[pure]
-            pdf[p_idx] = np.abs(wi[p_idx, 2]) * (1.0 / np.pi)
-            ok = pdf[p_idx] > 0.0
-            weight[p_idx] = np.where(ok[:, None], self.lobe_color[mat[p_idx], 0], 0.0)
-            valid[p_idx] &= ok
-            c = c[~pure]
-        if c.size:
-            f_c, pdf_c = self.eval(mat[c], wo[c], wi[c])
-            ok = pdf_c > 0.0
-            weight[c] = np.where(ok[:, None], f_c / np.where(ok, pdf_c, 1.0)[:, None], 0.0)
-            pdf[c] = pdf_c
-            valid[c] &= ok
-
-        kind[~valid] = LOBE_NONE
-        weight[~valid] = 0.0
-        pdf[~valid] = 0.0
-        is_delta &= valid
+        wi = np.empty((n, 3))
+        weight = np.empty((n, 3))
+        pdf = np.empty(n)
+        kind = np.empty(n, np.int8)
+        is_delta = np.empty(n, bool)
+        valid = np.empty(n, bool)
+        _sample_rows(self.data, mat, vec3_rows(wo), scalar_rows(u_lobe, n),
+                     f64_array(u2).reshape(n, 2),
+                     wi, weight, pdf, kind, is_delta, valid)
         return BSDFSample(wi, weight, pdf, kind, is_delta, valid)

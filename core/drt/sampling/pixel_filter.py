@@ -22,12 +22,88 @@ does not matter.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 
-__all__ = ["PixelFilter", "FILTER_KINDS"]
+from ..kernels import kernel
+
+__all__ = ["PixelFilter", "FilterData", "FILTER_KINDS", "filter_sample", "filter_sample_1d"]
 
 FILTER_KINDS = ("BLACKMAN_HARRIS", "GAUSSIAN", "BOX")
+KIND_BLACKMAN_HARRIS, KIND_GAUSSIAN, KIND_BOX = 0, 1, 2  # FilterData.kind
+
+FilterData = namedtuple("FilterData", ["kind", "width", "radius", "cdf", "edges"])
+FilterData.__doc__ = """The pixel filter for the kernels: kind (int64: 0 BLACKMAN_HARRIS, 1 GAUSSIAN,
+2 BOX), width and radius (float64, px), and the tabulated forward CDF: cdf (m + 1,) float64 at the
+cell edges (m + 1,) float64 (px) of [−radius, radius]."""
+
+
+@kernel
+def _interp(x, xp, fp):
+    """``np.interp(x, xp, fp)`` for one x (numpy's algorithm: the cell j with xp[j] ≤ x <
+    xp[j + 1], the same slope formula and its NaN fallbacks), so results are bit-identical."""
+    n = xp.shape[0]
+    if x != x:
+        return x
+    if x < xp[0]:
+        return fp[0]
+    if x > xp[n - 1]:
+        return fp[n - 1]
+    lo = 0
+    hi = n
+    while lo < hi:  # largest j with xp[j] <= x
+        mid = lo + ((hi - lo) >> 1)
+        if x >= xp[mid]:
+            lo = mid + 1
+        else:
+            hi = mid
+    j = lo - 1
+    if j == n - 1 or xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    r = slope * (x - xp[j]) + fp[j]
+    if r != r:
+        r = slope * (x - xp[j + 1]) + fp[j + 1]
+        if r != r and fp[j] == fp[j + 1]:
+            r = fp[j]
+    return r
+
+
+@kernel
+def filter_sample_1d(fd, u):
+    """One offset (px) along one axis, distributed ∝ the filter; monotone in u ∈ [0, 1)."""
+    if fd.kind == 2:  # BOX
+        return (u - 0.5) * fd.width
+    # piecewise-linear inversion of the tabulated CDF (uniform inside each cell)
+    return _interp(u, fd.cdf, fd.edges)
+
+
+@kernel
+def filter_sample(fd, u0, u1):
+    """Pixel-filter offset (dx, dy) in pixels from the pixel centre for (u0, u1) ∈ [0, 1)²;
+    fd = ``PixelFilter.data``.  Every sample carries weight 1."""
+    return filter_sample_1d(fd, u0), filter_sample_1d(fd, u1)
+
+
+@kernel
+def _sample_1d_rows(fd, u, out):
+    for k in range(u.shape[0]):
+        out[k] = filter_sample_1d(fd, u[k])
+
+
+@kernel
+def _sample_rows(fd, u, out):
+    for k in range(u.shape[0]):
+        dx, dy = filter_sample(fd, u[k, 0], u[k, 1])
+        out[k, 0] = dx
+        out[k, 1] = dy
+
+
+def _f64(x) -> np.ndarray:
+    """float64, C-contiguous, writeable (one compiled signature for every call)."""
+    a = np.ascontiguousarray(x, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()
 
 _BH = (0.35875, 0.48829, 0.14128, 0.01168)
 _erf = np.vectorize(math.erf, otypes=[np.float64])
@@ -61,6 +137,8 @@ class PixelFilter:
             self.radius = 0.5 * width
         self._norm = self._integral()
         self._build_table(int(table_size))
+        self.data = FilterData(kind=int(FILTER_KINDS.index(kind)), width=float(self.width),
+                               radius=float(self.radius), cdf=self._cdf, edges=self._edges)
 
     def __repr__(self) -> str:
         return f"PixelFilter(kind={self.kind!r}, width={self.width})"
@@ -146,10 +224,10 @@ class PixelFilter:
         """Offsets along one axis, distributed ∝ f.  u: (n,) in [0, 1) -> (n,) px in
         [−radius, radius].  Monotone in u (keeps the strata of stratified / Sobol samples)."""
         u = np.asarray(u, dtype=np.float64)
-        if self.kind == "BOX":
-            return (u - 0.5) * self.width
-        # piecewise-linear inversion of the tabulated CDF (uniform inside each cell), in one C pass
-        return np.interp(u, self._cdf, self._edges)
+        flat = _f64(u.reshape(-1))
+        out = np.empty_like(flat)
+        _sample_1d_rows(self.data, flat, out)
+        return out.reshape(u.shape)
 
     def sample(self, u) -> np.ndarray:
         """Pixel-filter offsets.
@@ -159,4 +237,8 @@ class PixelFilter:
         weight 1 (Cycles's convention), so the film just averages.
         """
         u = np.asarray(u, dtype=np.float64)
-        return np.stack([self.sample_1d(u[..., 0]), self.sample_1d(u[..., 1])], axis=-1)
+        lead = u.shape[:-1]
+        flat = _f64(u[..., :2].reshape(-1, 2))
+        out = np.empty_like(flat)
+        _sample_rows(self.data, flat, out)
+        return out.reshape(lead + (2,))

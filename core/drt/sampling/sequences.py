@@ -4,7 +4,9 @@ Every value is a pure function of (seed, pixel, index, dim) (and of ``spp`` for 
 strata depend on it): nothing is carried between calls, so any subset of samples can be drawn on
 its own and a render of sample range [k, n) reproduces exactly those samples of a full render.
 Samples come in 2-D *dimensions* (``dim``): dimension 0 is the pixel filter, 1 the lens, and so on
-(the table lives in ``drt/integrator.py``).  All bit operations are vectorized numpy ``uint32``.
+(the table lives in ``drt/integrator.py``).  The generators are scalar compiled kernels
+(``sample_2d(sd, pixel, index, dim)`` with ``sd = Sampler.data``) doing uint32 arithmetic in int64
+(every product masked to 32 bits); the numpy functions below are thin wrappers over them.
 
 * RANDOM: a counter-based hash (Wellons's "lowbias32" integer finalizer chained over seed, pixel,
   dim, index and component), 32 random bits per value.
@@ -21,75 +23,257 @@ Samples come in 2-D *dimensions* (``dim``): dimension 0 is the pixel filter, 1 t
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 
-__all__ = ["Sampler", "SAMPLER_KINDS", "hash_u32", "reverse_bits", "sobol_2d",
-           "nested_uniform_scramble", "permute_index"]
+from ..kernels import kernel
+
+__all__ = ["Sampler", "SamplerData", "SAMPLER_KINDS", "sample_2d", "sample_2d_batch",
+           "hash_u32", "reverse_bits", "sobol_2d", "nested_uniform_scramble", "permute_index"]
 
 SAMPLER_KINDS = ("SOBOL", "STRATIFIED", "RANDOM")
+KIND_SOBOL, KIND_STRATIFIED, KIND_RANDOM = 0, 1, 2  # SamplerData.kind
 
-_U32 = np.uint32
 _INV_2_32 = 1.0 / 4294967296.0  # uint32 -> [0, 1): (2^32 - 1)·2^-32 < 1 exactly in float64
-_ONE_MINUS_EPS = np.nextafter(1.0, 0.0)
+_ONE_MINUS_EPS = float(np.nextafter(1.0, 0.0))
+_MASK = 0xFFFFFFFF
+
+# salts that separate the hash streams of the different uses
+_SALT_RANDOM = 0x52414E44      # "RAND"
+_SALT_STRAT = 0x53545254       # "STRT"
+_SALT_SOBOL = 0x534F424C       # "SOBL"
 
 
-def _u32(x) -> np.ndarray:
-    """Any integer array (or scalar) -> uint32 array (values taken mod 2^32)."""
+SamplerData = namedtuple("SamplerData", ["kind", "seed", "spp", "nx", "ny", "prefix"])
+SamplerData.__doc__ = """Per-render sampler constants for the kernels (all Python ints → int64).
+
+kind: 0 SOBOL, 1 STRATIFIED, 2 RANDOM; seed: the 32-bit seed; spp: samples per pixel;
+nx, ny: STRATIFIED's grid (nx·ny = spp); prefix: the hash chain of (seed, the kind's salt), the
+common start of every per-sample hash."""
+
+
+# ---------------------------------------------------------------------------------------------
+# scalar kernels: uint32 values held in int64 (inputs taken mod 2^32; every product is formed
+# without signed overflow and masked back to 32 bits)
+# ---------------------------------------------------------------------------------------------
+
+
+@kernel
+def mul32(a, b):
+    """(a·b) mod 2^32 for a, b in [0, 2^32), as int64 (two partial products < 2^49: numba's
+    signed multiply must not overflow)."""
+    return (a * (b & 0xFFFF) + (((a * (b >> 16)) & 0xFFFF) << 16)) & 0xFFFFFFFF
+
+
+@kernel
+def hash32(x):
+    """A bijective 32-bit integer hash (Wellons's lowbias32), x in [0, 2^32)."""
+    x ^= x >> 16
+    x = mul32(x, 0x7FEB352D)
+    x ^= x >> 15
+    x = mul32(x, 0x846CA68B)
+    x ^= x >> 16
+    return x
+
+
+@kernel
+def reverse32(x):
+    """The 32 bits of x reversed."""
+    x = ((x >> 1) & 0x55555555) | ((x & 0x55555555) << 1)
+    x = ((x >> 2) & 0x33333333) | ((x & 0x33333333) << 2)
+    x = ((x >> 4) & 0x0F0F0F0F) | ((x & 0x0F0F0F0F) << 4)
+    x = ((x >> 8) & 0x00FF00FF) | ((x & 0x00FF00FF) << 8)
+    return ((x >> 16) & 0xFFFF) | ((x & 0xFFFF) << 16)
+
+
+@kernel
+def laine_karras32(x, seed):
+    """Burley 2020's hash: each output bit depends only on the same and *lower* input bits."""
+    x = (x + seed) & 0xFFFFFFFF
+    x ^= mul32(x, 0x6C50B47C)
+    x ^= mul32(x, 0xB82F1E52)
+    x ^= mul32(x, 0xC7AFE638)
+    x ^= mul32(x, 0x8D22F6E6)
+    return x
+
+
+@kernel
+def nested_uniform_scramble32(x, seed):
+    """Owen (nested uniform) scramble of a 32-bit fixed-point value / index (Burley 2020): each
+    bit of the result depends only on the same and *higher* bits of x."""
+    return reverse32(laine_karras32(reverse32(x), seed))
+
+
+@kernel
+def sobol_dim1(index):
+    """Second Sobol dimension (primitive polynomial x + 1: v_0 = 2^31, v_i = v_{i-1} ^
+    (v_{i-1} >> 1)) of index, as 32-bit fixed point."""
+    r = 0
+    v = 0x80000000
+    while index != 0:
+        if index & 1:
+            r ^= v
+        index >>= 1
+        v ^= v >> 1
+    return r
+
+
+@kernel
+def permute32(i, n, key):
+    """Hashed permutation of [0, n) (Kensler 2013), i in [0, n), one permutation per key: a
+    bijection on the next power of two, cycle-walked into [0, n)."""
+    if n <= 1:
+        return 0
+    w = n - 1
+    w |= w >> 1
+    w |= w >> 2
+    w |= w >> 4
+    w |= w >> 8
+    w |= w >> 16
+    p = key
+    x = i
+    for _ in range(4096):
+        x ^= p
+        x = mul32(x, 0xE170893D)
+        x ^= p >> 16
+        x ^= (x & w) >> 4
+        x ^= p >> 8
+        x = mul32(x, 0x0929EB3F)
+        x ^= p >> 23
+        x ^= (x & w) >> 1
+        x = mul32(x, 1 | (p >> 27))
+        x = mul32(x, 0x6935FA69)
+        x ^= (x & w) >> 11
+        x = mul32(x, 0x74DCB303)
+        x ^= (x & w) >> 2
+        x = mul32(x, 0x9E501CC3)
+        x ^= (x & w) >> 2
+        x = mul32(x, 0xC860A3DF)
+        x &= w
+        x ^= x >> 5
+        if x < n:
+            return (x + p) % n
+    raise RuntimeError("permute_index did not converge")  # pragma: no cover
+
+
+@kernel
+def sample_2d(sd, pixel, index, dim):
+    """One 2-D sample (u0, u1) in [0, 1)² of (pixel, index, dim) (ints, taken mod 2^32);
+    sd = ``Sampler.data``."""
+    pixel &= 0xFFFFFFFF
+    index &= 0xFFFFFFFF
+    dim &= 0xFFFFFFFF
+    h = hash32(hash32(sd.prefix ^ pixel) ^ dim)
+    if sd.kind == 2:  # RANDOM
+        h = hash32(h ^ index)
+        x = hash32(h ^ 0x68E31DA4)
+        y = hash32(h ^ 0xB5297A4D)
+        return float(x) * _INV_2_32, float(y) * _INV_2_32
+    if sd.kind == 1:  # STRATIFIED
+        spp = sd.spp
+        rnd = index // spp          # which set of spp samples
+        slot = index % spp
+        key = hash32(h ^ rnd)
+        stratum = permute32(slot, spp, key)
+        jit = hash32(key ^ hash32(slot))
+        jx = float(hash32(jit ^ 0x1B873593)) * _INV_2_32
+        jy = float(hash32(jit ^ 0xCC9E2D51)) * _INV_2_32
+        sx = float(stratum % sd.nx)
+        sy = float(stratum // sd.nx)
+        return (min((sx + jx) / sd.nx, _ONE_MINUS_EPS),
+                min((sy + jy) / sd.ny, _ONE_MINUS_EPS))
+    # SOBOL
+    shuffled = nested_uniform_scramble32(index, h)
+    x = nested_uniform_scramble32(reverse32(shuffled), hash32(h ^ 0x2545F491))
+    y = nested_uniform_scramble32(sobol_dim1(shuffled), hash32(h ^ 0x9E3779B9))
+    return float(x) * _INV_2_32, float(y) * _INV_2_32
+
+
+@kernel
+def sample_2d_batch(sd, pixel, index, dim, out):
+    """``sample_2d`` for rows: pixel, index, dim (n,) int64 -> out (n, 2) float64."""
+    for k in range(pixel.shape[0]):
+        u0, u1 = sample_2d(sd, pixel[k], index[k], dim[k])
+        out[k, 0] = u0
+        out[k, 1] = u1
+
+
+# ---------------------------------------------------------------------------------------------
+# numpy wrappers
+# ---------------------------------------------------------------------------------------------
+
+
+@kernel
+def _hash_rows(x, out):
+    for k in range(x.shape[0]):
+        out[k] = hash32(x[k] & 0xFFFFFFFF)
+
+
+@kernel
+def _reverse_rows(x, out):
+    for k in range(x.shape[0]):
+        out[k] = reverse32(x[k] & 0xFFFFFFFF)
+
+
+@kernel
+def _scramble_rows(x, seed, out):
+    for k in range(x.shape[0]):
+        out[k] = nested_uniform_scramble32(x[k] & 0xFFFFFFFF, seed[k] & 0xFFFFFFFF)
+
+
+@kernel
+def _sobol_rows(index, out_x, out_y):
+    for k in range(index.shape[0]):
+        i = index[k] & 0xFFFFFFFF
+        out_x[k] = reverse32(i)
+        out_y[k] = sobol_dim1(i)
+
+
+@kernel
+def _permute_rows(i, n, key, out):
+    for k in range(i.shape[0]):
+        out[k] = permute32(i[k] & 0xFFFFFFFF, n, key[k] & 0xFFFFFFFF)
+
+
+def _i64(x) -> np.ndarray:
+    """Any integer array (or scalar) -> int64 array (the kernels take it mod 2^32)."""
     a = np.asarray(x)
-    if a.dtype == np.uint32:
-        return a
-    return (a.astype(np.int64) & 0xFFFFFFFF).astype(np.uint32)
+    return a if a.dtype == np.int64 else a.astype(np.int64)
+
+
+def _flat(*arrays) -> tuple[tuple, list[np.ndarray]]:
+    """Broadcast int arrays together -> (shape, contiguous writeable 1-D int64 arrays): one
+    compiled signature for every call."""
+    arrays = [_i64(a) for a in arrays]
+    shape = np.broadcast_shapes(*(a.shape for a in arrays))
+    out = []
+    for a in arrays:
+        if a.shape != shape:
+            a = np.broadcast_to(a, shape)
+        a = np.ascontiguousarray(a).reshape(-1)
+        out.append(a if a.flags.writeable else a.copy())
+    return shape, out
+
+
+def _u32_out(out: np.ndarray, shape) -> np.ndarray:
+    return out.astype(np.uint32).reshape(shape)
 
 
 def hash_u32(x) -> np.ndarray:
     """A bijective 32-bit integer hash (Wellons's lowbias32).  x: uint32 array -> uint32 array."""
-    x = _u32(x).copy()
-    x ^= x >> _U32(16)
-    x *= _U32(0x7FEB352D)
-    x ^= x >> _U32(15)
-    x *= _U32(0x846CA68B)
-    x ^= x >> _U32(16)
-    return x
-
-
-def _hash_chain(*values) -> np.ndarray:
-    """Hash of a sequence of uint32 values (broadcast together): h = hash(h ^ v) for each v."""
-    h = hash_u32(_u32(0x9E3779B9) ^ _u32(values[0]))
-    for v in values[1:]:
-        h = hash_u32(h ^ _u32(v))
-    return h
-
-
-def _reverse_table_16() -> np.ndarray:
-    """(65536,) uint32: the 16 bits of each index reversed."""
-    b = np.arange(1 << 16, dtype=np.uint32)
-    r = np.zeros(1 << 16, dtype=np.uint32)
-    for j in range(16):
-        r |= ((b >> j) & 1) << (15 - j)
-    return r
-
-
-_REV16 = _reverse_table_16()
+    shape, (x,) = _flat(x)
+    out = np.empty_like(x)
+    _hash_rows(x, out)
+    return _u32_out(out, shape)
 
 
 def reverse_bits(x) -> np.ndarray:
-    """Reverse the 32 bits of each uint32 (two lookups in a 16-bit table, 256 KiB: cheaper than
-    bit twiddling in numpy, where every operation is a pass over the array)."""
-    x = _u32(x)
-    out = _REV16[x & _U32(0xFFFF)]
-    out <<= _U32(16)
-    out |= _REV16[x >> _U32(16)]
-    return out
-
-
-def _laine_karras_permutation(x: np.ndarray, seed: np.ndarray) -> np.ndarray:
-    """Burley 2020's hash: each output bit depends only on the same and *lower* input bits."""
-    x = x + seed
-    x ^= x * _U32(0x6C50B47C)
-    x ^= x * _U32(0xB82F1E52)
-    x ^= x * _U32(0xC7AFE638)
-    x ^= x * _U32(0x8D22F6E6)
-    return x
+    """Reverse the 32 bits of each uint32."""
+    shape, (x,) = _flat(x)
+    out = np.empty_like(x)
+    _reverse_rows(x, out)
+    return _u32_out(out, shape)
 
 
 def nested_uniform_scramble(x, seed) -> np.ndarray:
@@ -98,48 +282,23 @@ def nested_uniform_scramble(x, seed) -> np.ndarray:
     x, seed: uint32 arrays (broadcast).  Each bit of the result depends only on the same and
     *higher* bits of x, so aligned blocks of 2^k indices map onto aligned blocks of 2^k.
     """
-    return reverse_bits(_laine_karras_permutation(reverse_bits(x), _u32(seed)))
-
-
-def _sobol_dim1_matrix() -> np.ndarray:
-    v = np.empty(32, dtype=np.uint32)
-    v[0] = 1 << 31
-    for i in range(1, 32):
-        v[i] = v[i - 1] ^ (v[i - 1] >> 1)
-    return v
-
-
-_SOBOL_DIM1 = _sobol_dim1_matrix()
-
-
-def _byte_xor_tables(v: np.ndarray) -> np.ndarray:
-    """(4, 256) tables: entry [k, b] = XOR of v[8k + j] over the set bits j of byte b."""
-    t = np.zeros((4, 256), dtype=np.uint32)
-    b = np.arange(256)
-    for k in range(4):
-        for j in range(8):
-            t[k] ^= np.where((b >> j) & 1, v[8 * k + j], 0).astype(np.uint32)
-    return t
-
-
-_SOBOL_DIM1_BYTES = _byte_xor_tables(_SOBOL_DIM1)
+    shape, (x, seed) = _flat(x, seed)
+    out = np.empty_like(x)
+    _scramble_rows(x, seed, out)
+    return _u32_out(out, shape)
 
 
 def sobol_2d(index) -> tuple[np.ndarray, np.ndarray]:
     """First two Sobol dimensions of ``index`` as 32-bit fixed-point uint32 (value·2^32).
 
     Dimension 0 is van der Corput (bit reversal); dimension 1 uses the direction numbers of the
-    primitive polynomial x + 1 (v_0 = 2^31, v_i = v_{i-1} ^ (v_{i-1} >> 1)), applied a byte of
-    the index at a time through precomputed XOR tables.
+    primitive polynomial x + 1 (v_0 = 2^31, v_i = v_{i-1} ^ (v_{i-1} >> 1)).
     """
-    index = _u32(index)
-    x = reverse_bits(index)
-    t = _SOBOL_DIM1_BYTES
-    y = t[0][index & _U32(0xFF)]
-    hi = index >> _U32(8)
-    if hi.any():
-        y = y ^ t[1][hi & _U32(0xFF)] ^ t[2][(index >> _U32(16)) & _U32(0xFF)] ^ t[3][index >> _U32(24)]
-    return x, y
+    shape, (index,) = _flat(index)
+    x = np.empty_like(index)
+    y = np.empty_like(index)
+    _sobol_rows(index, x, y)
+    return _u32_out(x, shape), _u32_out(y, shape)
 
 
 def permute_index(i, n: int, key) -> np.ndarray:
@@ -148,50 +307,10 @@ def permute_index(i, n: int, key) -> np.ndarray:
     i: uint32 array of values in [0, n); key: uint32 array (broadcast), one permutation per key.
     A bijection on the next power of two, cycle-walked into [0, n).
     """
-    i = _u32(i).copy()
-    p = _u32(key)
-    i, p = np.broadcast_arrays(i, p)
-    i = i.copy()
-    if n <= 1:
-        return np.zeros_like(i)
-    w = n - 1
-    for s in (1, 2, 4, 8, 16):
-        w |= w >> s
-    w = _U32(w)
-    n_u = _U32(n)
+    shape, (i, key) = _flat(i, key)
     out = np.empty_like(i)
-    todo = np.ones(i.shape, dtype=bool)
-    cur = i
-    for _ in range(4096):  # cycle walking: a few rounds, each vectorized over the samples
-        x = cur[todo]
-        q = p[todo]
-        x ^= q
-        x *= _U32(0xE170893D)
-        x ^= q >> _U32(16)
-        x ^= (x & w) >> _U32(4)
-        x ^= q >> _U32(8)
-        x *= _U32(0x0929EB3F)
-        x ^= q >> _U32(23)
-        x ^= (x & w) >> _U32(1)
-        x *= _U32(1) | (q >> _U32(27))
-        x *= _U32(0x6935FA69)
-        x ^= (x & w) >> _U32(11)
-        x *= _U32(0x74DCB303)
-        x ^= (x & w) >> _U32(2)
-        x *= _U32(0x9E501CC3)
-        x ^= (x & w) >> _U32(2)
-        x *= _U32(0xC860A3DF)
-        x &= w
-        x ^= x >> _U32(5)
-        done = x < n_u
-        idx = np.flatnonzero(todo)
-        out.flat[idx[done]] = ((x[done].astype(np.uint64) + q[done]) % n).astype(np.uint32)
-        cur = cur.copy()
-        cur.flat[idx[~done]] = x[~done]
-        todo.flat[idx[done]] = False
-        if not todo.any():
-            return out
-    raise RuntimeError("permute_index did not converge")  # pragma: no cover
+    _permute_rows(i, int(n), key, out)
+    return _u32_out(out, shape)
 
 
 def _grid_shape(spp: int) -> tuple[int, int]:
@@ -202,14 +321,9 @@ def _grid_shape(spp: int) -> tuple[int, int]:
     return spp // ny, ny
 
 
-def _to_unit(x: np.ndarray) -> np.ndarray:
-    return x.astype(np.float64) * _INV_2_32
-
-
-# salts that separate the hash streams of the different uses
-_SALT_RANDOM = 0x52414E44      # "RAND"
-_SALT_STRAT = 0x53545254       # "STRT"
-_SALT_SOBOL = 0x534F424C       # "SOBL"
+def _hash_prefix(seed: int, salt: int) -> int:
+    h = int(hash_u32(0x9E3779B9 ^ (seed & _MASK)))
+    return int(hash_u32(h ^ salt))
 
 
 class Sampler:
@@ -218,7 +332,7 @@ class Sampler:
     kind: "SOBOL" | "STRATIFIED" | "RANDOM"; seed: int (mixed into every hash, e.g. the
     scene seed or frame number); spp: samples per pixel (STRATIFIED builds its strata from it;
     SOBOL and RANDOM ignore it).  Values depend only on (seed, pixel, index, dim) [+ spp for
-    STRATIFIED].
+    STRATIFIED].  ``data`` is the ``SamplerData`` the compiled ``sample_2d`` takes.
     """
 
     def __init__(self, kind: str = "SOBOL", seed: int = 0, spp: int = 1):
@@ -231,6 +345,11 @@ class Sampler:
         self.seed = int(seed) & 0xFFFFFFFF
         self.spp = int(spp)
         self._grid = _grid_shape(self.spp)
+        code = SAMPLER_KINDS.index(kind)
+        salt = (_SALT_SOBOL, _SALT_STRAT, _SALT_RANDOM)[code]
+        self.data = SamplerData(kind=int(code), seed=int(self.seed), spp=int(self.spp),
+                                nx=int(self._grid[0]), ny=int(self._grid[1]),
+                                prefix=_hash_prefix(self.seed, salt))
 
     def __repr__(self) -> str:
         return f"Sampler(kind={self.kind!r}, seed={self.seed}, spp={self.spp})"
@@ -242,49 +361,11 @@ class Sampler:
         dim: int (or (n,) ints) dimension number.  Inputs broadcast; other integer dtypes are
         taken mod 2^32.  Returns (n, 2) float64 in [0, 1).
         """
-        pixel, index, dim = np.broadcast_arrays(_u32(pixel), _u32(index), _u32(dim))
-        shape = pixel.shape
-        # work on 1-D arrays: numpy scalars would warn on the (intended) uint32 wrap-around
-        pixel, index, dim = (a.reshape(-1) for a in (pixel, index, dim))
-        if self.kind == "RANDOM":
-            out = self._random(pixel, index, dim)
-        elif self.kind == "STRATIFIED":
-            out = self._stratified(pixel, index, dim)
-        else:
-            out = self._sobol(pixel, index, dim)
+        shape, (pixel, index, dim) = _flat(pixel, index, dim)
+        out = np.empty((pixel.shape[0], 2))
+        sample_2d_batch(self.data, pixel, index, dim, out)
         return out.reshape(shape + (2,))
 
     def sample_1d(self, pixel, index, dim) -> np.ndarray:
         """First component of ``sample_2d``: (n,) float64 in [0, 1)."""
         return self.sample_2d(pixel, index, dim)[..., 0]
-
-    # -- generators ------------------------------------------------------------------------
-
-    def _random(self, pixel, index, dim) -> np.ndarray:
-        h = _hash_chain(self.seed, _SALT_RANDOM, pixel, dim, index)
-        x = hash_u32(h ^ _U32(0x68E31DA4))
-        y = hash_u32(h ^ _U32(0xB5297A4D))
-        return np.stack([_to_unit(x), _to_unit(y)], axis=-1)
-
-    def _stratified(self, pixel, index, dim) -> np.ndarray:
-        nx, ny = self._grid
-        spp = self.spp
-        rnd = index // _U32(spp)          # which set of spp samples
-        slot = index % _U32(spp)
-        key = _hash_chain(self.seed, _SALT_STRAT, pixel, dim, rnd)
-        stratum = permute_index(slot, spp, key)
-        jit = hash_u32(key ^ hash_u32(slot))
-        jx = _to_unit(hash_u32(jit ^ _U32(0x1B873593)))
-        jy = _to_unit(hash_u32(jit ^ _U32(0xCC9E2D51)))
-        sx = (stratum % _U32(nx)).astype(np.float64)
-        sy = (stratum // _U32(nx)).astype(np.float64)
-        out = np.stack([(sx + jx) / nx, (sy + jy) / ny], axis=-1)
-        return np.minimum(out, _ONE_MINUS_EPS)
-
-    def _sobol(self, pixel, index, dim) -> np.ndarray:
-        key = _hash_chain(self.seed, _SALT_SOBOL, pixel, dim)
-        shuffled = nested_uniform_scramble(index, key)
-        x, y = sobol_2d(shuffled)
-        x = nested_uniform_scramble(x, hash_u32(key ^ _U32(0x2545F491)))
-        y = nested_uniform_scramble(y, hash_u32(key ^ _U32(0x9E3779B9)))
-        return np.stack([_to_unit(x), _to_unit(y)], axis=-1)

@@ -7,6 +7,11 @@ Every warp ``square_to_X(u)`` takes ``u: (n, 2)`` float in [0, 1)² and is vecto
   plane, per unit *solid angle* for directions); 0 outside the support.
 * ``X_to_square(x)``: the inverse map, where one exists (round-trip tested).
 
+The implementation is the scalar ``@kernel`` functions below (one sample at a time, called
+from the compiled integrator, BSDFs, lights and camera: ``disk_concentric(u0, u1)``,
+``polygon(u0, u1, n_corners, rotation)``, ``cosine_hemisphere_pdf(d)``, …); the numpy functions
+are thin wrappers that apply them to the rows of their arrays.
+
 Directions are unit vectors in a **local z-up frame**: z is the axis (shading normal, cone axis),
 theta is measured from +z and phi = atan2(y, x) counter-clockwise from +x.  ``build_frame`` /
 ``to_local`` / ``to_world`` move vectors between that frame and world space.
@@ -22,7 +27,7 @@ import math
 
 import numpy as np
 
-from ..kernels import kernel
+from ..kernels import kernel, vec3
 
 __all__ = [
     "square_to_disk_concentric", "square_to_disk_concentric_pdf", "disk_concentric_to_square",
@@ -36,6 +41,14 @@ __all__ = [
     "square_to_triangle", "square_to_triangle_pdf", "triangle_to_square",
     "hemisphere_midpoint_grid",
     "build_frame", "to_local", "to_world",
+    # scalar kernels
+    "disk_concentric", "disk_concentric_pdf", "disk_concentric_inverse", "disk_to_cone",
+    "cone_to_disk", "polygon", "polygon_pdf", "polygon_inverse", "polygon_area_n",
+    "cosine_hemisphere", "cosine_hemisphere_pdf", "cosine_hemisphere_inverse",
+    "uniform_hemisphere", "uniform_hemisphere_pdf", "uniform_hemisphere_inverse",
+    "uniform_sphere", "uniform_sphere_pdf", "uniform_sphere_inverse",
+    "uniform_cone", "uniform_cone_pdf", "uniform_cone_inverse",
+    "uniform_triangle", "triangle_pdf", "triangle_inverse",
 ]
 
 _PI = np.pi
@@ -45,13 +58,48 @@ _INV_4PI = 0.25 / np.pi
 _PI_4 = 0.25 * np.pi
 
 # Largest float64 below 1: inverse maps clamp into [0, 1) so their output is a valid sample.
-_ONE_MINUS_EPS = np.nextafter(1.0, 0.0)
+_ONE_MINUS_EPS = float(np.nextafter(1.0, 0.0))
 
 
 # ---------------------------------------------------------------------------------------------
 # scalar kernels: one sample at a time, called from the compiled integrator, BSDFs and lights.
 # They are the implementation; the vectorized functions below apply them to arrays.
 # ---------------------------------------------------------------------------------------------
+
+
+# numpy's NaN-propagating minimum / maximum / clip and float modulo, so the kernels keep the
+# numpy semantics exactly
+@kernel
+def _np_min(a, b):
+    return a if (a <= b or a != a) else b
+
+
+@kernel
+def _np_max(a, b):
+    return a if (a >= b or a != a) else b
+
+
+@kernel
+def _clip(x, lo, hi):
+    return _np_min(_np_max(x, lo), hi)
+
+
+@kernel
+def _unit(x):
+    """Clamp into [0, 1): inverse maps return valid samples."""
+    return _np_min(_np_max(x, 0.0), _ONE_MINUS_EPS)
+
+
+@kernel
+def _np_mod(a, b):
+    """``np.mod`` for floats: the remainder with the sign of b."""
+    m = np.fmod(a, b)
+    if m != 0.0:
+        if (b < 0.0) != (m < 0.0):
+            m += b
+    else:
+        m = math.copysign(0.0, b)
+    return m
 
 
 @kernel
@@ -75,7 +123,7 @@ def disk_to_cone(x, y, one_minus_cos):
     """Area-preserving lift of a unit-disk point onto the cone cos θ ≥ 1 − one_minus_cos about
     +z (Cycles's ``sample_uniform_cone``): cos θ = 1 − r²·one_minus_cos."""
     r2 = x * x + y * y
-    s = math.sqrt(max(0.0, one_minus_cos * (2.0 - one_minus_cos * r2)))
+    s = math.sqrt(_np_max(0.0, one_minus_cos * (2.0 - one_minus_cos * r2)))
     return (x * s, y * s, 1.0 - r2 * one_minus_cos)
 
 
@@ -83,7 +131,7 @@ def disk_to_cone(x, y, one_minus_cos):
 def cosine_hemisphere(u0, u1):
     """Cosine-weighted direction, z ≥ 0 (Malley); pdf = z/π."""
     x, y = disk_concentric(u0, u1)
-    return (x, y, math.sqrt(max(0.0, 1.0 - x * x - y * y)))
+    return (x, y, math.sqrt(_np_max(0.0, 1.0 - x * x - y * y)))
 
 
 @kernel
@@ -105,7 +153,7 @@ def uniform_cone(u0, u1, one_minus_cos):
 def uniform_sphere(u0, u1):
     """Uniform direction on the sphere (z = 1 − 2u0, φ = 2πu1); pdf = 1/(4π)."""
     z = 1.0 - 2.0 * u0
-    r = math.sqrt(max(0.0, 1.0 - z * z))
+    r = math.sqrt(_np_max(0.0, 1.0 - z * z))
     phi = 2.0 * _PI * u1
     return (r * math.cos(phi), r * math.sin(phi), z)
 
@@ -117,12 +165,354 @@ def uniform_triangle(u0, u1):
     return s * (1.0 - u1), s * u1
 
 
-def _f64(x) -> np.ndarray:
-    return np.asarray(x, dtype=np.float64)
+@kernel
+def disk_concentric_pdf(x, y):
+    """Density of ``disk_concentric`` per unit area: 1/π inside the unit disk, else 0."""
+    return _INV_PI if x * x + y * y <= 1.0 else 0.0
 
 
-def _to_unit_square(u: np.ndarray) -> np.ndarray:
-    return np.clip(u, 0.0, _ONE_MINUS_EPS)
+@kernel
+def disk_concentric_inverse(x, y):
+    """Inverse of ``disk_concentric``: a point of the unit disk → (u0, u1) ∈ [0,1)²."""
+    r = math.hypot(x, y)
+    phi = math.atan2(y, x)
+    if phi < -_PI_4:
+        phi = phi + 2.0 * _PI  # phi in [-pi/4, 7pi/4)
+    # four wedges of the square: right, top, left, bottom (NaN falls to the last, as numpy's)
+    if phi < _PI_4:
+        a = r
+        b = phi * a / _PI_4
+    elif phi < 3.0 * _PI_4:
+        b = r
+        a = -(phi - 0.5 * _PI) * b / _PI_4
+    elif phi < 5.0 * _PI_4:
+        a = -r
+        b = (phi - _PI) * a / _PI_4
+    else:
+        b = -r
+        a = -(phi - 1.5 * _PI) * b / _PI_4
+    return _unit(0.5 * (a + 1.0)), _unit(0.5 * (b + 1.0))
+
+
+@kernel
+def polygon_area_n(n_corners):
+    """Area of the regular n-gon inscribed in the unit circle: (N/2)·sin(2π/N) (N float)."""
+    return 0.5 * n_corners * math.sin(2.0 * _PI / n_corners)
+
+
+@kernel
+def polygon(u0, u1, n_corners, rotation):
+    """Uniform point (x, y) in the regular ``n_corners``-gon (float, ≥ 3) inscribed in the unit
+    circle, rotated by ``rotation`` radians (Cycles's ``regular_polygon_sample``; see
+    ``square_to_polygon``)."""
+    uc = u0 * n_corners
+    corner = _np_min(np.floor(uc), n_corners - 1.0)
+    s = math.sqrt(_clip(uc - corner, 0.0, 1.0))
+    v = u1 * s
+    w = 1.0 - s
+    half = _PI / n_corners
+    px = (w + v) * math.cos(half)
+    py = (w - v) * math.sin(half)
+    ang = rotation + corner * 2.0 * half
+    cr = math.cos(ang)
+    sr = math.sin(ang)
+    return cr * px - sr * py, sr * px + cr * py
+
+
+@kernel
+def _polygon_local(x, y, n_corners, rotation):
+    """Wedge index k (float) and the point rotated back into wedge 0 (centred on +x)."""
+    half = _PI / n_corners
+    ang = math.atan2(y, x) - rotation
+    k = _np_mod(np.floor(ang / (2.0 * half) + 0.5), n_corners)
+    back = -(rotation + k * 2.0 * half)
+    cb = math.cos(back)
+    sb = math.sin(back)
+    return k, cb * x - sb * y, sb * x + cb * y, half
+
+
+@kernel
+def polygon_pdf(x, y, n_corners, rotation):
+    """Density of ``polygon`` per unit area: 1/area inside the polygon, else 0."""
+    _, qx, _, half = _polygon_local(x, y, n_corners, rotation)
+    if qx <= math.cos(half) * (1.0 + 1e-12):
+        return 1.0 / polygon_area_n(n_corners)
+    return 0.0
+
+
+@kernel
+def polygon_inverse(x, y, n_corners, rotation):
+    """Inverse of ``polygon``: a point of the polygon → (u0, u1) ∈ [0,1)²."""
+    k, qx, qy, half = _polygon_local(x, y, n_corners, rotation)
+    ch = math.cos(half)
+    sh = math.sin(half)
+    w = 0.5 * (qx / ch + qy / sh)
+    v = 0.5 * (qx / ch - qy / sh)
+    # A point on the ray shared with the previous wedge (w = 0, which would need u.x = (k+1)/N)
+    # is written as wedge k-1's point w' = v, v' = 0 instead, so u.x stays in [k/N, (k+1)/N)
+    # (not the origin, which every wedge reaches at s = 1).
+    if w <= 1e-12 and v > 1e-12:
+        k = _np_mod(k - 1.0, n_corners)
+        w = v
+        v = 0.0
+    s = 1.0 - w
+    u1 = v / s if s > 0.0 else 0.0
+    # keep floor(u.x·N) == k after rounding: s² < 1 by a margin far below float32 resolution
+    u0 = (k + _clip(s * s, 0.0, 1.0 - 1e-12)) / n_corners
+    return _unit(u0), _unit(u1)
+
+
+@kernel
+def cosine_hemisphere_pdf(d):
+    """Solid-angle density of ``cosine_hemisphere``: max(cos θ, 0)/π (d local, z = normal)."""
+    return _np_max(d[2], 0.0) * _INV_PI
+
+
+@kernel
+def cosine_hemisphere_inverse(d):
+    """Inverse of ``cosine_hemisphere``: a direction (z ≥ 0) → (u0, u1)."""
+    return disk_concentric_inverse(d[0], d[1])
+
+
+@kernel
+def cone_to_disk(d, one_minus_cos):
+    """Inverse of ``disk_to_cone``: a direction in the cone → the unit-disk point (x, y)."""
+    r2 = _clip((1.0 - d[2]) / one_minus_cos, 0.0, 1.0)
+    sxy = math.hypot(d[0], d[1])
+    k = math.sqrt(r2) / sxy if sxy > 0.0 else 0.0
+    return d[0] * k, d[1] * k
+
+
+@kernel
+def uniform_hemisphere_pdf(d):
+    """Solid-angle density of ``uniform_hemisphere``: 1/(2π) for z ≥ 0, else 0."""
+    return _INV_2PI if d[2] >= 0.0 else 0.0
+
+
+@kernel
+def uniform_hemisphere_inverse(d):
+    """Inverse of ``uniform_hemisphere``: a direction (z ≥ 0) → (u0, u1)."""
+    x, y = cone_to_disk(d, 1.0)
+    return disk_concentric_inverse(x, y)
+
+
+@kernel
+def uniform_sphere_pdf(d):
+    """Solid-angle density of ``uniform_sphere``: 1/(4π)."""
+    return _INV_4PI
+
+
+@kernel
+def uniform_sphere_inverse(d):
+    """Inverse of ``uniform_sphere``: a unit vector → (u0, u1) ∈ [0,1)²."""
+    u0 = 0.5 * (1.0 - d[2])
+    u1 = _np_mod(math.atan2(d[1], d[0]), 2.0 * _PI) * _INV_2PI
+    return _unit(u0), _unit(u1)
+
+
+@kernel
+def uniform_cone_pdf(d, cos_theta_max):
+    """Solid-angle density of ``uniform_cone``: 1/(2π(1 − cos θmax)) for d.z ≥ cos θmax, else 0
+    (inf for a degenerate cone).  Takes cos θmax (the sampler takes 1 − cos θmax)."""
+    val = _INV_2PI / (1.0 - cos_theta_max)
+    return val if d[2] >= cos_theta_max else 0.0
+
+
+@kernel
+def uniform_cone_inverse(d, one_minus_cos):
+    """Inverse of ``uniform_cone``: a direction in the cone → (u0, u1)."""
+    x, y = cone_to_disk(d, one_minus_cos)
+    return disk_concentric_inverse(x, y)
+
+
+@kernel
+def triangle_pdf(b1, b2):
+    """Density of ``uniform_triangle`` per unit barycentric area: 2 inside, else 0."""
+    return 2.0 if (b1 >= 0.0 and b2 >= 0.0 and b1 + b2 <= 1.0) else 0.0
+
+
+@kernel
+def triangle_inverse(b1, b2):
+    """Inverse of ``uniform_triangle``: barycentrics → (u0, u1) ∈ [0,1)²."""
+    s = b1 + b2
+    u1 = b2 / s if s > 0.0 else 0.0
+    return _unit(s * s), _unit(u1)
+
+
+# ---------------------------------------------------------------------------------------------
+# row loops (compiled) and the numpy-facing helpers of the wrappers
+# ---------------------------------------------------------------------------------------------
+
+
+@kernel
+def _disk_rows(u, out):
+    for k in range(u.shape[0]):
+        out[k, 0], out[k, 1] = disk_concentric(u[k, 0], u[k, 1])
+
+
+@kernel
+def _disk_pdf_rows(p, out):
+    for k in range(p.shape[0]):
+        out[k] = disk_concentric_pdf(p[k, 0], p[k, 1])
+
+
+@kernel
+def _disk_inverse_rows(p, out):
+    for k in range(p.shape[0]):
+        out[k, 0], out[k, 1] = disk_concentric_inverse(p[k, 0], p[k, 1])
+
+
+@kernel
+def _polygon_rows(u, n_corners, rotation, out):
+    for k in range(u.shape[0]):
+        out[k, 0], out[k, 1] = polygon(u[k, 0], u[k, 1], n_corners, rotation)
+
+
+@kernel
+def _polygon_pdf_rows(p, n_corners, rotation, out):
+    for k in range(p.shape[0]):
+        out[k] = polygon_pdf(p[k, 0], p[k, 1], n_corners, rotation)
+
+
+@kernel
+def _polygon_inverse_rows(p, n_corners, rotation, out):
+    for k in range(p.shape[0]):
+        out[k, 0], out[k, 1] = polygon_inverse(p[k, 0], p[k, 1], n_corners, rotation)
+
+
+@kernel
+def _cosine_rows(u, out):
+    for k in range(u.shape[0]):
+        vec3.store(out, k, cosine_hemisphere(u[k, 0], u[k, 1]))
+
+
+@kernel
+def _cosine_pdf_rows(d, out):
+    for k in range(d.shape[0]):
+        out[k] = cosine_hemisphere_pdf(vec3.load(d, k))
+
+
+@kernel
+def _hemisphere_rows(u, out):
+    for k in range(u.shape[0]):
+        vec3.store(out, k, uniform_hemisphere(u[k, 0], u[k, 1]))
+
+
+@kernel
+def _hemisphere_pdf_rows(d, out):
+    for k in range(d.shape[0]):
+        out[k] = uniform_hemisphere_pdf(vec3.load(d, k))
+
+
+@kernel
+def _hemisphere_inverse_rows(d, out):
+    for k in range(d.shape[0]):
+        out[k, 0], out[k, 1] = uniform_hemisphere_inverse(vec3.load(d, k))
+
+
+@kernel
+def _sphere_rows(u, out):
+    for k in range(u.shape[0]):
+        vec3.store(out, k, uniform_sphere(u[k, 0], u[k, 1]))
+
+
+@kernel
+def _sphere_pdf_rows(d, out):
+    for k in range(d.shape[0]):
+        out[k] = uniform_sphere_pdf(vec3.load(d, k))
+
+
+@kernel
+def _sphere_inverse_rows(d, out):
+    for k in range(d.shape[0]):
+        out[k, 0], out[k, 1] = uniform_sphere_inverse(vec3.load(d, k))
+
+
+@kernel
+def _cone_rows(u, one_minus_cos, out):
+    for k in range(u.shape[0]):
+        vec3.store(out, k, uniform_cone(u[k, 0], u[k, 1], one_minus_cos[k]))
+
+
+@kernel
+def _cone_pdf_rows(d, cos_theta_max, out):
+    for k in range(d.shape[0]):
+        out[k] = uniform_cone_pdf(vec3.load(d, k), cos_theta_max[k])
+
+
+@kernel
+def _cone_inverse_rows(d, one_minus_cos, out):
+    for k in range(d.shape[0]):
+        out[k, 0], out[k, 1] = uniform_cone_inverse(vec3.load(d, k), one_minus_cos[k])
+
+
+@kernel
+def _triangle_rows(u, b1, b2):
+    for k in range(u.shape[0]):
+        b1[k], b2[k] = uniform_triangle(u[k, 0], u[k, 1])
+
+
+@kernel
+def _triangle_pdf_rows(b1, b2, out):
+    for k in range(b1.shape[0]):
+        out[k] = triangle_pdf(b1[k], b2[k])
+
+
+@kernel
+def _triangle_inverse_rows(b1, b2, out):
+    for k in range(b1.shape[0]):
+        out[k, 0], out[k, 1] = triangle_inverse(b1[k], b2[k])
+
+
+@kernel
+def _frame_rows(n, t_out, b_out):
+    for k in range(n.shape[0]):
+        t, b = vec3.build_frame(vec3.load(n, k))
+        vec3.store(t_out, k, t)
+        vec3.store(b_out, k, b)
+
+
+@kernel
+def _to_local_rows(v, t, b, n, out):
+    for k in range(v.shape[0]):
+        vec3.store(out, k, vec3.to_local(vec3.load(v, k), vec3.load(t, k), vec3.load(b, k),
+                                         vec3.load(n, k)))
+
+
+@kernel
+def _to_world_rows(v, t, b, n, out):
+    for k in range(v.shape[0]):
+        vec3.store(out, k, vec3.to_world(vec3.load(v, k), vec3.load(t, k), vec3.load(b, k),
+                                         vec3.load(n, k)))
+
+
+def _c64(a: np.ndarray) -> np.ndarray:
+    """float64, C-contiguous and writeable: one compiled signature serves every call."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()
+
+
+def _rows(x, k: int) -> tuple[np.ndarray, tuple]:
+    """(..., k) array -> ((m, k) float64 rows, leading shape)."""
+    a = np.asarray(x, dtype=np.float64)[..., :k]
+    return _c64(a.reshape(-1, k)), a.shape[:-1]
+
+
+def _broadcast_rows(*items) -> tuple[list[np.ndarray], tuple]:
+    """Items (array, k): k = 0 for per-row scalars, else rows of k components; broadcast over
+    the leading shape -> ([(m,) or (m, k) float64], leading shape)."""
+    arrs = []
+    for x, k in items:
+        a = np.asarray(x, dtype=np.float64)
+        arrs.append((a[..., :k] if k else a, k))
+    lead = np.broadcast_shapes(*(a.shape[:-1] if k else a.shape for a, k in arrs))
+    out = []
+    for a, k in arrs:
+        shape = lead + (k,) if k else lead
+        if a.shape != shape:
+            a = np.broadcast_to(a, shape)
+        out.append(_c64(a.reshape((-1, k) if k else (-1,))))
+    return out, lead
 
 
 # ---------------------------------------------------------------------------------------------
@@ -136,15 +526,10 @@ def square_to_disk_concentric(u) -> np.ndarray:
     u: (n, 2) float.  Returns (n, 2) float64 points (x, y) with x² + y² ≤ 1.
     Concentric squares map to concentric circles; the square's centre maps to the origin.
     """
-    u = _f64(u)
-    a = 2.0 * u[..., 0] - 1.0
-    b = 2.0 * u[..., 1] - 1.0
-    use_a = np.abs(a) > np.abs(b)
-    r = np.where(use_a, a, b)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        phi = np.where(use_a, _PI_4 * (b / a), 0.5 * _PI - _PI_4 * (a / b))
-    phi = np.where((a == 0.0) & (b == 0.0), 0.0, phi)
-    return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=-1)
+    u, lead = _rows(u, 2)
+    out = np.empty_like(u)
+    _disk_rows(u, out)
+    return out.reshape(lead + (2,))
 
 
 def square_to_disk_concentric_pdf(p) -> np.ndarray:
@@ -152,30 +537,18 @@ def square_to_disk_concentric_pdf(p) -> np.ndarray:
 
     p: (n, 2).  Returns (n,) float64.
     """
-    p = _f64(p)
-    r2 = p[..., 0] ** 2 + p[..., 1] ** 2
-    return np.where(r2 <= 1.0, _INV_PI, 0.0)
+    p, lead = _rows(p, 2)
+    out = np.empty(p.shape[0])
+    _disk_pdf_rows(p, out)
+    return out.reshape(lead)
 
 
 def disk_concentric_to_square(p) -> np.ndarray:
     """Inverse of ``square_to_disk_concentric``: (n, 2) points in the unit disk -> (n, 2)."""
-    p = _f64(p)
-    x, y = p[..., 0], p[..., 1]
-    r = np.hypot(x, y)
-    phi = np.arctan2(y, x)
-    phi = np.where(phi < -_PI_4, phi + 2.0 * _PI, phi)  # phi in [-pi/4, 7pi/4)
-    # four wedges of the square: right, top, left, bottom
-    right = phi < _PI_4
-    top = ~right & (phi < 3.0 * _PI_4)
-    left = ~right & ~top & (phi < 5.0 * _PI_4)
-    a = np.where(right, r, np.where(left, -r, 0.0))
-    b = np.where(top, r, np.where(right | left, 0.0, -r))
-    b = np.where(right, phi * a / _PI_4, b)
-    b = np.where(left, (phi - _PI) * a / _PI_4, b)
-    a = np.where(top, -(phi - 0.5 * _PI) * b / _PI_4, a)
-    bottom = ~right & ~top & ~left
-    a = np.where(bottom, -(phi - 1.5 * _PI) * b / _PI_4, a)
-    return _to_unit_square(np.stack([0.5 * (a + 1.0), 0.5 * (b + 1.0)], axis=-1))
+    p, lead = _rows(p, 2)
+    out = np.empty_like(p)
+    _disk_inverse_rows(p, out)
+    return out.reshape(lead + (2,))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -185,7 +558,7 @@ def disk_concentric_to_square(p) -> np.ndarray:
 
 def polygon_area(blades: int) -> float:
     """Area of the regular ``blades``-gon inscribed in the unit circle: (N/2)·sin(2π/N)."""
-    return 0.5 * blades * np.sin(2.0 * _PI / blades)
+    return polygon_area_n(float(blades))
 
 
 def _check_blades(blades) -> float:
@@ -209,31 +582,10 @@ def square_to_polygon(u, blades: int, rotation: float = 0.0) -> np.ndarray:
     The camera divides x by the aperture ratio afterwards (not done here).
     """
     n_corners = _check_blades(blades)
-    u = _f64(u)
-    uc = u[..., 0] * n_corners
-    corner = np.minimum(np.floor(uc), n_corners - 1.0)
-    s = np.sqrt(np.clip(uc - corner, 0.0, 1.0))
-    v = u[..., 1] * s
-    w = 1.0 - s
-    half = _PI / n_corners
-    px = (w + v) * np.cos(half)
-    py = (w - v) * np.sin(half)
-    ang = rotation + corner * 2.0 * half
-    cr, sr = np.cos(ang), np.sin(ang)
-    return np.stack([cr * px - sr * py, sr * px + cr * py], axis=-1)
-
-
-def _polygon_local(p, n_corners: float, rotation: float):
-    """Wedge index k and the point rotated back into wedge 0 (centred on +x)."""
-    p = _f64(p)
-    half = _PI / n_corners
-    ang = np.arctan2(p[..., 1], p[..., 0]) - rotation
-    k = np.mod(np.floor(ang / (2.0 * half) + 0.5), n_corners)
-    back = -(rotation + k * 2.0 * half)
-    cb, sb = np.cos(back), np.sin(back)
-    qx = cb * p[..., 0] - sb * p[..., 1]
-    qy = sb * p[..., 0] + cb * p[..., 1]
-    return k, qx, qy, half
+    u, lead = _rows(u, 2)
+    out = np.empty_like(u)
+    _polygon_rows(u, n_corners, float(rotation), out)
+    return out.reshape(lead + (2,))
 
 
 def square_to_polygon_pdf(p, blades: int, rotation: float = 0.0) -> np.ndarray:
@@ -242,28 +594,19 @@ def square_to_polygon_pdf(p, blades: int, rotation: float = 0.0) -> np.ndarray:
     p: (n, 2).  Returns (n,) float64.
     """
     n_corners = _check_blades(blades)
-    _, qx, _, half = _polygon_local(p, n_corners, rotation)
-    inside = qx <= np.cos(half) * (1.0 + 1e-12)
-    return np.where(inside, 1.0 / polygon_area(blades), 0.0)
+    p, lead = _rows(p, 2)
+    out = np.empty(p.shape[0])
+    _polygon_pdf_rows(p, n_corners, float(rotation), out)
+    return out.reshape(lead)
 
 
 def polygon_to_square(p, blades: int, rotation: float = 0.0) -> np.ndarray:
     """Inverse of ``square_to_polygon``: (n, 2) points in the polygon -> (n, 2) in [0,1)²."""
     n_corners = _check_blades(blades)
-    k, qx, qy, half = _polygon_local(p, n_corners, rotation)
-    w = 0.5 * (qx / np.cos(half) + qy / np.sin(half))
-    v = 0.5 * (qx / np.cos(half) - qy / np.sin(half))
-    # A point on the ray shared with the previous wedge (w = 0, which would need u.x = (k+1)/N)
-    # is written as wedge k-1's point w' = v, v' = 0 instead, so u.x stays in [k/N, (k+1)/N).
-    shared = (w <= 1e-12) & (v > 1e-12)  # (not the origin, which every wedge reaches at s = 1)
-    k = np.where(shared, np.mod(k - 1.0, n_corners), k)
-    w, v = np.where(shared, v, w), np.where(shared, 0.0, v)
-    s = 1.0 - w
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u1 = np.where(s > 0.0, v / s, 0.0)
-    # keep floor(u.x·N) == k after rounding: s² < 1 by a margin far below float32 resolution
-    u0 = (k + np.clip(s * s, 0.0, 1.0 - 1e-12)) / n_corners
-    return _to_unit_square(np.stack([u0, u1], axis=-1))
+    p, lead = _rows(p, 2)
+    out = np.empty_like(p)
+    _polygon_inverse_rows(p, n_corners, float(rotation), out)
+    return out.reshape(lead + (2,))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -276,9 +619,10 @@ def square_to_cosine_hemisphere(u) -> np.ndarray:
 
     u: (n, 2).  Returns (n, 3) float64 unit vectors, z ≥ 0 (local frame, z = normal).
     """
-    d = square_to_disk_concentric(u)
-    z = np.sqrt(np.maximum(0.0, 1.0 - d[..., 0] ** 2 - d[..., 1] ** 2))
-    return np.concatenate([d, z[..., None]], axis=-1)
+    u, lead = _rows(u, 2)
+    out = np.empty((u.shape[0], 3))
+    _cosine_rows(u, out)
+    return out.reshape(lead + (3,))
 
 
 def square_to_cosine_hemisphere_pdf(d) -> np.ndarray:
@@ -286,29 +630,15 @@ def square_to_cosine_hemisphere_pdf(d) -> np.ndarray:
 
     d: (n, 3) unit vectors (local).  Returns (n,) float64.
     """
-    return np.maximum(_f64(d)[..., 2], 0.0) * _INV_PI
+    d, lead = _rows(d, 3)
+    out = np.empty(d.shape[0])
+    _cosine_pdf_rows(d, out)
+    return out.reshape(lead)
 
 
 def cosine_hemisphere_to_square(d) -> np.ndarray:
     """Inverse of ``square_to_cosine_hemisphere``: (n, 3) directions (z ≥ 0) -> (n, 2)."""
-    return disk_concentric_to_square(_f64(d)[..., :2])
-
-
-def _disk_to_cone(xy: np.ndarray, one_minus_cos) -> np.ndarray:
-    """Area-preserving lift of the unit disk onto the cone cos θ ≥ 1 − one_minus_cos
-    (Cycles's ``sample_uniform_cone``): cos θ = 1 − r²·(1 − cos θmax)."""
-    r2 = xy[..., 0] ** 2 + xy[..., 1] ** 2
-    cos_theta = 1.0 - r2 * one_minus_cos
-    scale = np.sqrt(np.maximum(0.0, one_minus_cos * (2.0 - one_minus_cos * r2)))
-    return np.concatenate([xy * scale[..., None], cos_theta[..., None]], axis=-1)
-
-
-def _cone_to_disk(d: np.ndarray, one_minus_cos) -> np.ndarray:
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r2 = np.clip((1.0 - d[..., 2]) / one_minus_cos, 0.0, 1.0)
-        sxy = np.hypot(d[..., 0], d[..., 1])
-        k = np.where(sxy > 0.0, np.sqrt(r2) / sxy, 0.0)
-    return d[..., :2] * k[..., None]
+    return disk_concentric_to_square(np.asarray(d, dtype=np.float64)[..., :2])
 
 
 def square_to_uniform_hemisphere(u) -> np.ndarray:
@@ -316,17 +646,26 @@ def square_to_uniform_hemisphere(u) -> np.ndarray:
 
     u: (n, 2).  Returns (n, 3) float64 unit vectors (local frame).
     """
-    return _disk_to_cone(square_to_disk_concentric(u), 1.0)
+    u, lead = _rows(u, 2)
+    out = np.empty((u.shape[0], 3))
+    _hemisphere_rows(u, out)
+    return out.reshape(lead + (3,))
 
 
 def square_to_uniform_hemisphere_pdf(d) -> np.ndarray:
     """Solid-angle density of the uniform hemisphere: 1/(2π) for z ≥ 0, else 0.  d: (n, 3)."""
-    return np.where(_f64(d)[..., 2] >= 0.0, _INV_2PI, 0.0)
+    d, lead = _rows(d, 3)
+    out = np.empty(d.shape[0])
+    _hemisphere_pdf_rows(d, out)
+    return out.reshape(lead)
 
 
 def uniform_hemisphere_to_square(d) -> np.ndarray:
     """Inverse of ``square_to_uniform_hemisphere``: (n, 3) directions (z ≥ 0) -> (n, 2)."""
-    return disk_concentric_to_square(_cone_to_disk(_f64(d), 1.0))
+    d, lead = _rows(d, 3)
+    out = np.empty((d.shape[0], 2))
+    _hemisphere_inverse_rows(d, out)
+    return out.reshape(lead + (2,))
 
 
 def square_to_uniform_sphere(u) -> np.ndarray:
@@ -334,24 +673,26 @@ def square_to_uniform_sphere(u) -> np.ndarray:
 
     u: (n, 2).  Returns (n, 3) float64 unit vectors.
     """
-    u = _f64(u)
-    z = 1.0 - 2.0 * u[..., 0]
-    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    phi = 2.0 * _PI * u[..., 1]
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+    u, lead = _rows(u, 2)
+    out = np.empty((u.shape[0], 3))
+    _sphere_rows(u, out)
+    return out.reshape(lead + (3,))
 
 
 def square_to_uniform_sphere_pdf(d) -> np.ndarray:
     """Solid-angle density of the uniform sphere: 1/(4π).  d: (n, 3).  Returns (n,)."""
-    return np.full(_f64(d).shape[:-1], _INV_4PI)
+    d, lead = _rows(d, 3)
+    out = np.empty(d.shape[0])
+    _sphere_pdf_rows(d, out)
+    return out.reshape(lead)
 
 
 def uniform_sphere_to_square(d) -> np.ndarray:
     """Inverse of ``square_to_uniform_sphere``: (n, 3) unit vectors -> (n, 2) in [0,1)²."""
-    d = _f64(d)
-    u0 = 0.5 * (1.0 - d[..., 2])
-    u1 = np.mod(np.arctan2(d[..., 1], d[..., 0]), 2.0 * _PI) * _INV_2PI
-    return _to_unit_square(np.stack([u0, u1], axis=-1))
+    d, lead = _rows(d, 3)
+    out = np.empty((d.shape[0], 2))
+    _sphere_inverse_rows(d, out)
+    return out.reshape(lead + (2,))
 
 
 def square_to_uniform_cone(u, cos_theta_max) -> np.ndarray:
@@ -362,8 +703,10 @@ def square_to_uniform_cone(u, cos_theta_max) -> np.ndarray:
     cos θ = 1 − r²(1 − cos θmax) (Cycles's ``sample_uniform_cone``), which keeps precision for
     tiny cones.  cos_theta_max = 1 is a delta (returns +z).
     """
-    omc = 1.0 - _f64(cos_theta_max)
-    return _disk_to_cone(square_to_disk_concentric(u), omc)
+    (u, cmax), lead = _broadcast_rows((u, 2), (cos_theta_max, 0))
+    out = np.empty((u.shape[0], 3))
+    _cone_rows(u, 1.0 - cmax, out)
+    return out.reshape(lead + (3,))
 
 
 def square_to_uniform_cone_pdf(d, cos_theta_max) -> np.ndarray:
@@ -372,16 +715,18 @@ def square_to_uniform_cone_pdf(d, cos_theta_max) -> np.ndarray:
     d: (n, 3) unit vectors; cos_theta_max scalar or (n,).  Returns (n,) float64 (inf for a
     degenerate cone, cos_theta_max = 1).
     """
-    d = _f64(d)
-    cmax = _f64(cos_theta_max)
-    with np.errstate(divide="ignore"):
-        val = _INV_2PI / (1.0 - cmax)
-    return np.where(d[..., 2] >= cmax, val, 0.0)
+    (d, cmax), lead = _broadcast_rows((d, 3), (cos_theta_max, 0))
+    out = np.empty(d.shape[0])
+    _cone_pdf_rows(d, cmax, out)
+    return out.reshape(lead)
 
 
 def uniform_cone_to_square(d, cos_theta_max) -> np.ndarray:
     """Inverse of ``square_to_uniform_cone``: (n, 3) directions inside the cone -> (n, 2)."""
-    return disk_concentric_to_square(_cone_to_disk(_f64(d), 1.0 - _f64(cos_theta_max)))
+    (d, cmax), lead = _broadcast_rows((d, 3), (cos_theta_max, 0))
+    out = np.empty((d.shape[0], 2))
+    _cone_inverse_rows(d, 1.0 - cmax, out)
+    return out.reshape(lead + (2,))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -396,9 +741,11 @@ def square_to_triangle(u) -> tuple[np.ndarray, np.ndarray]:
     is (1 − b1 − b2)·v0 + b1·v1 + b2·v2 (Embree's convention).  Map: s = √u₀, b1 = s(1 − u₁),
     b2 = s·u₁.
     """
-    u = _f64(u)
-    s = np.sqrt(u[..., 0])
-    return s * (1.0 - u[..., 1]), s * u[..., 1]
+    u, lead = _rows(u, 2)
+    b1 = np.empty(u.shape[0])
+    b2 = np.empty(u.shape[0])
+    _triangle_rows(u, b1, b2)
+    return b1.reshape(lead), b2.reshape(lead)
 
 
 def square_to_triangle_pdf(b1, b2) -> np.ndarray:
@@ -406,18 +753,18 @@ def square_to_triangle_pdf(b1, b2) -> np.ndarray:
 
     For the density per unit world area divide by the triangle's area instead: pdf = 1/A.
     """
-    b1, b2 = _f64(b1), _f64(b2)
-    inside = (b1 >= 0.0) & (b2 >= 0.0) & (b1 + b2 <= 1.0)
-    return np.where(inside, 2.0, 0.0)
+    (b1, b2), lead = _broadcast_rows((b1, 0), (b2, 0))
+    out = np.empty(b1.shape[0])
+    _triangle_pdf_rows(b1, b2, out)
+    return out.reshape(lead)
 
 
 def triangle_to_square(b1, b2) -> np.ndarray:
     """Inverse of ``square_to_triangle``: barycentrics (n,), (n,) -> (n, 2) in [0,1)²."""
-    b1, b2 = _f64(b1), _f64(b2)
-    s = b1 + b2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u1 = np.where(s > 0.0, b2 / s, 0.0)
-    return _to_unit_square(np.stack([s * s, u1], axis=-1))
+    (b1, b2), lead = _broadcast_rows((b1, 0), (b2, 0))
+    out = np.empty((b1.shape[0], 2))
+    _triangle_inverse_rows(b1, b2, out)
+    return out.reshape(lead + (2,))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -447,7 +794,7 @@ def hemisphere_midpoint_grid(M: int, N: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ---------------------------------------------------------------------------------------------
-# frames
+# frames (the scalar kernels are drt.kernels.vec3's build_frame / to_local / to_world)
 # ---------------------------------------------------------------------------------------------
 
 
@@ -458,28 +805,24 @@ def build_frame(n) -> tuple[np.ndarray, np.ndarray]:
     construction of Duff et al. 2017, "Building an Orthonormal Basis, Revisited" (continuous
     except across n.z = 0 sign flip; exact for n = ±z).
     """
-    n = _f64(n)
-    x, y, z = n[..., 0], n[..., 1], n[..., 2]
-    sign = np.copysign(1.0, z)
-    a = -1.0 / (sign + z)
-    bxy = x * y * a
-    t = np.stack([1.0 + sign * x * x * a, sign * bxy, -sign * x], axis=-1)
-    b = np.stack([bxy, sign + y * y * a, -y], axis=-1)
-    return t, b
+    n, lead = _rows(n, 3)
+    t = np.empty_like(n)
+    b = np.empty_like(n)
+    _frame_rows(n, t, b)
+    return t.reshape(lead + (3,)), b.reshape(lead + (3,))
 
 
 def to_local(v, t, b, n) -> np.ndarray:
     """World vectors v (n, 3) -> local coordinates (v·t, v·b, v·n), (n, 3) float64."""
-    v = _f64(v)
-    out = np.empty(np.broadcast_shapes(v.shape, np.shape(t)))
-    # one einsum pass per axis: no (n, 3) product temporaries (this runs several times a bounce)
-    out[..., 0] = np.einsum("...j,...j->...", v, t)
-    out[..., 1] = np.einsum("...j,...j->...", v, b)
-    out[..., 2] = np.einsum("...j,...j->...", v, n)
-    return out
+    (v, t, b, n), lead = _broadcast_rows((v, 3), (t, 3), (b, 3), (n, 3))
+    out = np.empty_like(v)
+    _to_local_rows(v, t, b, n, out)
+    return out.reshape(lead + (3,))
 
 
 def to_world(v, t, b, n) -> np.ndarray:
     """Local vectors v (n, 3) -> world: v.x·t + v.y·b + v.z·n, (n, 3) float64."""
-    v = _f64(v)
-    return v[..., 0:1] * _f64(t) + v[..., 1:2] * _f64(b) + v[..., 2:3] * _f64(n)
+    (v, t, b, n), lead = _broadcast_rows((v, 3), (t, 3), (b, 3), (n, 3))
+    out = np.empty_like(v)
+    _to_world_rows(v, t, b, n, out)
+    return out.reshape(lead + (3,))
