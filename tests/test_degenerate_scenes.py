@@ -262,19 +262,18 @@ def test_one_pixel_and_very_wide_images(size):
 
 
 def test_nan_samples_are_counted_dropped_and_reported(tmp_path):
-    """Force a NaN into every other world lookup: those samples never reach the film, the film
-    and the stats count them, and the rest of the image is the clean world colour."""
-    h = base_header(8, 8, 4, world=(0.5, 0.5, 0.5))
-    scene = scene_from_dict(h, {})
+    """Poison the world's radiance with NaN in the compiled light data: camera rays that miss
+    the black emitter filling the left half of the view return NaN, those samples never reach
+    the film, the film and the stats count them, and the rest of the image is the emitter."""
+    h = base_header(8, 8, 4, camera={"type": "ORTHO", "matrix_world": look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0)),
+                                     "ortho_scale": 2.0})
+    a = {}
+    m = add_material(h, "black_emitter", [], emission=(0.5, 0.5, 0.5))
+    add_mesh(h, a, "half", *quad((-0.5, 0, 0), (0.5, 0, 0), (0, 1.0, 0)), material=m)
+    scene = scene_from_dict(h, a)
     ctx = prepare(scene)
-    world = ctx.integrator.lights.world_radiance
-
-    def poisoned(d):
-        le = world(d).copy()
-        le[::2] = np.nan
-        return le
-
-    ctx.integrator.lights.world_radiance = poisoned
+    lights = ctx.integrator.lights
+    lights.data = lights.data._replace(world_color=np.full(3, np.nan), has_world=True)
     film = render(scene, context=ctx, threads=1, parallel="threads")
     n = 8 * 8 * 4
     assert film.nan_samples == film.stats.nan_samples and n // 3 < film.nan_samples <= n // 2 + 8

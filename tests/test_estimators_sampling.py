@@ -8,20 +8,25 @@ import pytest
 
 from drt.integrator import D_BOUNCE0, D_LENS, D_PIXEL, D_TIME, DIMS_PER_BOUNCE, RR_START_BOUNCE
 from drt.render import prepare, render
-from drt.sampling.sequences import Sampler
 from drt.scene import scene_from_dict
 from scene_builders import cornell_box
 
 
 def _recording_render(monkeypatch, header, arrays, spp=4):
+    """Render with the path stages run as plain Python (their ``py_func``), so that a spy can
+    stand in for the compiled sampler they call and record every dimension drawn."""
+    import drt.path_stages as stages
+
     used = set()
-    original = Sampler.sample_2d
+    original = stages.sample_2d
 
-    def spy(self, pixel, index, dim):
-        used.update(np.unique(np.asarray(dim)).tolist())
-        return original(self, pixel, index, dim)
+    def spy(sd, pixel, index, dim):
+        used.add(int(dim))
+        return original(sd, pixel, index, dim)
 
-    monkeypatch.setattr(Sampler, "sample_2d", spy)
+    monkeypatch.setattr(stages, "sample_2d", spy)
+    monkeypatch.setattr(stages, "camera_stage", stages.camera_stage.py_func)
+    monkeypatch.setattr(stages, "shade", stages.shade.py_func)
     rng_calls = []
     monkeypatch.setattr(np.random, "random", lambda *a, **k: rng_calls.append(a))
     monkeypatch.setattr(np.random, "default_rng", lambda *a, **k: rng_calls.append(a))

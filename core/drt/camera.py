@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernels import kernel
+from .kernels import inline_kernel, kernel
 from .motion import RigidMotion, apply_rows, motion_at, static_motion_data
 from .sampling.warps import disk_concentric, polygon
 from .scene import CameraSpec, RenderSettings
@@ -55,7 +55,7 @@ def lens_offset(cd, ul0, ul1):
     return x * cd.lens_radius / cd.ratio, y * cd.lens_radius
 
 
-@kernel
+@inline_kernel
 def camera_ray(cd, px, py, ul0, ul1, tau):
     """The primary ray through continuous pixel position (px from the left, py from the bottom)
     with aperture uniforms (ul0, ul1) at shutter fraction tau, in the shifted world frame:

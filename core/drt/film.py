@@ -14,10 +14,40 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .kernels import kernel
+
+
+LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)
+
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
-    """Rec.709 / linear sRGB luminance of (..., 3) radiance."""
-    return rgb @ np.array([0.2126, 0.7152, 0.0722])
+    """Rec.709 / linear sRGB luminance of (..., 3) radiance (no BLAS call: BLAS threads would
+    spin beside the render's own)."""
+    r, g, b = LUMINANCE_WEIGHTS
+    return r * rgb[..., 0] + g * rgb[..., 1] + b * rgb[..., 2]
+
+
+@kernel
+def _accumulate(pixel, radiance, alpha, depth, normal, albedo,
+                sum_rgba, sum_lum2, sum_normal, sum_albedo, min_depth, count):
+    """Add one batch's samples to the film sums, in batch order (deterministic)."""
+    wr, wg, wb = LUMINANCE_WEIGHTS
+    for i in range(pixel.shape[0]):
+        k = pixel[i]
+        for c in range(3):
+            sum_rgba[k, c] += radiance[i, c]
+            sum_normal[k, c] += normal[i, c]
+            sum_albedo[k, c] += albedo[i, c]
+        sum_rgba[k, 3] += alpha[i]
+        lum = wr * radiance[i, 0] + wg * radiance[i, 1] + wb * radiance[i, 2]
+        sum_lum2[k] += lum * lum
+        if depth[i] < min_depth[k]:
+            min_depth[k] = depth[i]
+        count[k] += 1
+
+
+def _rows3(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
 
 
 @dataclass
@@ -67,17 +97,11 @@ class Film:
             self.count = np.zeros(n, dtype=np.int64)
 
     def add(self, b: SampleBatch) -> None:
-        n = self.width * self.height
-        px = b.pixel
-        for c in range(3):
-            self.sum_rgba[:, c] += np.bincount(px, weights=b.radiance[:, c], minlength=n)
-        self.sum_rgba[:, 3] += np.bincount(px, weights=b.alpha, minlength=n)
-        self.sum_lum2 += np.bincount(px, weights=luminance(b.radiance) ** 2, minlength=n)
-        for c in range(3):
-            self.sum_normal[:, c] += np.bincount(px, weights=b.normal[:, c], minlength=n)
-            self.sum_albedo[:, c] += np.bincount(px, weights=b.albedo[:, c], minlength=n)
-        np.minimum.at(self.min_depth, px, b.depth)
-        self.count += np.bincount(px, minlength=n)
+        _accumulate(np.ascontiguousarray(b.pixel, dtype=np.int64), _rows3(b.radiance),
+                    np.ascontiguousarray(b.alpha, dtype=np.float64),
+                    np.ascontiguousarray(b.depth, dtype=np.float64), _rows3(b.normal), _rows3(b.albedo),
+                    self.sum_rgba, self.sum_lum2, self.sum_normal, self.sum_albedo, self.min_depth,
+                    self.count)
         self.nan_samples += b.nan_count
 
     def merge(self, other: "Film") -> None:

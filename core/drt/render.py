@@ -26,7 +26,7 @@ import numpy as np
 
 from . import __version__
 from .camera import Camera
-from .film import Film
+from .film import Film, luminance
 from .geometry import build_geometry
 from .integrator import Integrator
 from .lights import EmissiveTriangles, LightSet
@@ -328,8 +328,7 @@ def adaptive_active(film: Film, xs: np.ndarray, ys: np.ndarray, threshold: float
     still above ``threshold``? The denominator is floored at 1e-3 so black pixels converge."""
     flat = ys * film.width + xs
     n = film.count[flat].astype(np.float64)
-    weights = np.array([0.2126, 0.7152, 0.0722])
-    mean = film.sum_rgba[flat, :3] @ weights / np.maximum(n, 1)
+    mean = luminance(film.sum_rgba[flat, :3]) / np.maximum(n, 1)
     m2 = film.sum_lum2[flat] / np.maximum(n, 1)
     var_mean = np.maximum(m2 - mean**2, 0.0) / np.maximum(n - 1, 1)
     return np.sqrt(var_mean) > threshold * np.maximum(mean, 1e-3)

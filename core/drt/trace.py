@@ -23,6 +23,8 @@ from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
 from .geometry import SceneGeometry
+from .kernels import kernel
+from .kernels.vec3 import load, store
 from .motion import apply_linear, apply_linear_transposed, invert_linear
 from .vecmath import row_norm
 
@@ -32,14 +34,56 @@ OFFSET_RELATIVE = 2e-6
 OFFSET_ABSOLUTE = 1e-5
 
 
+@kernel
+def offset_point(p, ng, toward):
+    """One point p (3-tuple) moved off the surface with unit geometric normal ng to the side
+    ``toward`` points to (see ``offset_origin``)."""
+    eps = OFFSET_ABSOLUTE + OFFSET_RELATIVE * max(abs(p[0]), max(abs(p[1]), abs(p[2])))
+    if ng[0] * toward[0] + ng[1] * toward[1] + ng[2] * toward[2] < 0.0:
+        eps = -eps
+    return (p[0] + ng[0] * eps, p[1] + ng[1] * eps, p[2] + ng[2] * eps)
+
+
+@kernel
+def _offset_rows(p, ng, toward, out):
+    for i in range(p.shape[0]):
+        store(out, i, offset_point(load(p, i), load(ng, i), load(toward, i)))
+
+
 def offset_origin(p: np.ndarray, ng: np.ndarray, toward: np.ndarray) -> np.ndarray:
     """Move ``p`` off the surface with geometric normal ``ng`` to the side ``toward`` points to.
 
     p, ng, toward: (n, 3) float64 (ng unit). Returns (n, 3) float64.
     """
-    eps = OFFSET_ABSOLUTE + OFFSET_RELATIVE * np.max(np.abs(p), axis=1)
-    side = np.where(np.einsum("ij,ij->i", ng, toward) >= 0, 1.0, -1.0)
-    return p + ng * (eps * side)[:, None]
+    def f64(a):
+        return np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
+
+    p = f64(p)
+    out = np.empty_like(p)
+    _offset_rows(p, f64(ng), f64(toward), out)
+    return out
+
+
+@kernel
+def static_surface(positions, triangles, face_normals, static_count, d, prim, b1, b2, p, ng):
+    """Hit points and unit geometric normals of hits on static triangles, in float64 from the
+    triangles themselves (more accurate than Embree's float32 t; the front side is ours). A
+    degenerate (zero-area) triangle has no normal: it faces the ray so shading stays finite."""
+    for i in range(prim.shape[0]):
+        k = prim[i]
+        if k < 0 or k >= static_count:
+            continue
+        a = triangles[k, 0]
+        b = triangles[k, 1]
+        c = triangles[k, 2]
+        w1, w2 = b1[i], b2[i]
+        for axis in range(3):
+            v0 = float(positions[a, axis])
+            p[i, axis] = v0 + w1 * (float(positions[b, axis]) - v0) + w2 * (float(positions[c, axis]) - v0)
+            ng[i, axis] = face_normals[k, axis]
+        if ng[i, 0] == 0.0 and ng[i, 1] == 0.0 and ng[i, 2] == 0.0:
+            for axis in range(3):
+                ng[i, axis] = -d[i, axis]
 
 
 @dataclass
@@ -216,17 +260,15 @@ class Tracer:
         return hits
 
     def _surface_geometry(self, hits, o, d, tau, translation):
-        """Fill ``hits.p`` and ``hits.ng`` from the triangles themselves, in float64: more
-        accurate than Embree's float32 values, and the winding (front side) is ours to define."""
-        hits.p = o + np.where(np.isfinite(hits.t), hits.t, 0.0)[:, None] * d
+        """Fill ``hits.p`` and ``hits.ng`` (unit, front side) from the triangles themselves, in
+        float64: more accurate than Embree's float32 values, and the winding is ours to define."""
+        n = len(hits.t)
+        hits.p = np.zeros((n, 3))
         g = self.geom
-        st = (hits.prim >= 0) & (hits.prim < g.static_count)
-        if np.any(st):
-            prim = hits.prim[st]
-            v = g.static_positions[g.static_triangles[prim]].astype(np.float64)
-            e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
-            hits.ng[st] = self._static_ng[prim]
-            hits.p[st] = v[:, 0] + hits.b1[st, None] * e1 + hits.b2[st, None] * e2
+        if g.static_count:
+            static_surface(g.static_positions, g.static_triangles, self._static_ng, g.static_count,
+                           np.ascontiguousarray(d, dtype=np.float64), hits.prim, hits.b1, hits.b2,
+                           hits.p, hits.ng)
         for obj in self.moving:
             mm = obj.mesh
             sel = (hits.prim >= mm.prim_offset) & (hits.prim < mm.prim_offset + len(mm.triangles))
@@ -242,13 +284,17 @@ class Tracer:
             p_local = v[:, 0] + hits.b1[sel, None] * e1 + hits.b2[sel, None] * e2
             hits.p[sel] = apply_linear(lin, p_local) + translation[sel]
             # normals transform by the inverse transpose of the local→world map
-            hits.ng[sel] = apply_linear_transposed(invert_linear(lin), np.cross(e1, e2))
-        length = row_norm(hits.ng)
-        good = length > 0
-        hits.ng[good] /= length[good, None]
-        # a degenerate (zero-area) triangle has no normal: face the ray so shading stays finite
-        bad = (hits.prim >= 0) & ~good
-        hits.ng[bad] = -d[bad]
+            ng = apply_linear_transposed(invert_linear(lin), np.cross(e1, e2))
+            length = row_norm(ng)
+            good = length > 0
+            ng[good] /= length[good, None]
+            # a degenerate (zero-area) triangle has no normal: face the ray
+            ng[~good] = -d[sel][~good]
+            hits.ng[sel] = ng
+        miss = hits.prim < 0
+        if np.any(miss):  # on a miss, p is where the ray ends (o + tmax·d, or o)
+            t = np.where(np.isfinite(hits.t[miss]), hits.t[miss], 0.0)
+            hits.p[miss] = o[miss] + t[:, None] * d[miss]
 
     def occluded(self, o, d, tmax, tau=None) -> np.ndarray:
         """(n,) bool: is anything hit in (0, tmax)?"""

@@ -111,3 +111,9 @@ def to_world(v, t, b, n):
     return (v[0] * t[0] + v[1] * b[0] + v[2] * n[0],
             v[0] * t[1] + v[1] * b[1] + v[2] * n[1],
             v[0] * t[2] + v[1] * b[2] + v[2] * n[2])
+
+
+@kernel
+def load_col3(arr, i, c):
+    """Columns c, c+1, c+2 of row i of a 2-D array as a tuple (a vector stored in a packed table)."""
+    return (float(arr[i, c]), float(arr[i, c + 1]), float(arr[i, c + 2]))

@@ -17,17 +17,27 @@ else (disks, ellipses, spread < π) uniformly by area. `pdf` applies exactly the
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from . import _warps
-from .common import T_EPSILON, camera_visible, light_frame, luminance, unit
+from .common import AREA, T_EPSILON, camera_visible, light_frame, luminance, scalar_kernel, unit
+from ..kernels.vec3 import dot, load, sub
+from .common import I_IS_ELLIPSE, I_PLAIN, I_SOLID_ANGLE, L_AREA, L_CORNER, L_EX, L_EY, L_EZ, L_HALF_SPREAD, L_LEN_X, L_LEN_Y, L_NORMAL, L_POS, L_RADIANCE, L_SPREAD_NORM, L_TAN_HALF  # noqa: F401 (table columns)
+from ..kernels.vec3 import load_col3
 
 #: Below this solid angle (sr) rectangles are sampled by area instead of solid angle.
 MIN_SOLID_ANGLE = 1e-7
 
+_INF = math.inf
+_TWO_PI = 2.0 * np.pi
+
 
 class AreaLight:
     """A Blender AREA light."""
+
+    kind = AREA
 
     def __init__(self, light: dict, origin_shift=(0.0, 0.0, 0.0)):
         self.center, basis = light_frame(light["matrix_world"], origin_shift)
@@ -47,129 +57,229 @@ class AreaLight:
         self.area = (np.pi * 0.25 if self.is_ellipse else 1.0) * self.len_x * self.len_y
         self.color = np.asarray(light.get("color", (1.0, 1.0, 1.0)), dtype=np.float64)
         power = float(light.get("power", 0.0))
-        self.radiance = self.color * power / (np.pi * self.area)   # W/(m² sr) on the normal
+        with np.errstate(divide="ignore", invalid="ignore"):  # a zero-size light: inf, never hit
+            self.radiance = self.color * power / (np.pi * self.area)   # W/(m² sr) on the normal
         spread = float(light.get("spread", np.pi))
         self.plain = spread >= np.pi - 1e-6
         self.half_spread = 0.5 * spread
+        self.tan_half = self.spread_norm = 0.0
         if not self.plain and self.half_spread > 1e-6:
             self.tan_half = float(np.tan(self.half_spread))
             self.spread_norm = 1.0 / (self.tan_half - self.half_spread)
         self.solid_angle_sampling = self.plain and not self.is_ellipse
+        # the corner the spherical-rectangle sampler starts from
+        self.corner = self.center - 0.5 * self.len_x * self.ex - 0.5 * self.len_y * self.ey
         self.is_delta = False
         self.visible_to_camera = camera_visible(light)
         self.power = float(power * luminance(self.color))
 
-    # --- emission profile ----------------------------------------------------------------
-    def _emission(self, cos_e: np.ndarray) -> np.ndarray:
-        """Radiance factor (m,) for directions leaving the light at cos θ = cos_e."""
-        front = cos_e > 0.0
-        if self.plain:
-            return front.astype(np.float64)
-        if self.half_spread <= 1e-6:
-            return np.zeros_like(cos_e)          # spread 0 (a collimated beam) is not supported
-        c = np.where(front, cos_e, 1.0)
-        tan_e = np.sqrt(np.maximum(1.0 - c * c, 0.0)) / c
-        return np.where(front, np.maximum(self.tan_half - tan_e, 0.0) * self.spread_norm, 0.0)
+    def _store(self, a: dict, i: int) -> None:
+        """Write this light's parameters into row i of the `LightData` arrays."""
+        a["kind"][i] = AREA
+        a["is_delta"][i] = False
+        a["visible_camera"][i] = self.visible_to_camera
+        a["pos"][i] = self.center
+        a["radiance"][i] = self.radiance
+        for name in ("ex", "ey", "ez", "normal", "corner", "len_x", "len_y", "area",
+                     "is_ellipse", "plain", "half_spread", "tan_half", "spread_norm"):
+            a[name][i] = getattr(self, name)
+        a["solid_angle"][i] = self.solid_angle_sampling
 
-    # --- spherical rectangle (Ureña et al. 2013) -----------------------------------------
-    def _spherical_rect(self, o):
-        corner = self.center - 0.5 * self.len_x * self.ex - 0.5 * self.len_y * self.ey
-        dv = corner - o
-        x0, y0, z0 = dv @ self.ex, dv @ self.ey, dv @ self.ez
-        zsign = np.where(z0 > 0.0, -1.0, 1.0)     # local z points away from the rectangle
-        z0 = -np.abs(z0)
-        x1, y1 = x0 + self.len_x, y0 + self.len_y
-
-        def cross_n(ax, ay, bx, by):
-            # normalized cross((ax, ay, z0), (bx, by, z0))
-            cx = ay * z0 - z0 * by
-            cy = z0 * bx - ax * z0
-            cz = ax * by - ay * bx
-            inv = 1.0 / np.maximum(np.sqrt(cx * cx + cy * cy + cz * cz), 1e-300)
-            return cx * inv, cy * inv, cz * inv
-
-        n0 = cross_n(x0, y0, x1, y0)
-        n1 = cross_n(x1, y0, x1, y1)
-        n2 = cross_n(x1, y1, x0, y1)
-        n3 = cross_n(x0, y1, x0, y0)
-
-        def angle(a, b):
-            return np.arccos(np.clip(-(a[0] * b[0] + a[1] * b[1] + a[2] * b[2]), -1.0, 1.0))
-
-        g0, g1, g2, g3 = angle(n0, n1), angle(n1, n2), angle(n2, n3), angle(n3, n0)
-        k = 2.0 * np.pi - g2 - g3
-        solid_angle = g0 + g1 - k
-        return dict(x0=x0, y0=y0, z0=z0, x1=x1, y1=y1, zsign=zsign, b0=n0[2], b1=n2[2], k=k,
-                    S=solid_angle)
-
-    def _use_solid_angle(self, sr) -> np.ndarray:
-        return (sr["S"] > MIN_SOLID_ANGLE) & (sr["z0"] < 0.0)
-
-    def _sample_spherical_rect(self, o, u, sr):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            au = u[:, 0] * sr["S"] + sr["k"]
-            fu = (np.cos(au) * sr["b0"] - sr["b1"]) / np.sin(au)
-            cu = np.clip(np.sign(fu) / np.sqrt(fu * fu + sr["b0"] ** 2), -1.0, 1.0)
-            cu = np.nan_to_num(cu)
-            z0 = sr["z0"]
-            xu = -(cu * z0) / np.sqrt(np.maximum(1.0 - cu * cu, 1e-300))
-            xu = np.clip(xu, sr["x0"], sr["x1"])
-            dd = np.sqrt(xu * xu + z0 * z0)
-            h0 = sr["y0"] / np.sqrt(dd * dd + sr["y0"] ** 2)
-            h1 = sr["y1"] / np.sqrt(dd * dd + sr["y1"] ** 2)
-            hv = h0 + u[:, 1] * (h1 - h0)
-            hv2 = hv * hv
-            yv = np.where(hv2 < 1.0 - 1e-12, hv * dd / np.sqrt(np.maximum(1.0 - hv2, 1e-300)), sr["y1"])
-        return (o + xu[:, None] * self.ex + yv[:, None] * self.ey
-                + (z0 * sr["zsign"])[:, None] * self.ez)
-
-    # --- protocol --------------------------------------------------------------------------
-    def _area_point(self, u):
-        if self.is_ellipse:
-            xy = _warps.square_to_disk_concentric(u) * np.array([0.5 * self.len_x, 0.5 * self.len_y])
-        else:
-            xy = (u - 0.5) * np.array([self.len_x, self.len_y])
-        return self.center + xy[:, :1] * self.ex + xy[:, 1:] * self.ey
-
+    # --- the per-light protocol (thin wrappers over the kernels, see common.py) -------------
     def sample(self, p, n, u2):
-        sr = None
-        if self.solid_angle_sampling:
-            sr = self._spherical_rect(p)
-            use = self._use_solid_angle(sr)
-            q = self._sample_spherical_rect(p, u2, sr)
-            if not use.all():  # tiny or edge-on: uniform over the area there
-                q[~use] = self._area_point(u2[~use])
-        else:
-            q = self._area_point(u2)
-        wi, dist = _warps.normalize(q - p)
-        pdf = self._pdf_given(p, wi, dist, sr)
-        cos_e = -(wi @ self.normal)
-        radiance = self.radiance[None, :] * self._emission(cos_e)[:, None]
-        valid = (cos_e > 0.0) & (radiance.max(axis=1) > 0.0) & np.isfinite(pdf) & (pdf > 0.0)
-        return wi, dist, radiance, pdf, valid
-
-    def _pdf_given(self, o, d, t, sr):
-        cos_l = np.abs(d @ self.normal)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            area_pdf = t * t / (self.area * cos_l)
-            if sr is None:
-                return area_pdf
-            return np.where(self._use_solid_angle(sr), 1.0 / sr["S"], area_pdf)
+        from .light_set import header_light_sample
+        return header_light_sample(self, p, n, u2)
 
     def intersect(self, o, d):
-        denom = d @ self.normal
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = ((self.center - o) @ self.normal) / denom
-        t = np.where(np.isfinite(t) & (t > T_EPSILON), t, np.inf)
-        x = o + np.where(np.isfinite(t), t, 0.0)[:, None] * d - self.center
-        lx = 2.0 * (x @ self.ex) / self.len_x
-        ly = 2.0 * (x @ self.ey) / self.len_y
-        inside = (lx * lx + ly * ly <= 1.0) if self.is_ellipse else (np.abs(lx) <= 1.0) & (np.abs(ly) <= 1.0)
-        # like Cycles, an area light does not exist seen from behind: rays pass through it
-        return np.where(inside & (denom < 0), t, np.inf)
+        from .light_set import header_light_intersect
+        return header_light_intersect(self, o, d)
 
     def hit_radiance(self, o, d, t):
-        return self.radiance[None, :] * self._emission(-(d @ self.normal))[:, None]
+        from .light_set import header_light_hit_radiance
+        return header_light_hit_radiance(self, o, d, t)
 
     def pdf(self, o, d, t):
-        return self._pdf_given(o, d, t, self._spherical_rect(o) if self.solid_angle_sampling else None)
+        from .light_set import header_light_pdf
+        return header_light_pdf(self, o, d, t)
+
+
+# ----------------------------------------------------------------------------------- kernels
+@scalar_kernel
+def _emission(ld, i, cos_e):
+    """Radiance factor of light i for a direction leaving it at cos θ = cos_e."""
+    front = cos_e > 0.0
+    if (ld.li[i, I_PLAIN] != 0):
+        return 1.0 if front else 0.0
+    if ld.lf[i, L_HALF_SPREAD] <= 1e-6:
+        return 0.0          # spread 0 (a collimated beam) is not supported
+    if not front:
+        return 0.0
+    tan_e = math.sqrt(max(1.0 - cos_e * cos_e, 0.0)) / cos_e
+    return max(ld.lf[i, L_TAN_HALF] - tan_e, 0.0) * ld.lf[i, L_SPREAD_NORM]
+
+
+@scalar_kernel
+def _clip(x, lo, hi):
+    """np.clip for one value (NaN stays NaN)."""
+    if x < lo:
+        x = lo
+    if x > hi:
+        x = hi
+    return x
+
+
+@scalar_kernel
+def _cross_n(ax, ay, bx, by, z0):
+    """normalized cross((ax, ay, z0), (bx, by, z0))"""
+    cx = ay * z0 - z0 * by
+    cy = z0 * bx - ax * z0
+    cz = ax * by - ay * bx
+    inv = 1.0 / max(math.sqrt(cx * cx + cy * cy + cz * cz), 1e-300)
+    return (cx * inv, cy * inv, cz * inv)
+
+
+@scalar_kernel
+def _angle(a, b):
+    return math.acos(_clip(-(a[0] * b[0] + a[1] * b[1] + a[2] * b[2]), -1.0, 1.0))
+
+
+@scalar_kernel
+def _spherical_rect(ld, i, o):
+    """The rectangle seen from o (Ureña, Fajardo, King 2013): (x0, y0, z0, x1, y1, zsign, b0, b1,
+    k, S) with S its solid angle."""
+    dv = sub(load_col3(ld.lf, i, L_CORNER), o)
+    x0 = dot(dv, load_col3(ld.lf, i, L_EX))
+    y0 = dot(dv, load_col3(ld.lf, i, L_EY))
+    z0 = dot(dv, load_col3(ld.lf, i, L_EZ))
+    zsign = -1.0 if z0 > 0.0 else 1.0     # local z points away from the rectangle
+    z0 = -abs(z0)
+    x1 = x0 + ld.lf[i, L_LEN_X]
+    y1 = y0 + ld.lf[i, L_LEN_Y]
+    n0 = _cross_n(x0, y0, x1, y0, z0)
+    n1 = _cross_n(x1, y0, x1, y1, z0)
+    n2 = _cross_n(x1, y1, x0, y1, z0)
+    n3 = _cross_n(x0, y1, x0, y0, z0)
+    g0, g1, g2, g3 = _angle(n0, n1), _angle(n1, n2), _angle(n2, n3), _angle(n3, n0)
+    k = _TWO_PI - g2 - g3
+    solid_angle = g0 + g1 - k
+    return (x0, y0, z0, x1, y1, zsign, n0[2], n2[2], k, solid_angle)
+
+
+@scalar_kernel
+def _use_solid_angle(sr):
+    return sr[9] > MIN_SOLID_ANGLE and sr[2] < 0.0
+
+
+@scalar_kernel
+def _sample_spherical_rect(ld, i, o, u0, u1, sr):
+    x0, y0, z0, x1, y1, zsign, b0, b1, k, solid_angle = sr
+    au = u0 * solid_angle + k
+    fu = (math.cos(au) * b0 - b1) / math.sin(au)
+    if fu > 0.0:
+        sign = 1.0
+    elif fu < 0.0:
+        sign = -1.0
+    else:
+        sign = fu * 0.0   # 0, or NaN for NaN
+    cu = _clip(sign / math.sqrt(fu * fu + b0 ** 2), -1.0, 1.0)
+    if cu != cu:
+        cu = 0.0
+    xu = -(cu * z0) / math.sqrt(max(1.0 - cu * cu, 1e-300))
+    xu = _clip(xu, x0, x1)
+    dd = math.sqrt(xu * xu + z0 * z0)
+    h0 = y0 / math.sqrt(dd * dd + y0 ** 2)
+    h1 = y1 / math.sqrt(dd * dd + y1 ** 2)
+    hv = h0 + u1 * (h1 - h0)
+    hv2 = hv * hv
+    yv = hv * dd / math.sqrt(max(1.0 - hv2, 1e-300)) if hv2 < 1.0 - 1e-12 else y1
+    zz = z0 * zsign
+    return (o[0] + xu * ld.lf[i, L_EX + 0] + yv * ld.lf[i, L_EY + 0] + zz * ld.lf[i, L_EZ + 0],
+            o[1] + xu * ld.lf[i, L_EX + 1] + yv * ld.lf[i, L_EY + 1] + zz * ld.lf[i, L_EZ + 1],
+            o[2] + xu * ld.lf[i, L_EX + 2] + yv * ld.lf[i, L_EY + 2] + zz * ld.lf[i, L_EZ + 2])
+
+
+@scalar_kernel
+def _area_point(ld, i, u0, u1):
+    if (ld.li[i, I_IS_ELLIPSE] != 0):
+        x, y = _warps.disk_concentric(u0, u1)
+        x *= 0.5 * ld.lf[i, L_LEN_X]
+        y *= 0.5 * ld.lf[i, L_LEN_Y]
+    else:
+        x = (u0 - 0.5) * ld.lf[i, L_LEN_X]
+        y = (u1 - 0.5) * ld.lf[i, L_LEN_Y]
+    return (ld.lf[i, L_POS + 0] + x * ld.lf[i, L_EX + 0] + y * ld.lf[i, L_EY + 0],
+            ld.lf[i, L_POS + 1] + x * ld.lf[i, L_EX + 1] + y * ld.lf[i, L_EY + 1],
+            ld.lf[i, L_POS + 2] + x * ld.lf[i, L_EX + 2] + y * ld.lf[i, L_EY + 2])
+
+
+@scalar_kernel
+def _pdf_given(ld, i, d, t, use_sr, solid_angle):
+    if use_sr:
+        return 1.0 / solid_angle
+    cos_l = abs(dot(d, load_col3(ld.lf, i, L_NORMAL)))
+    return t * t / (ld.lf[i, L_AREA] * cos_l)
+
+
+@scalar_kernel
+def area_sample(ld, i, p, u0, u1):
+    """Area light i from p: (wi, dist, radiance, pdf, valid) (pdf without selection). Rectangles
+    with spread π by solid angle (area sampling where it is tiny or edge-on), else by area."""
+    use = False
+    solid_angle = 0.0
+    if (ld.li[i, I_SOLID_ANGLE] != 0):
+        sr = _spherical_rect(ld, i, p)
+        use = _use_solid_angle(sr)
+        solid_angle = sr[9]
+        if use:
+            q = _sample_spherical_rect(ld, i, p, u0, u1, sr)
+        else:
+            q = _area_point(ld, i, u0, u1)
+    else:
+        q = _area_point(ld, i, u0, u1)
+    wi, dist = _warps.normalize(sub(q, p))
+    pdf = _pdf_given(ld, i, wi, dist, use, solid_angle)
+    cos_e = -dot(wi, load_col3(ld.lf, i, L_NORMAL))
+    e = _emission(ld, i, cos_e)
+    radiance = (ld.lf[i, L_RADIANCE + 0] * e, ld.lf[i, L_RADIANCE + 1] * e, ld.lf[i, L_RADIANCE + 2] * e)
+    peak = max(radiance[0], max(radiance[1], radiance[2]))
+    valid = (cos_e > 0.0 and peak > 0.0 and math.isfinite(pdf) and pdf > 0.0
+             and radiance[0] == radiance[0] and radiance[1] == radiance[1]
+             and radiance[2] == radiance[2])
+    return wi, dist, radiance, pdf, valid
+
+
+@scalar_kernel
+def area_intersect(ld, i, o, d):
+    """Distance to area light i along the unit ray, inf on a miss; like Cycles, an area light
+    does not exist seen from behind: rays pass through it."""
+    normal = load_col3(ld.lf, i, L_NORMAL)
+    denom = dot(d, normal)
+    center = load_col3(ld.lf, i, L_POS)
+    t = dot(sub(center, o), normal) / denom
+    if not (math.isfinite(t) and t > T_EPSILON):
+        t = _INF
+    tf = t if math.isfinite(t) else 0.0
+    x = ((o[0] + tf * d[0]) - center[0], (o[1] + tf * d[1]) - center[1],
+         (o[2] + tf * d[2]) - center[2])
+    lx = 2.0 * dot(x, load_col3(ld.lf, i, L_EX)) / ld.lf[i, L_LEN_X]
+    ly = 2.0 * dot(x, load_col3(ld.lf, i, L_EY)) / ld.lf[i, L_LEN_Y]
+    if (ld.li[i, I_IS_ELLIPSE] != 0):
+        inside = lx * lx + ly * ly <= 1.0
+    else:
+        inside = abs(lx) <= 1.0 and abs(ly) <= 1.0
+    return t if inside and denom < 0.0 else _INF
+
+
+@scalar_kernel
+def area_hit_radiance(ld, i, o, d):
+    e = _emission(ld, i, -dot(d, load_col3(ld.lf, i, L_NORMAL)))
+    return (ld.lf[i, L_RADIANCE + 0] * e, ld.lf[i, L_RADIANCE + 1] * e, ld.lf[i, L_RADIANCE + 2] * e)
+
+
+@scalar_kernel
+def area_pdf(ld, i, o, d, t):
+    """Solid-angle pdf of `area_sample` from o producing d (the light hit at distance t)."""
+    if (ld.li[i, I_SOLID_ANGLE] != 0):
+        sr = _spherical_rect(ld, i, o)
+        return _pdf_given(ld, i, d, t, _use_solid_angle(sr), sr[9])
+    return _pdf_given(ld, i, d, t, False, 0.0)

@@ -22,21 +22,44 @@ Selection modes (``selection=``):
 - ``"UNIFORM"``: every strategy alike (for comparison).
 
 With a single strategy nothing is computed: its probability is exactly 1.
+
+The maths is in scalar ``@kernel`` functions (the interface the compiled integrator calls, see
+docs/kernels.md): `light_sample`, `selection_prob`, `shape_intersect`, `shape_emission`,
+`sun_in_cone`, `sun_emission`, `world_radiance`, `world_pdf`, `emissive_pdf`, all taking
+``LightSet.data`` (a `drt.lights.common.LightData`) first. The `LightSet` methods are thin
+wrappers: a compiled loop over the rows calling them.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .area import AreaLight
-from .emissive import EmissiveGroup, EmissiveTriangles
-from .point import PointLight
-from .selection import ShadingHint, bsdf_factor, mix_with_defensive, normalise_rows
+from .area import AreaLight, area_hit_radiance, area_intersect, area_pdf, area_sample
+from ..kernels import inline_kernel
+from .common import AREA, SUN, LightData, build_light_data, scalar_kernel, selection_tables
+from .emissive import (EmissiveGroup, EmissiveTriangles, emissive_dir_pdf, emissive_local_index,
+                       emissive_sample)
+from .point import PointLight, point_hit_radiance, point_intersect, point_pdf, point_sample
+from .selection import (ShadingHint, hint_arrays, hint_known, row_hint, select_in,
+                        select_strategy, selection_prob, selection_totals, strategy_prob)
 from .spot import SpotLight
-from .sun import SunLight
-from .world import WorldLight
+from .sun import SunLight, sun_contains, sun_pdf_dir, sun_sample
+from .world import WorldLight, world_dir_pdf, world_sample
+from ..kernels import kernel
+from ..kernels.vec3 import dot, load, store, sub
+from .common import I_IS_DELTA, I_KIND, L_RADIANCE  # noqa: F401 (table columns)
+from ..kernels.vec3 import load_col3
+
+__all__ = ["LightData", "LightHit", "LightSample", "LightSet", "emissive_pdf", "light_sample",
+           "light_sample_full",
+           "select", "select_rows", "selection_distribution", "selection_prob", "shape_emission",
+           "shape_intersect", "sun_emission", "sun_in_cone", "world_pdf", "world_radiance"]
+
+_INF = math.inf
+_ZERO3 = (0.0, 0.0, 0.0)
 
 
 @dataclass
@@ -74,6 +97,375 @@ class LightHit:
     light: np.ndarray
 
 
+# ------------------------------------------------------------------------ the scalar interface
+@inline_kernel
+def _strategy_sample(ld, s, p, n, u0, u1, u_rem):
+    """Strategy s from p: (wi, dist, radiance, pdf, is_delta, valid, prim) (pdf without the
+    selection probability; prim: the global triangle id for the emissive group, else −1)."""
+    if s < ld.n_lights:
+        kind = ld.li[s, I_KIND]
+        if kind == SUN:
+            wi, dist, radiance, pdf, valid = sun_sample(ld, s, u0, u1)
+        elif kind == AREA:
+            wi, dist, radiance, pdf, valid = area_sample(ld, s, p, u0, u1)
+        else:
+            wi, dist, radiance, pdf, valid = point_sample(ld, s, p, u0, u1)
+        return wi, dist, radiance, pdf, (ld.li[s, I_IS_DELTA] != 0), valid, -1
+    if s == ld.emissive_index:
+        wi, dist, radiance, pdf, valid, prim = emissive_sample(ld, p, u0, u1, u_rem)
+        return wi, dist, radiance, pdf, False, valid, prim
+    wi, dist, radiance, pdf, valid = world_sample(ld, p, n, u0, u1)
+    return wi, dist, radiance, pdf, False, valid, -1
+
+
+@inline_kernel
+def light_sample_full(ld, p, n, hint, u_sel, u0, u1):
+    """`light_sample` plus the strategy chosen and the emissive triangle's global id (−1)."""
+    if ld.n_strategies == 0:
+        return _ZERO3, 0.0, _ZERO3, 0.0, False, False, -1, -1
+    s, prob, u_rem = select_strategy(ld, p, hint, u_sel)
+    wi, dist, radiance, pdf, is_delta, valid, prim = _strategy_sample(ld, s, p, n, u0, u1, u_rem)
+    pdf = pdf * prob
+    return wi, dist, radiance, pdf, is_delta, valid and pdf > 0.0, s, prim
+
+
+@inline_kernel
+def light_sample(ld, p, n, hint, u_sel, u0, u1):
+    """Next-event sample at p: choose a strategy with u_sel (BSDF-aware with `hint`), sample it
+    with (u0, u1). n: normal of the hemisphere to light (the world samples cosine-weighted about
+    it; zero = none: uniform sphere). (wi, dist, radiance, pdf, is_delta, valid), pdf = solid
+    angle × selection probability (delta lights: the selection probability); see `LightSample`."""
+    wi, dist, radiance, pdf, is_delta, valid, _, _ = light_sample_full(ld, p, n, hint, u_sel, u0, u1)
+    return wi, dist, radiance, pdf, is_delta, valid
+
+
+@scalar_kernel
+def _light_intersect(ld, i, o, d):
+    if ld.li[i, I_KIND] == AREA:
+        return area_intersect(ld, i, o, d)
+    if ld.li[i, I_KIND] == SUN:
+        return _INF
+    return point_intersect(ld, i, o, d)
+
+
+@scalar_kernel
+def _light_hit_radiance(ld, i, o, d):
+    if ld.li[i, I_KIND] == AREA:
+        return area_hit_radiance(ld, i, o, d)
+    return point_hit_radiance(ld, i, o, d)
+
+
+@scalar_kernel
+def _light_pdf(ld, i, o, d, t):
+    if ld.li[i, I_KIND] == AREA:
+        return area_pdf(ld, i, o, d, t)
+    return point_pdf(ld, i, o, d, t)
+
+
+@inline_kernel
+def shape_intersect(ld, k, o, d):
+    """Distance along the unit ray o + t d to the k-th light with a visible shape (light
+    ``ld.shapes[k]``), inf on a miss."""
+    return _light_intersect(ld, ld.shapes[k], o, d)
+
+
+@inline_kernel
+def shape_emission(ld, k, o, d, t, origin, hint):
+    """The k-th shape light hit at o + t d: (header light index, radiance arriving along −d,
+    pdf = solid-angle pdf of sampling d from `origin` × selection probability at origin)."""
+    i = ld.shapes[k]
+    radiance = _light_hit_radiance(ld, i, o, d)
+    # as seen from origin: the hit point o + t d lies at t + (o − origin)·d from it
+    t_origin = t + dot(sub(o, origin), d)
+    pdf = _light_pdf(ld, i, origin, d, t_origin) * selection_prob(ld, origin, hint, i)
+    return i, radiance, pdf
+
+
+@inline_kernel
+def sun_in_cone(ld, d):
+    """Header index of the first sun with an angle whose disk contains the unit direction d, or
+    −1."""
+    for j in range(ld.n_suns):
+        i = ld.suns[j]
+        if sun_contains(ld, i, d):
+            return i
+    return -1
+
+
+@inline_kernel
+def sun_emission(ld, light, origin, d, hint):
+    """(radiance, pdf × selection at origin) of sun `light` seen along d."""
+    pdf = sun_pdf_dir(ld, light, d) * selection_prob(ld, origin, hint, light)
+    return load_col3(ld.lf, light, L_RADIANCE), pdf
+
+
+@inline_kernel
+def world_radiance(ld, d):
+    """World radiance arriving along −d (constant; zero without a world)."""
+    return (ld.world_color[0], ld.world_color[1], ld.world_color[2])
+
+
+@inline_kernel
+def world_pdf(ld, p, n, d, hint):
+    """Solid-angle pdf × selection probability of the world producing d at p with normal n
+    (zero: uniform sphere), as `light_sample` would; 0 without a world."""
+    if not ld.has_world:
+        return 0.0
+    return world_dir_pdf(n, d) * selection_prob(ld, p, hint, ld.world_index)
+
+
+@inline_kernel
+def emissive_pdf(ld, prim, o, p_hit, ng_hit, hint):
+    """MIS pdf (solid angle × selection) of sampling p_hit on emissive triangle `prim` (global
+    id) from o; 0 for non-emissive triangles."""
+    if not ld.has_emissive:
+        return 0.0
+    pdf = emissive_dir_pdf(ld, prim, o, p_hit, ng_hit)
+    if pdf == 0.0:
+        return 0.0
+    return pdf * selection_prob(ld, o, hint, ld.emissive_index)
+
+
+# ------------------------------------------------------------------------- row-loop wrappers
+@kernel
+def _sample_rows(ld, p, n, hn, hwo, hs, u_sel, u2, wi, dist, radiance, pdf, is_delta, valid,
+                 light, prim):
+    for r in range(p.shape[0]):
+        out = light_sample_full(ld, load(p, r), load(n, r), row_hint(hn, hwo, hs, r), u_sel[r],
+                                u2[r, 0], u2[r, 1])
+        store(wi, r, out[0])
+        dist[r] = out[1]
+        store(radiance, r, out[2])
+        pdf[r] = out[3]
+        is_delta[r] = out[4]
+        valid[r] = out[5]
+        light[r] = out[6]
+        prim[r] = out[7]
+
+
+@kernel
+def _intersect_rows(ld, o, d, tmax, origin, hn, hwo, hs, exclude, use_exclude, t_out, radiance,
+                    pdf, light):
+    for r in range(o.shape[0]):
+        o_r, d_r = load(o, r), load(d, r)
+        best_t = tmax[r]
+        best, best_k = -1, -1
+        for k in range(ld.n_shapes):
+            if use_exclude and exclude[r, ld.shapes[k]]:
+                continue          # a light this ray already passed
+            t = shape_intersect(ld, k, o_r, d_r)
+            if t < best_t:
+                best_t, best, best_k = t, ld.shapes[k], k
+        t_out[r] = best_t if best >= 0 else _INF
+        if best < 0 and math.isinf(tmax[r]):
+            best = sun_in_cone(ld, d_r)
+        light[r] = best
+        if best < 0:
+            continue
+        hint = row_hint(hn, hwo, hs, r)
+        if best_k >= 0:
+            _, rad, pdf_r = shape_emission(ld, best_k, o_r, d_r, best_t, load(origin, r), hint)
+        else:
+            rad, pdf_r = sun_emission(ld, best, load(origin, r), d_r, hint)
+        store(radiance, r, rad)
+        pdf[r] = pdf_r
+
+
+@kernel
+def _selection_pmf_rows(ld, p, hn, hwo, hs, out):
+    from_pt = ld.per_point
+    for r in range(p.shape[0]):
+        hint = row_hint(hn, hwo, hs, r)
+        p_r = load(p, r)
+        if from_pt:
+            guided = hint_known(hint)
+            totals = selection_totals(ld, p_r, hint, guided)
+            for j in range(ld.n_strategies):
+                out[r, j] = strategy_prob(ld, j, p_r, hint, guided, totals)
+        else:
+            for j in range(ld.n_strategies):
+                out[r, j] = ld.pmf[j]
+
+
+@kernel
+def _selection_prob_rows(ld, p, hn, hwo, hs, index, out):
+    for r in range(p.shape[0]):
+        out[r] = selection_prob(ld, load(p, r), row_hint(hn, hwo, hs, r), index[r])
+
+
+@kernel
+def _world_pdf_rows(ld, p, n, d, hn, hwo, hs, out):
+    for r in range(p.shape[0]):
+        out[r] = world_pdf(ld, load(p, r), load(n, r), load(d, r), row_hint(hn, hwo, hs, r))
+
+
+@kernel
+def _emissive_pdf_rows(ld, prim, o, p_hit, ng, hn, hwo, hs, out):
+    for r in range(o.shape[0]):
+        out[r] = emissive_pdf(ld, prim[r], load(o, r), load(p_hit, r), load(ng, r),
+                              row_hint(hn, hwo, hs, r))
+
+
+@kernel
+def _strategy_sample_rows(ld, s, p, n, u2, u_tri, wi, dist, radiance, pdf, valid, prim):
+    for r in range(p.shape[0]):
+        out = _strategy_sample(ld, s, load(p, r), load(n, r), u2[r, 0], u2[r, 1], u_tri[r])
+        store(wi, r, out[0])
+        dist[r] = out[1]
+        store(radiance, r, out[2])
+        pdf[r] = out[3]
+        valid[r] = out[5]
+        prim[r] = out[6]
+
+
+@kernel
+def _light_query_rows(ld, i, o, d, t, t_out, radiance, pdf):
+    """Light i along each ray: its intersection distance, hit radiance and pdf at distance t."""
+    for r in range(o.shape[0]):
+        o_r, d_r = load(o, r), load(d, r)
+        t_out[r] = _light_intersect(ld, i, o_r, d_r)
+        store(radiance, r, _light_hit_radiance(ld, i, o_r, d_r))
+        pdf[r] = _light_pdf(ld, i, o_r, d_r, t[r])
+
+
+@kernel
+def _sun_rows(ld, i, d, in_cone, pdf):
+    for r in range(d.shape[0]):
+        d_r = load(d, r)
+        in_cone[r] = sun_contains(ld, i, d_r)
+        pdf[r] = sun_pdf_dir(ld, i, d_r)
+
+
+@kernel
+def _world_dir_pdf_rows(n, d, out):
+    for r in range(d.shape[0]):
+        out[r] = world_dir_pdf(load(n, r), load(d, r))
+
+
+@kernel
+def _emissive_rows(ld, tri, o, p_hit, ng, local, pdf):
+    for r in range(tri.shape[0]):
+        local[r] = emissive_local_index(ld, tri[r])
+        pdf[r] = emissive_dir_pdf(ld, tri[r], load(o, r), load(p_hit, r), load(ng, r))
+
+
+@kernel
+def _select_rows(pmf, cdf, use_cdf, per_row, u, idx, prob, u_rem):
+    for r in range(u.shape[0]):
+        if per_row:
+            out = select_in(pmf[r], pmf[r], u[r], False)
+        else:
+            out = select_in(pmf[0], cdf, u[r], use_cdf)
+        idx[r] = out[0]
+        prob[r] = out[1]
+        u_rem[r] = out[2]
+
+
+# ------------------------------------------------------------------------- array conversions
+def _vec(a, m: int) -> np.ndarray:
+    """(m, 3) C-contiguous writeable float64 rows (None → zeros)."""
+    if a is None:
+        return np.zeros((m, 3))
+    return np.array(np.broadcast_to(np.asarray(a, dtype=np.float64), (m, 3)), dtype=np.float64,
+                    order="C", copy=True)
+
+
+def _col(a, m: int, dtype=np.float64) -> np.ndarray:
+    """(m,) C-contiguous writeable rows of `dtype`."""
+    return np.array(np.broadcast_to(np.asarray(a, dtype=dtype), (m,)), dtype=dtype, order="C",
+                    copy=True)
+
+
+def _uv(u2, m: int) -> np.ndarray:
+    return np.array(np.broadcast_to(np.asarray(u2, dtype=np.float64), (m, 2)), dtype=np.float64,
+                    order="C", copy=True)
+
+
+# ------------------------------------------------------------ wrappers of the light classes
+def strategy_sample_rows(ld: LightData, s: int, p, n, u2, u_tri=None):
+    """Strategy s of `ld` sampled from points p (m, 3) with normals n (None: zero) and u2 (m, 2)
+    (u_tri: the emissive triangle choice): (wi, dist, radiance, pdf, valid, prim), pdf without
+    selection."""
+    p = np.asarray(p, dtype=np.float64)
+    m = len(p)
+    wi, radiance = np.zeros((m, 3)), np.zeros((m, 3))
+    dist, pdf = np.zeros(m), np.zeros(m)
+    valid, prim = np.zeros(m, dtype=bool), np.full(m, -1, dtype=np.int64)
+    u_tri = np.zeros(m) if u_tri is None else _col(u_tri, m)
+    _strategy_sample_rows(ld, int(s), _vec(p, m), _vec(n, m), _uv(u2, m), u_tri, wi, dist,
+                          radiance, pdf, valid, prim)
+    return wi, dist, radiance, pdf, valid, prim
+
+
+def _single(light) -> LightData:
+    """The `LightData` of one header light alone (cached on the light)."""
+    ld = getattr(light, "_ld", None)
+    if ld is None:
+        ld = light._ld = build_light_data([light])
+    return ld
+
+
+def header_light_sample(light, p, n, u2):
+    wi, dist, radiance, pdf, valid, _ = strategy_sample_rows(_single(light), 0, p, n, u2)
+    return wi, dist, radiance, pdf, valid
+
+
+def _light_query(light, o, d, t=None):
+    o = np.asarray(o, dtype=np.float64)
+    m = len(o)
+    t_out, radiance, pdf = np.zeros(m), np.zeros((m, 3)), np.zeros(m)
+    _light_query_rows(_single(light), 0, _vec(o, m), _vec(d, m),
+                      np.zeros(m) if t is None else _col(t, m), t_out, radiance, pdf)
+    return t_out, radiance, pdf
+
+
+def header_light_intersect(light, o, d):
+    return _light_query(light, o, d)[0]
+
+
+def header_light_hit_radiance(light, o, d, t):
+    return _light_query(light, o, d, t)[1]
+
+
+def header_light_pdf(light, o, d, t):
+    return _light_query(light, o, d, t)[2]
+
+
+def header_sun_query(light, d):
+    """(in_cone (m,) bool, pdf_dir (m,)) of a sun for unit directions d."""
+    d = np.asarray(d, dtype=np.float64)
+    m = len(d)
+    in_cone, pdf = np.zeros(m, dtype=bool), np.zeros(m)
+    _sun_rows(_single(light), 0, _vec(d, m), in_cone, pdf)
+    return in_cone, pdf
+
+
+def world_dir_pdf_rows(ld: LightData, n, d) -> np.ndarray:
+    d = np.asarray(d, dtype=np.float64)
+    m = len(d)
+    out = np.zeros(m)
+    _world_dir_pdf_rows(_vec(n, m), _vec(d, m), out)
+    return out
+
+
+def _emissive_query(ld: LightData, tri, o=None, p_hit=None, ng=None):
+    tri = _col(np.reshape(np.asarray(tri, dtype=np.int64), -1), np.size(tri), np.int64)
+    m = len(tri)
+    local, pdf = np.zeros(m, dtype=np.int64), np.zeros(m)
+    _emissive_rows(ld, tri, _vec(o, m), _vec(p_hit, m), _vec(ng, m), local, pdf)
+    return local, pdf
+
+
+def emissive_local_rows(ld: LightData, tri) -> np.ndarray:
+    local = _emissive_query(ld, tri)[0]
+    return local.reshape(np.shape(tri))
+
+
+def emissive_dir_pdf_rows(ld: LightData, tri, o, p_hit, ng) -> np.ndarray:
+    return _emissive_query(ld, tri, o, p_hit, ng)[1]
+
+
+# ------------------------------------------------------------------------------- selection
 def selection_distribution(power) -> tuple[np.ndarray, np.ndarray]:
     """pmf and cdf (both (k,)) for choosing among k strategies ∝ power. Zero total → uniform.
     With one strategy the pmf is exactly [1.0]."""
@@ -92,33 +484,21 @@ def selection_distribution(power) -> tuple[np.ndarray, np.ndarray]:
 def select(pmf, cdf, u) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Choose strategies for u (n,) in [0, 1): index (n,), its probability (n,), and u rescaled to
     [0, 1) within the chosen interval (reusable for a second discrete choice)."""
-    idx = np.searchsorted(cdf, u, side="right")
-    idx = np.minimum(idx, len(cdf) - 1)
-    prob = pmf[idx]
-    # never land on a zero-probability strategy through round-off at the top of the cdf
-    if (prob == 0.0).any():
-        last = int(np.flatnonzero(pmf > 0.0)[-1])
-        idx = np.where(prob == 0.0, last, idx)
-        prob = pmf[idx]
-    lo = cdf[idx] - pmf[idx]
-    u_rem = np.clip((u - lo) / prob, 0.0, np.nextafter(1.0, 0.0))
-    return idx, prob, u_rem
+    pmf = np.array(pmf, dtype=np.float64, order="C", ndmin=1)
+    u = np.asarray(u, dtype=np.float64)
+    m = u.size
+    idx, prob, u_rem = np.zeros(m, dtype=np.int64), np.zeros(m), np.zeros(m)
+    _select_rows(pmf[None, :].copy(), _col(cdf, len(pmf)), True, False, _col(u.reshape(-1), m),
+                 idx, prob, u_rem)
+    return idx.reshape(u.shape), prob.reshape(u.shape), u_rem.reshape(u.shape)
 
 
 def select_rows(pmf, u) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Like `select`, with a separate distribution per row: pmf (m, k), u (m,) in [0, 1)."""
-    m, k = pmf.shape
-    cdf = np.cumsum(pmf, axis=1)
-    cdf[:, -1] = 1.0
-    idx = np.minimum((u[:, None] >= cdf).sum(axis=1), k - 1)
-    rows = np.arange(m)
-    prob = pmf[rows, idx]
-    if (prob == 0.0).any():  # round-off at the top of a row's cdf: take its last non-zero entry
-        last = k - 1 - np.argmax(pmf[:, ::-1] > 0.0, axis=1)
-        idx = np.where(prob == 0.0, last, idx)
-        prob = pmf[rows, idx]
-    lo = cdf[rows, idx] - prob
-    u_rem = np.clip((u - lo) / np.where(prob > 0, prob, 1.0), 0.0, np.nextafter(1.0, 0.0))
+    pmf = np.array(pmf, dtype=np.float64, order="C")
+    m = len(pmf)
+    idx, prob, u_rem = np.zeros(m, dtype=np.int64), np.zeros(m), np.zeros(m)
+    _select_rows(pmf, np.zeros(0), False, True, _col(u, m), idx, prob, u_rem)
     return idx, prob, u_rem
 
 
@@ -147,6 +527,8 @@ class LightSet:
     from every light position in ``lights`` (the integrator's re-centring; emissive vertices are
     taken as given). scene_radius: bounding radius of the scene for the sun/world selection
     weights (default: from the light positions and emissive vertices, at least 1 m).
+
+    ``data``: the `LightData` the kernels (and the compiled integrator) take.
     """
 
     def __init__(self, lights: list[dict], world_color=(0.0, 0.0, 0.0),
@@ -180,60 +562,53 @@ class LightSet:
         if selection == "UNIFORM":
             powers = [1.0] * len(powers)
         self.pmf, self.cdf = selection_distribution(powers)
-        self._setup_distance_selection()
+        self._per_point = self.selection == "DISTANCE" and len(self.strategies) > 1
         self.visible_to_camera = np.array([lt.visible_to_camera for lt in self.lights], dtype=bool)
         self._shapes = [i for i, lt in enumerate(self.lights)
                         if isinstance(lt, (AreaLight, PointLight)) and not lt.is_delta]
         self._suns = [i for i, lt in enumerate(self.lights)
                       if isinstance(lt, SunLight) and not lt.is_delta]
+        self.data = build_light_data(
+            self.lights, self.emissive, self.world.radiance if self.world is not None else None,
+            pmf=self.pmf, cdf=self.cdf, per_point=self._per_point,
+            selection=self._selection_tables())
 
     # ------------------------------------------------------------------------------ selection
-    def _setup_distance_selection(self) -> None:
-        """Per-strategy arrays for `selection_pmf`: centre (k, 3), squared bounding radius (k,),
-        irradiance scale (k,) (flux × 1/(4π), 1/π, ...), local (k,) bool, one-sided normal
-        (k, 3) (zero: two-sided)."""
+    def _selection_tables(self) -> dict:
+        """Per-strategy arrays for the DISTANCE selection (`LightData.sel_*`): centre (k, 3),
+        squared bounding radius (k,), irradiance scale (k,) (flux × 1/(4π), 1/π, ...), local
+        (k,) bool, one-sided normal (k, 3) (zero: two-sided), a sun's direction and sin² of its
+        half-angle (for the BSDF factor: its centre seen at distance 1), world flags."""
         k = len(self.strategies)
-        self._per_point = self.selection == "DISTANCE" and k > 1
-        if not self._per_point:
-            return
-        centre = np.zeros((k, 3))
-        radius2 = np.zeros(k)
-        scale = np.zeros(k)
-        local = np.zeros(k, dtype=bool)
-        facing = np.zeros((k, 3))
-        # for the BSDF factor: direction to a sun (its centre seen at distance 1)
-        sun_dir = np.zeros((k, 3))
-        sun_sin2 = np.zeros(k)
+        tab = selection_tables(k)
+        centre, facing, sun_dir = tab["sel_centre"], tab["sel_facing"], tab["sel_sun_dir"]
         for i, strat in enumerate(self.strategies):
             if isinstance(strat, AreaLight):
-                centre[i], local[i] = strat.center, True
-                radius2[i] = 0.25 * (strat.len_x ** 2 + strat.len_y ** 2)
-                scale[i] = strat.power / np.pi
+                centre[i], tab["sel_local"][i] = strat.center, True
+                tab["sel_radius2"][i] = 0.25 * (strat.len_x ** 2 + strat.len_y ** 2)
+                tab["sel_scale"][i] = strat.power / np.pi
                 facing[i] = strat.normal
             elif isinstance(strat, PointLight):  # and spot lights
-                centre[i], local[i] = strat.position, True
-                radius2[i] = strat.radius ** 2
-                scale[i] = strat.power / (4.0 * np.pi)
+                centre[i], tab["sel_local"][i] = strat.position, True
+                tab["sel_radius2"][i] = strat.radius ** 2
+                tab["sel_scale"][i] = strat.power / (4.0 * np.pi)
             elif strat is self.emissive:
                 g = strat
                 pts = np.concatenate([g.v0, g.v0 + g.e1, g.v0 + g.e2])
                 lo, hi = pts.min(axis=0), pts.max(axis=0)
-                centre[i], local[i] = 0.5 * (lo + hi), True
-                radius2[i] = 0.25 * float(np.sum((hi - lo) ** 2))
-                scale[i] = strat.power / (2.0 * np.pi)
+                centre[i], tab["sel_local"][i] = 0.5 * (lo + hi), True
+                tab["sel_radius2"][i] = 0.25 * float(np.sum((hi - lo) ** 2))
+                tab["sel_scale"][i] = strat.power / (2.0 * np.pi)
             else:  # sun, world: flux over the scene's disk πR²
-                scale[i] = strat.power / (np.pi * self.scene_radius ** 2)
+                tab["sel_scale"][i] = strat.power / (np.pi * self.scene_radius ** 2)
                 if isinstance(strat, SunLight):
                     sun_dir[i] = strat.to_sun
-                    sun_sin2[i] = min(strat.one_minus_cos * (2.0 - strat.one_minus_cos), 1.0)
-        self._sel_centre, self._sel_radius2, self._sel_scale = centre, radius2, scale
-        self._sel_sun_dir, self._sel_sun_sin2 = sun_dir, sun_sin2
-        self._sel_is_sun = np.any(sun_dir != 0.0, axis=1)
-        self._sel_is_world = np.zeros(k, dtype=bool)
+                    tab["sel_sun_sin2"][i] = min(strat.one_minus_cos * (2.0 - strat.one_minus_cos), 1.0)
+        tab["sel_is_sun"][:] = np.any(sun_dir != 0.0, axis=1)
         if self.world is not None:
-            self._sel_is_world[self.world_index] = True
-        self._sel_local, self._sel_facing = local, facing
-        self._sel_one_sided = np.any(facing != 0.0, axis=1)
+            tab["sel_is_world"][self.world_index] = True
+        tab["sel_one_sided"][:] = np.any(facing != 0.0, axis=1)
+        return tab
 
     def selection_pmf(self, p, hint: ShadingHint | None = None) -> np.ndarray:
         """(m, k) probability of choosing each strategy at points p (m, 3) (see the module
@@ -243,35 +618,10 @@ class LightSet:
         p = np.asarray(p, dtype=np.float64)
         if not self._per_point:
             return np.broadcast_to(self.pmf, (len(p), len(self.pmf)))
-        rel = p[:, None, :] - self._sel_centre[None, :, :]
-        d2 = np.einsum("mkj,mkj->mk", rel, rel)
-        w = np.where(self._sel_local, self._sel_scale / np.maximum(d2, np.maximum(self._sel_radius2, 1e-12)),
-                     self._sel_scale)
-        if self._sel_one_sided.any():
-            behind = np.einsum("mkj,kj->mk", rel, self._sel_facing) <= 0.0
-            w = np.where(self._sel_one_sided & behind, 0.0, w)
-        pmf = normalise_rows(w, self.pmf[None, :])
-        if hint is None:
-            return pmf
-        return mix_with_defensive(w * self._bsdf_factor(rel, hint), pmf)
-
-    def _bsdf_factor(self, rel, hint: ShadingHint) -> np.ndarray:
-        """(m, k) `bsdf_factor` for every strategy; rel (m, k, 3) = point − light centre. Local
-        lights and suns have a direction; the world gets the hemisphere average of f·cos."""
-        m, k = rel.shape[0], rel.shape[1]
-        aimed = self._sel_local | self._sel_is_sun
-        cols = np.flatnonzero(aimed)
-        b = np.empty((m, k))
-        if len(cols):
-            sun = self._sel_is_sun[cols]
-            to_light = -rel if len(cols) == k else -rel[:, cols]
-            if sun.any():
-                to_light = np.where(sun[None, :, None], self._sel_sun_dir[cols][None], to_light)
-            radius2 = np.where(sun, self._sel_sun_sin2[cols], self._sel_radius2[cols])
-            b[:, cols] = bsdf_factor(to_light, radius2, hint)
-        if self._sel_is_world.any():  # albedo / 4π: the world's E estimate is 4πL
-            b[:, self._sel_is_world] = ((hint.kd + hint.kg + hint.kt) / (4.0 * np.pi))[:, None]
-        return b
+        m = len(p)
+        out = np.zeros((m, self.count))
+        _selection_pmf_rows(self.data, _vec(p, m), *hint_arrays(hint, m), out)
+        return out
 
     def selection_prob(self, p, index, hint: ShadingHint | None = None) -> np.ndarray:
         """(m,) probability that `sample` at points p (m, 3) with the same ``hint`` chooses
@@ -279,7 +629,11 @@ class LightSet:
         index = np.broadcast_to(np.asarray(index), (len(p),))
         if not self._per_point:
             return self.pmf[index]
-        return self.selection_pmf(p, hint)[np.arange(len(p)), index]
+        m = len(p)
+        out = np.zeros(m)
+        _selection_prob_rows(self.data, _vec(p, m), *hint_arrays(hint, m),
+                             _col(index, m, np.int64), out)
+        return out
 
     @property
     def uses_hint(self) -> bool:
@@ -305,42 +659,21 @@ class LightSet:
 
     # ------------------------------------------------------------------------------------------
     def sample(self, p, n, u_select, u2, hint: ShadingHint | None = None) -> LightSample:
-        """p (m,3) shading points; n (m,3) normals of the hemisphere to light (or None);
-        u_select (m,), u2 (m,2) in [0, 1); hint: the points' BSDFs, for selection (MIS pdfs of
-        `intersect` / `world_pdf` / `emissive_pdf` must then get the same hint)."""
+        """p (m,3) shading points; n (m,3) normals of the hemisphere to light (or None; zero
+        rows count as None); u_select (m,), u2 (m,2) in [0, 1); hint: the points' BSDFs, for
+        selection (MIS pdfs of `intersect` / `world_pdf` / `emissive_pdf` must then get the same
+        hint)."""
         p = np.asarray(p, dtype=np.float64)
         m = len(p)
         out = LightSample(wi=np.zeros((m, 3)), dist=np.zeros(m), radiance=np.zeros((m, 3)),
                           pdf=np.zeros(m), is_delta=np.zeros(m, dtype=bool),
-                          valid=np.zeros(m, dtype=bool), light=np.full(m, -1),
-                          prim=np.full(m, -1))
+                          valid=np.zeros(m, dtype=bool), light=np.full(m, -1, dtype=np.int64),
+                          prim=np.full(m, -1, dtype=np.int64))
         if not self.strategies or m == 0:
             return out
-        u_select = np.asarray(u_select, dtype=np.float64)
-        if self._per_point:
-            idx, prob, u_rem = select_rows(self.selection_pmf(p, hint), u_select)
-        else:
-            idx, prob, u_rem = select(self.pmf, self.cdf, u_select)
-        u2 = np.asarray(u2, dtype=np.float64)
-        for s, strat in enumerate(self.strategies):
-            sel = idx == s
-            if not sel.any():
-                continue
-            every = sel.all()
-            ps = p if every else p[sel]
-            ns = None if n is None else (n if every else n[sel])
-            us = u2 if every else u2[sel]
-            if s == self.emissive_index:
-                wi, dist, rad, pdf, valid, prim = strat.sample(ps, ns, us, u_rem if every else u_rem[sel])
-                out.prim[sel] = prim
-            else:
-                wi, dist, rad, pdf, valid = strat.sample(ps, ns, us)
-            out.wi[sel], out.dist[sel], out.radiance[sel] = wi, dist, rad
-            out.pdf[sel], out.valid[sel] = pdf, valid
-            out.is_delta[sel] = strat.is_delta
-            out.light[sel] = s
-        out.pdf *= prob
-        out.valid &= out.pdf > 0.0
+        _sample_rows(self.data, _vec(p, m), _vec(n, m), *hint_arrays(hint, m), _col(u_select, m),
+                     _uv(u2, m), out.wi, out.dist, out.radiance, out.pdf, out.is_delta, out.valid,
+                     out.light, out.prim)
         return out
 
     def hits_along(self, o, d, tmax, origin=None, hint: ShadingHint | None = None):
@@ -383,71 +716,43 @@ class LightSet:
         `world_radiance` separately. Camera rays should ignore hits where
         ``visible_to_camera[light]`` is False."""
         o = np.asarray(o, dtype=np.float64)
-        d = np.asarray(d, dtype=np.float64)
-        origin = o if origin is None else np.asarray(origin, dtype=np.float64)
         m = len(o)
-        tmax = np.broadcast_to(np.asarray(tmax, dtype=np.float64), (m,))
-        best_t = np.array(tmax, dtype=np.float64, copy=True)
-        best = np.full(m, -1)
-        for i in self._shapes:
-            t = self.lights[i].intersect(o, d)
-            if exclude is not None:  # (m, n_lights) bool: lights this ray already passed
-                t = np.where(exclude[:, i], np.inf, t)
-            closer = t < best_t
-            best_t = np.where(closer, t, best_t)
-            best = np.where(closer, i, best)
-        hit = best >= 0
-        t_out = np.where(hit, best_t, np.inf)
-        radiance = np.zeros((m, 3))
-        pdf = np.zeros(m)
-        open_sky = ~hit & np.isinf(tmax)
-        for i in self._suns:
-            sel = open_sky & (best < 0) & self.lights[i].in_cone(d)
-            if sel.any():
-                best[sel] = i
-        found = np.flatnonzero(best >= 0)
-        if len(found) == 0:
-            return LightHit(hit=best >= 0, t=t_out, radiance=radiance, pdf=pdf, light=best)
-        # selection probabilities of the lights found, all rows at once (one pmf evaluation)
-        sel_prob = np.zeros(m)
-        sel_prob[found] = self.selection_prob(origin[found], best[found], _rows(hint, found))
-        for i in self._shapes:
-            sel = best == i
-            if sel.any():
-                lt = self.lights[i]
-                radiance[sel] = lt.hit_radiance(o[sel], d[sel], t_out[sel])
-                # as seen from origin: the hit point o + t d lies at t + (o − origin)·d from it
-                t_origin = t_out[sel] + np.einsum("ij,ij->i", o[sel] - origin[sel], d[sel])
-                pdf[sel] = lt.pdf(origin[sel], d[sel], t_origin) * sel_prob[sel]
-        for i in self._suns:
-            sel = best == i
-            if sel.any():
-                radiance[sel] = self.lights[i].radiance
-                pdf[sel] = self.lights[i].pdf_dir(d[sel]) * sel_prob[sel]
-        return LightHit(hit=best >= 0, t=t_out, radiance=radiance, pdf=pdf, light=best)
+        origin = o if origin is None else origin
+        t_out, radiance, pdf = np.zeros(m), np.zeros((m, 3)), np.zeros(m)
+        light = np.full(m, -1, dtype=np.int64)
+        use_exclude = exclude is not None
+        exclude = (np.ascontiguousarray(exclude, dtype=bool) if use_exclude
+                   else np.zeros((0, 0), dtype=bool))
+        if not exclude.flags.writeable:
+            exclude = exclude.copy()
+        _intersect_rows(self.data, _vec(o, m), _vec(d, m), _col(tmax, m), _vec(origin, m),
+                        *hint_arrays(hint, m), exclude, use_exclude, t_out, radiance, pdf, light)
+        return LightHit(hit=light >= 0, t=t_out, radiance=radiance, pdf=pdf, light=light)
 
     def world_radiance(self, d) -> np.ndarray:
         """(m, 3) world radiance arriving along −d (constant)."""
-        color = self.world.radiance if self.world is not None else np.zeros(3)
-        return np.broadcast_to(color, (len(d), 3)).copy()
+        return np.broadcast_to(self.data.world_color, (len(d), 3)).copy()
 
     def world_pdf(self, p, n, d, hint: ShadingHint | None = None) -> np.ndarray:
         """(m,) solid-angle pdf × selection probability of the world producing direction d at p
-        with normal n (None → uniform sphere), as `sample` would."""
+        with normal n (None or zero rows → uniform sphere), as `sample` would."""
+        m = len(d)
+        out = np.zeros(m)
         if self.world is None:
-            return np.zeros(len(d))
-        return (self.world.pdf(n, np.asarray(d, dtype=np.float64))
-                * self.selection_prob(p, self.world_index, hint))
+            return out
+        _world_pdf_rows(self.data, _vec(p, m), _vec(n, m), _vec(d, m), *hint_arrays(hint, m), out)
+        return out
 
     def emissive_pdf(self, tri, o, p_hit, ng_hit, hint: ShadingHint | None = None) -> np.ndarray:
         """(m,) MIS pdf (solid angle × selection) of sampling p_hit on emissive triangle `tri`
         (global id) from o; 0 for non-emissive triangles."""
+        m = len(o)
+        out = np.zeros(m)
         if self.emissive is None:
-            return np.zeros(len(o))
-        pdf = self.emissive.pdf(tri, np.asarray(o, dtype=np.float64),
-                                np.asarray(p_hit, dtype=np.float64),
-                                np.asarray(ng_hit, dtype=np.float64))
-        return pdf * self.selection_prob(o, self.emissive_index, hint)
+            return out
+        _emissive_pdf_rows(self.data, _col(tri, m, np.int64), _vec(o, m), _vec(p_hit, m),
+                           _vec(ng_hit, m), *hint_arrays(hint, m), out)
+        return out
 
 
 def _rows(hint: ShadingHint | None, rows) -> ShadingHint | None:

@@ -11,20 +11,32 @@ I = P/(4π) W/sr. With ``radius`` r > 0 it becomes a shape of radiance L = P/(4�
   the shaded point, sampled uniformly by area. On axis E = P/(4π)/(d² + r²): the disk subtends a
   cone of half-angle atan(r/d), so there is no singularity when a surface touches the light.
 
-Object scale does not change the radius (as in Cycles).
+Object scale does not change the radius (as in Cycles). The kernels below serve point and spot
+lights (``LightData.kind`` POINT or SPOT; a spot adds its cone mask and one-sided shape).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from . import _warps
-from .common import T_EPSILON, camera_visible, light_frame, luminance, one_minus_cos_from_sin2
-from ..vecmath import row_norm
+from .common import (POINT, SPOT, T_EPSILON, camera_visible, clip01, light_frame, luminance,
+                     one_minus_cos_from_sin2, scalar_kernel)
+from ..kernels.vec3 import build_frame, dot, load, neg, sub
+from .common import I_IS_DELTA, I_IS_SPHERE, I_KIND, L_COS_HALF, L_INTENSITY, L_POS, L_RADIANCE, L_RADIUS, L_SPOT_DIR, L_SPOT_WIDTH  # noqa: F401 (table columns)
+from ..kernels.vec3 import load_col3
+
+_INF = math.inf
+_INV_4PI = 1.0 / (4.0 * np.pi)
+_TWO_PI = 2.0 * np.pi
 
 
 class PointLight:
     """A Blender POINT light. Subclassed by :class:`drt.lights.spot.SpotLight`."""
+
+    kind = POINT
 
     def __init__(self, light: dict, origin_shift=(0.0, 0.0, 0.0)):
         self.position, self.basis = light_frame(light["matrix_world"], origin_shift)
@@ -40,108 +52,169 @@ class PointLight:
         self.visible_to_camera = camera_visible(light)
         self.power = float(power * luminance(self.color)) * self._power_fraction()
 
-    # --- overridden by spot lights -------------------------------------------------------
     def _power_fraction(self) -> float:
         """Fraction of the 4π steradians that actually emit (1 for a point light)."""
         return 1.0
 
-    def _mask(self, w_out: np.ndarray) -> np.ndarray:
-        """Angular factor for directions w_out (m, 3) leaving the light (1 for a point light)."""
-        return np.ones(len(w_out))
+    def _store(self, a: dict, i: int) -> None:
+        """Write this light's parameters into row i of the `LightData` arrays."""
+        a["kind"][i] = self.kind
+        a["is_delta"][i] = self.is_delta
+        a["visible_camera"][i] = self.visible_to_camera
+        a["pos"][i] = self.position
+        a["radiance"][i] = self.radiance
+        a["intensity"][i] = self.intensity
+        a["radius"][i] = self.radius
+        a["is_sphere"][i] = self.is_sphere
 
-    def _one_sided_ok(self, o: np.ndarray, d: np.ndarray) -> np.ndarray:
-        return np.ones(len(o), dtype=bool)
-
-    # --- sampling -------------------------------------------------------------------------
+    # --- the per-light protocol (thin wrappers over the kernels, see common.py) -------------
     def sample(self, p, n, u2):
-        to_c = self.position - p
-        axis, d = _warps.normalize(to_c)
-        m = len(p)
-        if self.is_delta:
-            wi, dist = axis, d
-            with np.errstate(divide="ignore"):
-                radiance = self.intensity[None, :] / (d * d)[:, None]
-            pdf = np.ones(m)
-        elif self.is_sphere:
-            wi, dist, pdf = self._sample_sphere(p, axis, d, u2)
-            radiance = np.broadcast_to(self.radiance, (m, 3)).copy()
-        else:
-            wi, dist, pdf = self._sample_disk(p, axis, u2)
-            radiance = np.broadcast_to(self.radiance, (m, 3)).copy()
-        inside = d <= self.radius
-        mask = np.where(inside, 1.0, self._mask(-wi))
-        radiance = radiance * mask[:, None]
-        valid = (mask > 0.0) & (pdf > 0.0) & np.isfinite(pdf) & (dist > 0.0)
-        return wi, dist, radiance, pdf, valid
+        from .light_set import header_light_sample
+        return header_light_sample(self, p, n, u2)
 
-    def _sample_sphere(self, p, axis, d, u2):
-        r = self.radius
-        outside = d > r
-        omc = one_minus_cos_from_sin2(np.minimum((r / np.where(outside, d, 1.0)) ** 2, 1.0))
-        local = np.where(outside[:, None], _warps.square_to_uniform_cone(u2, omc),
-                         _warps.square_to_uniform_sphere(u2))
-        safe_axis = np.where(d[:, None] > 0.0, axis, np.array([0.0, 0.0, 1.0]))
-        wi = _warps.to_world(local, safe_axis)
-        cos_t = local[:, 2]
-        root = np.sqrt(np.maximum(r * r - d * d * (1.0 - cos_t * cos_t), 0.0))
-        dist = np.where(outside, d * cos_t - root, d * cos_t + root)   # law of cosines
-        pdf = np.where(outside, 1.0 / (2.0 * np.pi * np.where(outside, omc, 1.0)),
-                       1.0 / (4.0 * np.pi))
-        return wi, dist, pdf
-
-    def _sample_disk(self, p, axis, u2):
-        light_n = -axis                                   # disk normal, toward the shaded point
-        light_n = np.where(np.isfinite(light_n).all(axis=1)[:, None] & (np.abs(light_n).sum(1) > 0)[:, None],
-                           light_n, np.array([0.0, 0.0, 1.0]))
-        t, b = _warps.build_frame(light_n)
-        xy = _warps.square_to_disk_concentric(u2) * self.radius
-        q = self.position + xy[:, :1] * t + xy[:, 1:] * b
-        wi, dist = _warps.normalize(q - p)
-        cos_l = np.abs((light_n * wi).sum(axis=1))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            pdf = dist * dist / (np.pi * self.radius ** 2 * cos_l)
-        return wi, dist, pdf
-
-    # --- intersection ---------------------------------------------------------------------
     def intersect(self, o, d):
-        m = len(o)
-        t = np.full(m, np.inf)
-        if self.is_delta:
-            return t
-        oc = o - self.position
-        ok = self._one_sided_ok(o, d)
-        if self.is_sphere:
-            b = (d * oc).sum(axis=1)
-            c = (oc * oc).sum(axis=1) - self.radius ** 2
-            disc = b * b - c
-            root = np.sqrt(np.maximum(disc, 0.0))
-            t0, t1 = -b - root, -b + root
-            tt = np.where(t0 > T_EPSILON, t0, np.where(t1 > T_EPSILON, t1, np.inf))
-            return np.where(ok & (disc >= 0.0), tt, np.inf)
-        light_n, dist_c = _warps.normalize(oc)
-        denom = (d * light_n).sum(axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tt = np.where(denom < 0.0, -dist_c / denom, np.inf)
-        x = o + np.where(np.isfinite(tt), tt, 0.0)[:, None] * d - self.position
-        inside = (x * x).sum(axis=1) <= self.radius ** 2
-        return np.where(ok & inside & (tt > T_EPSILON), tt, np.inf)
+        from .light_set import header_light_intersect
+        return header_light_intersect(self, o, d)
 
     def hit_radiance(self, o, d, t):
-        dist_c = row_norm(o - self.position)
-        mask = np.where(dist_c <= self.radius, 1.0, self._mask(-d))
-        return self.radiance[None, :] * mask[:, None]
+        from .light_set import header_light_hit_radiance
+        return header_light_hit_radiance(self, o, d, t)
 
     def pdf(self, o, d, t):
-        if self.is_delta:
-            return np.zeros(len(o))
-        oc = o - self.position
-        dist_c = row_norm(oc)
-        r = self.radius
-        if self.is_sphere:
-            outside = dist_c > r
-            omc = one_minus_cos_from_sin2(np.minimum((r / np.where(outside, dist_c, 1.0)) ** 2, 1.0))
-            return np.where(outside, 1.0 / (2.0 * np.pi * omc), 1.0 / (4.0 * np.pi))
-        light_n, _ = _warps.normalize(oc)
-        cos_l = np.abs((light_n * d).sum(axis=1))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return t * t / (np.pi * r * r * cos_l)
+        from .light_set import header_light_pdf
+        return header_light_pdf(self, o, d, t)
+
+
+# ----------------------------------------------------------------------------------- kernels
+@scalar_kernel
+def spot_mask(ld, i, w_out):
+    """Angular factor for the direction w_out leaving light i (1 for a point light): Cycles's
+    smoothstep((cos θ − cos(size/2)) / ((1 − cos(size/2))·blend)) for a spot."""
+    if ld.li[i, I_KIND] != SPOT:
+        return 1.0
+    cos_t = dot(w_out, load_col3(ld.lf, i, L_SPOT_DIR))
+    cos_half = ld.lf[i, L_COS_HALF]
+    width = ld.lf[i, L_SPOT_WIDTH]
+    if width <= 0.0:
+        return 1.0 if cos_t > cos_half else 0.0
+    x = clip01((cos_t - cos_half) / width)
+    return x * x * (3.0 - 2.0 * x)
+
+
+@scalar_kernel
+def _sphere_omc(r, d):
+    """1 − cos of the half-angle the sphere of radius r subtends at distance d (> r)."""
+    x = r / d
+    return one_minus_cos_from_sin2(min(x * x, 1.0))
+
+
+@scalar_kernel
+def _sample_sphere(r, axis, d, u0, u1):
+    outside = d > r
+    if outside:
+        omc = _sphere_omc(r, d)
+        local = _warps.uniform_cone(u0, u1, omc)
+    else:
+        omc = 1.0
+        local = _warps.uniform_sphere(u0, u1)
+    safe_axis = axis if d > 0.0 else (0.0, 0.0, 1.0)
+    wi = _warps.to_world(local, safe_axis)
+    cos_t = local[2]
+    root = math.sqrt(max(r * r - d * d * (1.0 - cos_t * cos_t), 0.0))   # law of cosines
+    if outside:
+        return wi, d * cos_t - root, 1.0 / (_TWO_PI * omc)
+    return wi, d * cos_t + root, _INV_4PI
+
+
+@scalar_kernel
+def _sample_disk(pos, r, p, axis, u0, u1):
+    light_n = neg(axis)                                   # disk normal, toward the shaded point
+    if not (math.isfinite(light_n[0]) and math.isfinite(light_n[1]) and math.isfinite(light_n[2])
+            and abs(light_n[0]) + abs(light_n[1]) + abs(light_n[2]) > 0.0):
+        light_n = (0.0, 0.0, 1.0)
+    t, b = build_frame(light_n)
+    x, y = _warps.disk_concentric(u0, u1)
+    x *= r
+    y *= r
+    q = (pos[0] + x * t[0] + y * b[0], pos[1] + x * t[1] + y * b[1], pos[2] + x * t[2] + y * b[2])
+    wi, dist = _warps.normalize(sub(q, p))
+    cos_l = abs(dot(light_n, wi))
+    pdf = dist * dist / (np.pi * r ** 2 * cos_l)
+    return wi, dist, pdf
+
+
+@scalar_kernel
+def point_sample(ld, i, p, u0, u1):
+    """Light i (POINT or SPOT) from p: (wi, dist, radiance, pdf, valid) (pdf without selection)."""
+    pos = load_col3(ld.lf, i, L_POS)
+    axis, d = _warps.normalize(sub(pos, p))
+    r = ld.lf[i, L_RADIUS]
+    if (ld.li[i, I_IS_DELTA] != 0):
+        wi, dist = axis, d
+        dd = d * d
+        radiance = (ld.lf[i, L_INTENSITY + 0] / dd, ld.lf[i, L_INTENSITY + 1] / dd, ld.lf[i, L_INTENSITY + 2] / dd)
+        pdf = 1.0
+    else:
+        if (ld.li[i, I_IS_SPHERE] != 0):
+            wi, dist, pdf = _sample_sphere(r, axis, d, u0, u1)
+        else:
+            wi, dist, pdf = _sample_disk(pos, r, p, axis, u0, u1)
+        radiance = load_col3(ld.lf, i, L_RADIANCE)
+    mask = 1.0 if d <= r else spot_mask(ld, i, neg(wi))
+    radiance = (radiance[0] * mask, radiance[1] * mask, radiance[2] * mask)
+    valid = mask > 0.0 and pdf > 0.0 and math.isfinite(pdf) and dist > 0.0
+    return wi, dist, radiance, pdf, valid
+
+
+@scalar_kernel
+def point_intersect(ld, i, o, d):
+    """Distance to light i's shape (sphere, or disk facing o) along the unit ray, inf on a miss.
+    A spot's shape is hit only by rays heading toward its centre (as in Cycles)."""
+    if (ld.li[i, I_IS_DELTA] != 0):
+        return _INF
+    pos = load_col3(ld.lf, i, L_POS)
+    oc = sub(o, pos)
+    ok = True
+    if ld.li[i, I_KIND] == SPOT:
+        ok = dot(oc, d) < 0.0
+    r = ld.lf[i, L_RADIUS]
+    if (ld.li[i, I_IS_SPHERE] != 0):
+        b = dot(d, oc)
+        c = dot(oc, oc) - r ** 2
+        disc = b * b - c
+        root = math.sqrt(max(disc, 0.0))
+        t0, t1 = -b - root, -b + root
+        tt = t0 if t0 > T_EPSILON else (t1 if t1 > T_EPSILON else _INF)
+        return tt if ok and disc >= 0.0 else _INF
+    light_n, dist_c = _warps.normalize(oc)
+    denom = dot(d, light_n)
+    tt = -dist_c / denom if denom < 0.0 else _INF
+    tf = tt if math.isfinite(tt) else 0.0
+    x = ((o[0] + tf * d[0]) - pos[0], (o[1] + tf * d[1]) - pos[1], (o[2] + tf * d[2]) - pos[2])
+    inside = dot(x, x) <= r ** 2
+    return tt if ok and inside and tt > T_EPSILON else _INF
+
+
+@scalar_kernel
+def point_hit_radiance(ld, i, o, d):
+    """Radiance arriving at o along −d from light i's shape."""
+    dist_c = _warps.norm(sub(o, load_col3(ld.lf, i, L_POS)))
+    mask = 1.0 if dist_c <= ld.lf[i, L_RADIUS] else spot_mask(ld, i, neg(d))
+    return (ld.lf[i, L_RADIANCE + 0] * mask, ld.lf[i, L_RADIANCE + 1] * mask, ld.lf[i, L_RADIANCE + 2] * mask)
+
+
+@scalar_kernel
+def point_pdf(ld, i, o, d, t):
+    """Solid-angle pdf of `point_sample` from o producing d (its shape hit at distance t)."""
+    if (ld.li[i, I_IS_DELTA] != 0):
+        return 0.0
+    oc = sub(o, load_col3(ld.lf, i, L_POS))
+    r = ld.lf[i, L_RADIUS]
+    if (ld.li[i, I_IS_SPHERE] != 0):
+        dist_c = _warps.norm(oc)
+        if dist_c > r:
+            return 1.0 / (_TWO_PI * _sphere_omc(r, dist_c))
+        return _INV_4PI
+    light_n, _ = _warps.normalize(oc)
+    cos_l = abs(dot(light_n, d))
+    return t * t / (np.pi * r * r * cos_l)

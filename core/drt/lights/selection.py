@@ -23,19 +23,33 @@ pmf, and the estimator stays unbiased whatever B_j says (only its variance depen
 
 Directions are world space; ``n`` is the shading normal on wo's side, ``wo`` points from the
 surface toward the viewer (docs/architecture.md).
+
+The kernels take the hint of one point as a tuple ``(n, wo, kd, kg, alpha, kt)``; an all-zero
+hint (nothing known: camera rays) selects exactly as no hint. The per-point pmf is never stored:
+`selection_prob` makes one pass over the strategies (a running maximum and sum of the weights),
+`select_strategy` a second one that walks the cdf.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..vecmath import row_norm
+from .common import scalar_kernel
+from ..kernels.vec3 import dot, load, sub
+from .common import S_CENTRE, S_FACING, S_IS_SUN, S_IS_WORLD, S_LOCAL, S_ONE_SIDED, S_RADIUS2, S_SCALE, S_SUN_DIR, S_SUN_SIN2  # noqa: F401 (table columns)
+from ..kernels.vec3 import load_col3
 
 #: share of the distance-only pmf kept in the BSDF-aware selection (robustness to a bad guess)
 DEFENSIVE_SHARE = 0.1
 _COS_FLOOR = 1e-2  # keeps D/(4 cos θo) finite at grazing view
+
+_GUIDED_SHARE = 1.0 - DEFENSIVE_SHARE
+_FMAX = float(np.finfo(np.float64).max)
+_ONE_MINUS_EPS = float(np.nextafter(1.0, 0.0))
+_INV_PI = 1.0 / np.pi
 
 
 @dataclass
@@ -62,50 +76,210 @@ class ShadingHint:
         return ShadingHint(self.n[rows], self.wo[rows], self.kd[rows], self.kg[rows],
                            self.alpha[rows], self.kt[rows])
 
+    def arrays(self, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(n (m, 3), wo (m, 3), [kd, kg, alpha, kt] (m, 4)) as C-contiguous float64 arrays."""
+        return hint_arrays(self, m)
 
-def bsdf_factor(to_light: np.ndarray, radius2: np.ndarray, hint: ShadingHint) -> np.ndarray:
-    """(m, k) guess of the BSDF·cos averaged over each light's cone (1/sr, see module docstring).
 
-    to_light (m, k, 3): light centre − point (a sun: its unit direction); radius2 (k,): squared
-    bounding radius (a sun: sin² of its half-angle), so that sin θ_L = √(radius2 / d²) ≤ 1."""
-    d2 = np.einsum("mkj,mkj->mk", to_light, to_light)
-    d = np.sqrt(d2)
-    wi = to_light / np.where(d > 0, d, 1.0)[..., None]
-    sin_l = np.sqrt(np.minimum(radius2 / np.maximum(d2, 1e-300), 1.0))
-    cos_c = np.clip(np.einsum("mkj,mj->mk", wi, hint.n), -1.0, 1.0)
+def hint_arrays(hint: ShadingHint | None, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The row arrays the wrapper kernels take for a hint (all zeros for None: nothing known)."""
+    if hint is None:
+        return np.zeros((m, 3)), np.zeros((m, 3)), np.zeros((m, 4))
+    n = np.array(np.broadcast_to(np.asarray(hint.n, dtype=np.float64), (m, 3)), order="C")
+    wo = np.array(np.broadcast_to(np.asarray(hint.wo, dtype=np.float64), (m, 3)), order="C")
+    summary = np.empty((m, 4))
+    for j, a in enumerate((hint.kd, hint.kg, hint.alpha, hint.kt)):
+        summary[:, j] = np.broadcast_to(np.asarray(a, dtype=np.float64), (m,))
+    return n, wo, summary
+
+
+@scalar_kernel
+def row_hint(hn, hwo, hs, r):
+    """Row r of the wrapper arrays as a hint tuple (n, wo, kd, kg, alpha, kt)."""
+    return ((hn[r, 0], hn[r, 1], hn[r, 2]), (hwo[r, 0], hwo[r, 1], hwo[r, 2]),
+            hs[r, 0], hs[r, 1], hs[r, 2], hs[r, 3])
+
+
+# ----------------------------------------------------------------------------------- kernels
+@scalar_kernel
+def bsdf_factor(to_light, radius2, hint):
+    """Guess of the BSDF·cos averaged over a light's cone (1/sr, see the module docstring).
+
+    to_light: light centre − point (a sun: its unit direction); radius2: squared bounding radius
+    (a sun: sin² of its half-angle), so that sin θ_L = √(radius2 / d²) ≤ 1."""
+    n, wo, kd, kg, alpha, kt = hint
+    d2 = dot(to_light, to_light)
+    d = math.sqrt(d2)
+    s = d if d > 0.0 else 1.0
+    wi = (to_light[0] / s, to_light[1] / s, to_light[2] / s)
+    sin_l = math.sqrt(min(radius2 / max(d2, 1e-300), 1.0))
+    cos_c = dot(wi, n)
+    if cos_c < -1.0:
+        cos_c = -1.0
+    if cos_c > 1.0:
+        cos_c = 1.0
     # largest cosine over the light's cone: cos(max(θ − θ_L, 0))
-    theta = np.arccos(cos_c) - np.arcsin(sin_l)
-    cos_bound = np.where(theta > 0, np.cos(theta), 1.0)
-    above = cos_bound > 0
-
-    value = (hint.kd / np.pi)[:, None] * np.maximum(cos_bound, 0.0)
-    if np.any(hint.kg > 0):
-        h = wi + hint.wo[:, None, :]
-        h_len = row_norm(h)
-        cos_h = np.einsum("mkj,mj->mk", h, hint.n) / np.where(h_len > 1e-12, h_len, 1.0)
-        a2 = hint.alpha[:, None] ** 2 + 0.25 * sin_l ** 2
-        denom = np.maximum(cos_h, 0.0) ** 2 * (a2 - 1.0) + 1.0
-        D = a2 / (np.pi * denom * denom)
-        cos_o = np.maximum(np.einsum("mj,mj->m", hint.n, hint.wo), _COS_FLOOR)
-        value = value + np.where(above, (hint.kg / (4.0 * cos_o))[:, None] * D, 0.0)
-    value = value + (hint.kt / np.pi)[:, None]
-    return value
+    theta = math.acos(cos_c) - math.asin(sin_l)
+    cos_bound = math.cos(theta) if theta > 0.0 else 1.0
+    value = (kd / np.pi) * max(cos_bound, 0.0)
+    if kg > 0.0 and cos_bound > 0.0:
+        h = (wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2])
+        h_len = math.sqrt(dot(h, h))
+        cos_h = dot(h, n) / (h_len if h_len > 1e-12 else 1.0)
+        a2 = alpha ** 2 + 0.25 * sin_l ** 2
+        c = max(cos_h, 0.0)
+        denom = c * c * (a2 - 1.0) + 1.0
+        big_d = a2 / (np.pi * denom * denom)
+        cos_o = max(dot(n, wo), _COS_FLOOR)
+        value = value + kg / (4.0 * cos_o) * big_d
+    return value + kt / np.pi
 
 
-def normalise_rows(weights: np.ndarray, fallback: np.ndarray) -> np.ndarray:
-    """(m, k) rows of non-negative ``weights`` scaled to sum to 1; rows with no positive finite
-    weight take ``fallback`` ((k,) or (m, k)). Infinite weights count as the row's largest
-    finite scale, so an absurd flux cannot make inf / inf."""
-    w = np.minimum(weights, np.finfo(np.float64).max)
-    peak = w.max(axis=1, keepdims=True) if w.shape[1] else np.zeros((len(w), 1))
-    ok = peak > 0
-    w = w / np.where(ok, peak, 1.0)  # now in [0, 1]: the sum cannot overflow
-    total = w.sum(axis=1, keepdims=True)
-    return np.where(ok, w / np.where(ok, total, 1.0), fallback)
+@scalar_kernel
+def hint_known(hint):
+    """The hint says something about the material (kd + kg + kt > 0): BSDF-aware selection."""
+    return hint[2] + hint[3] + hint[5] > 0.0
 
 
-def mix_with_defensive(weights: np.ndarray, distance_pmf: np.ndarray) -> np.ndarray:
-    """(m, k) BSDF-aware pmf: ``weights`` (E_j·B_j) normalised per row, mixed with the
-    distance pmf by DEFENSIVE_SHARE; rows whose weights are all zero keep the distance pmf."""
-    guided = normalise_rows(weights, distance_pmf)
-    return (1.0 - DEFENSIVE_SHARE) * guided + DEFENSIVE_SHARE * distance_pmf
+@scalar_kernel
+def distance_weight(ld, j, p):
+    """(irradiance estimate E_j of strategy j at p, p − its centre)."""
+    rel = sub(p, load_col3(ld.sf, j, S_CENTRE))
+    if (ld.sf[j, S_LOCAL] != 0.0):
+        d2 = dot(rel, rel)
+        w = ld.sf[j, S_SCALE] / max(d2, max(ld.sf[j, S_RADIUS2], 1e-12))
+    else:
+        w = ld.sf[j, S_SCALE]
+    if (ld.sf[j, S_ONE_SIDED] != 0.0) and dot(rel, load_col3(ld.sf, j, S_FACING)) <= 0.0:
+        w = 0.0       # behind a one-sided light
+    return w, rel
+
+
+@scalar_kernel
+def strategy_bsdf_factor(ld, j, rel, hint):
+    """`bsdf_factor` of strategy j (rel = p − its centre); the world gets the hemisphere
+    average of f·cos: albedo / 4π (its E estimate is 4πL)."""
+    if (ld.sf[j, S_IS_WORLD] != 0.0):
+        return (hint[2] + hint[3] + hint[5]) / (4.0 * np.pi)
+    if (ld.sf[j, S_IS_SUN] != 0.0):
+        return bsdf_factor(load_col3(ld.sf, j, S_SUN_DIR), ld.sf[j, S_SUN_SIN2], hint)
+    if (ld.sf[j, S_LOCAL] != 0.0):
+        return bsdf_factor((-rel[0], -rel[1], -rel[2]), ld.sf[j, S_RADIUS2], hint)
+    return 0.0
+
+
+@scalar_kernel
+def _accumulate(peak, total, bad, x):
+    """Running (max, Σ x/max, NaN seen) of weights, so that x_j / max / Σ is the normalised
+    row without storing it. Infinite weights count as the largest finite one."""
+    if x != x:
+        return peak, total, True
+    x = min(x, _FMAX)
+    if x > peak:
+        total = total * (peak / x) + 1.0
+        peak = x
+    elif peak > 0.0:
+        total += x / peak
+    return peak, total, bad
+
+
+@scalar_kernel
+def selection_totals(ld, p, hint, guided):
+    """One pass over the strategies: (peak, total, ok) of the distance weights and of the
+    guided ones (E_j · B_j, when `guided`)."""
+    pw = tw = pg = tg = 0.0
+    bw = bg = False
+    for j in range(ld.n_strategies):
+        w, rel = distance_weight(ld, j, p)
+        pw, tw, bw = _accumulate(pw, tw, bw, w)
+        if guided:
+            g = w * strategy_bsdf_factor(ld, j, rel, hint)
+            pg, tg, bg = _accumulate(pg, tg, bg, g)
+    return pw, tw, pw > 0.0 and not bw, pg, tg, pg > 0.0 and not bg
+
+
+@scalar_kernel
+def strategy_prob(ld, j, p, hint, guided, totals):
+    """Probability of strategy j at p given `selection_totals` (per-point selection)."""
+    pw, tw, ok_w, pg, tg, ok_g = totals
+    w, rel = distance_weight(ld, j, p)
+    if ok_w:
+        dist_pmf = (min(w, _FMAX) / pw) / tw
+    else:
+        dist_pmf = ld.pmf[j]      # nothing reaches p: the power distribution
+    if not guided:
+        return dist_pmf
+    if ok_g:
+        g = w * strategy_bsdf_factor(ld, j, rel, hint)
+        guided_pmf = (min(g, _FMAX) / pg) / tg
+    else:
+        guided_pmf = dist_pmf
+    return _GUIDED_SHARE * guided_pmf + DEFENSIVE_SHARE * dist_pmf
+
+
+@scalar_kernel
+def selection_prob(ld, p, hint, strategy):
+    """Probability that `light_sample` at p with this hint chooses `strategy`."""
+    if not ld.per_point:
+        return ld.pmf[strategy]
+    guided = hint_known(hint)
+    totals = selection_totals(ld, p, hint, guided)
+    return strategy_prob(ld, strategy, p, hint, guided, totals)
+
+
+@scalar_kernel
+def _finish_select(u, idx, prob, top, last, last_prob, last_top):
+    """(index, probability, rescaled u) of a walk along a cdf that stopped at idx (cdf value
+    `top`); a zero-probability pick (round-off at the top of the cdf) becomes the last non-zero
+    entry seen (`last`, or −1)."""
+    if prob == 0.0 and last >= 0:
+        idx, prob, top = last, last_prob, last_top
+    lo = top - prob
+    u_rem = (u - lo) / (prob if prob > 0.0 else 1.0)
+    if u_rem < 0.0:
+        u_rem = 0.0
+    if u_rem > _ONE_MINUS_EPS:
+        u_rem = _ONE_MINUS_EPS
+    return idx, prob, u_rem
+
+
+@scalar_kernel
+def select_in(pmf, cdf, u, use_cdf):
+    """Choose an index of the 1-D `pmf` for u in [0, 1): (index, probability, u rescaled to
+    [0, 1) within the chosen interval, reusable for a second discrete choice). The cdf is `cdf`
+    (use_cdf) or the running sum of pmf, its last entry taken as 1. Never lands on a
+    zero-probability entry through round-off at the top of the cdf."""
+    k = len(pmf)
+    c = 0.0
+    last, last_prob, last_top = -1, 0.0, 0.0
+    for j in range(k):
+        pj = pmf[j]
+        c += pj
+        cj = 1.0 if j == k - 1 else (cdf[j] if use_cdf else c)
+        if u < cj or j == k - 1:
+            return _finish_select(u, j, pj, cj, last, last_prob, last_top)
+        if pj > 0.0:
+            last, last_prob, last_top = j, pj, cj
+    return -1, 0.0, 0.0
+
+
+@scalar_kernel
+def select_strategy(ld, p, hint, u):
+    """Choose a strategy at p (with this hint) for u in [0, 1): (index, probability, u
+    rescaled), as `select_in` on the point's pmf, computed in two passes without storing it."""
+    if not ld.per_point:
+        return select_in(ld.pmf, ld.cdf, u, True)
+    k = ld.n_strategies
+    guided = hint_known(hint)
+    totals = selection_totals(ld, p, hint, guided)
+    c = 0.0
+    last, last_prob, last_top = -1, 0.0, 0.0
+    for j in range(k):
+        pj = strategy_prob(ld, j, p, hint, guided, totals)
+        c += pj
+        cj = 1.0 if j == k - 1 else c
+        if u < cj or j == k - 1:
+            return _finish_select(u, j, pj, cj, last, last_prob, last_top)
+        if pj > 0.0:
+            last, last_prob, last_top = j, pj, cj
+    return -1, 0.0, 0.0

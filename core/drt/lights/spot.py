@@ -16,12 +16,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import smoothstep01, unit
+from .common import SPOT, unit
 from .point import PointLight
 
 
 class SpotLight(PointLight):
-    """A Blender SPOT light."""
+    """A Blender SPOT light (its kernels are the point light's: `drt.lights.point`)."""
+
+    kind = SPOT
 
     def __init__(self, light: dict, origin_shift=(0.0, 0.0, 0.0)):
         self.spot_size = float(light.get("spot_size", np.pi / 4))
@@ -33,13 +35,8 @@ class SpotLight(PointLight):
     def _power_fraction(self) -> float:
         return 0.5 * (1.0 - self.cos_half)
 
-    def _mask(self, w_out):
-        cos_t = w_out @ self.direction
-        width = (1.0 - self.cos_half) * self.spot_blend
-        if width <= 0.0:
-            return (cos_t > self.cos_half).astype(np.float64)
-        return smoothstep01((cos_t - self.cos_half) / width)
-
-    def _one_sided_ok(self, o, d):
-        # Cycles only lets rays heading toward the light's centre hit a spot light's shape.
-        return ((o - self.position) * d).sum(axis=1) < 0.0
+    def _store(self, a: dict, i: int) -> None:
+        super()._store(a, i)
+        a["spot_dir"][i] = self.direction
+        a["cos_half"][i] = self.cos_half
+        a["spot_width"][i] = (1.0 - self.cos_half) * self.spot_blend

@@ -9,14 +9,24 @@ The light shines along its local −Z, so the direction *toward* the sun is the 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from . import _warps
-from .common import camera_visible, luminance, unit
+from .common import SUN, camera_visible, luminance, scalar_kernel, unit
+from ..kernels.vec3 import dot, load
+from .common import I_IS_DELTA, L_COS_HALF, L_INTENSITY, L_ONE_MINUS_COS, L_RADIANCE, L_TO_SUN  # noqa: F401 (table columns)
+from ..kernels.vec3 import load_col3
+
+_INF = math.inf
+_TWO_PI = 2.0 * np.pi
 
 
 class SunLight:
     """A Blender SUN light (position and scale are irrelevant)."""
+
+    kind = SUN
 
     def __init__(self, light: dict, scene_radius: float = 1.0):
         m = np.asarray(light["matrix_world"], dtype=np.float64).reshape(4, 4)
@@ -34,23 +44,55 @@ class SunLight:
         # Flux through the scene's cross-section (pbrt's DistantLight::Phi).
         self.power = float(strength * luminance(self.color)) * np.pi * scene_radius ** 2
 
+    def _store(self, a: dict, i: int) -> None:
+        """Write this light's parameters into row i of the `LightData` arrays."""
+        a["kind"][i] = SUN
+        a["is_delta"][i] = self.is_delta
+        a["visible_camera"][i] = self.visible_to_camera
+        a["to_sun"][i] = self.to_sun
+        a["one_minus_cos"][i] = self.one_minus_cos
+        a["cos_half"][i] = self.cos_half
+        a["radiance"][i] = self.radiance
+        a["intensity"][i] = self.irradiance
+
+    # --- thin wrappers over the kernels ---------------------------------------------------
     def sample(self, p, n, u2):
-        m = len(p)
-        axis = np.broadcast_to(self.to_sun, (m, 3))
-        dist = np.full(m, np.inf)
-        if self.is_delta:
-            return (axis.copy(), dist, np.broadcast_to(self.irradiance, (m, 3)).copy(),
-                    np.ones(m), np.ones(m, dtype=bool))
-        local = _warps.square_to_uniform_cone(u2, np.full(m, self.one_minus_cos))
-        wi = _warps.to_world(local, np.ascontiguousarray(axis))
-        pdf = np.full(m, 1.0 / (2.0 * np.pi * self.one_minus_cos))
-        return wi, dist, np.broadcast_to(self.radiance, (m, 3)).copy(), pdf, np.ones(m, dtype=bool)
+        from .light_set import header_light_sample
+        return header_light_sample(self, p, n, u2)
 
     def in_cone(self, d) -> np.ndarray:
         """(m,) bool: unit directions d fall inside the sun's disk (never for a delta sun)."""
-        if self.is_delta:
-            return np.zeros(len(d), dtype=bool)
-        return d @ self.to_sun >= self.cos_half
+        from .light_set import header_sun_query
+        return header_sun_query(self, d)[0]
 
     def pdf_dir(self, d) -> np.ndarray:
-        return np.where(self.in_cone(d), 1.0 / (2.0 * np.pi * max(self.one_minus_cos, 1e-300)), 0.0)
+        from .light_set import header_sun_query
+        return header_sun_query(self, d)[1]
+
+
+# ----------------------------------------------------------------------------------- kernels
+@scalar_kernel
+def sun_sample(ld, i, u0, u1):
+    """Sun i: (wi, dist = inf, radiance, pdf, valid); a delta sun gives its irradiance, pdf 1."""
+    axis = load_col3(ld.lf, i, L_TO_SUN)
+    if (ld.li[i, I_IS_DELTA] != 0):
+        return axis, _INF, load_col3(ld.lf, i, L_INTENSITY), 1.0, True
+    omc = ld.lf[i, L_ONE_MINUS_COS]
+    wi = _warps.to_world(_warps.uniform_cone(u0, u1, omc), axis)
+    return wi, _INF, load_col3(ld.lf, i, L_RADIANCE), 1.0 / (_TWO_PI * omc), True
+
+
+@scalar_kernel
+def sun_contains(ld, i, d):
+    """The unit direction d falls inside sun i's disk (never for a delta sun)."""
+    if (ld.li[i, I_IS_DELTA] != 0):
+        return False
+    return dot(d, load_col3(ld.lf, i, L_TO_SUN)) >= ld.lf[i, L_COS_HALF]
+
+
+@scalar_kernel
+def sun_pdf_dir(ld, i, d):
+    """Solid-angle pdf of `sun_sample` producing d."""
+    if sun_contains(ld, i, d):
+        return 1.0 / (_TWO_PI * max(ld.lf[i, L_ONE_MINUS_COS], 1e-300))
+    return 0.0

@@ -1,17 +1,23 @@
 """The world background: a constant radiance (color × strength) from every direction.
 
 Sampled cosine-weighted about the normal ``n`` the integrator passes (pdf cos θ/π, zero below
-the surface), or uniformly over the sphere when ``n`` is None (pdf 1/(4π)). The integrator must
-pass a normal on the side it wants light from (e.g. flipped toward ``wo``), or None for
-transmissive surfaces; `world_pdf` uses the same rule.
+the surface), or uniformly over the sphere when ``n`` is None — in the kernels, a zero normal
+(pdf 1/(4π)). The integrator must pass a normal on the side it wants light from (e.g. flipped
+toward ``wo``), or None / zero for transmissive surfaces; `world_pdf` uses the same rule.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from . import _warps
-from .common import luminance
+from .common import luminance, scalar_kernel
+from ..kernels.vec3 import dot
+
+_INF = math.inf
+_INV_4PI = 1.0 / (4.0 * np.pi)
 
 
 class WorldLight:
@@ -21,18 +27,41 @@ class WorldLight:
         self.visible_to_camera = True
         # Flux onto the scene's bounding sphere (pbrt's UniformInfiniteLight::Phi): 4π·πR²·L.
         self.power = float(luminance(self.radiance)) * 4.0 * np.pi ** 2 * scene_radius ** 2
+        self._data = None
+
+    def data(self):
+        """A `LightData` with this world as its only strategy (for the wrappers below)."""
+        if self._data is None:
+            from .common import build_light_data
+            self._data = build_light_data([], None, self.radiance)
+        return self._data
 
     def sample(self, p, n, u2):
-        m = len(p)
-        if n is None:
-            wi = _warps.square_to_uniform_sphere(u2)
-        else:
-            wi = _warps.to_world(_warps.square_to_cosine_hemisphere(u2), n)
-        pdf = self.pdf(n, wi)
-        radiance = np.broadcast_to(self.radiance, (m, 3)).copy()
-        return wi, np.full(m, np.inf), radiance, pdf, pdf > 0.0
+        from .light_set import strategy_sample_rows
+        wi, dist, radiance, pdf, valid, _ = strategy_sample_rows(self.data(), 0, p, n, u2)
+        return wi, dist, radiance, pdf, valid
 
     def pdf(self, n, d):
-        if n is None:
-            return np.full(len(d), 1.0 / (4.0 * np.pi))
-        return np.maximum((n * d).sum(axis=1), 0.0) / np.pi
+        from .light_set import world_dir_pdf_rows
+        return world_dir_pdf_rows(self.data(), n, d)
+
+
+# ----------------------------------------------------------------------------------- kernels
+@scalar_kernel
+def world_dir_pdf(n, d):
+    """Solid-angle pdf of `world_sample` about n producing d (n zero: uniform sphere)."""
+    if n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0:
+        return _INV_4PI
+    return max(dot(n, d), 0.0) / np.pi
+
+
+@scalar_kernel
+def world_sample(ld, p, n, u0, u1):
+    """(wi, dist = inf, radiance, pdf, valid): cosine-weighted about n, uniform sphere for n = 0."""
+    if n[0] == 0.0 and n[1] == 0.0 and n[2] == 0.0:
+        wi = _warps.uniform_sphere(u0, u1)
+    else:
+        wi = _warps.to_world(_warps.cosine_hemisphere(u0, u1), n)
+    pdf = world_dir_pdf(n, wi)
+    radiance = (ld.world_color[0], ld.world_color[1], ld.world_color[2])
+    return wi, _INF, radiance, pdf, pdf > 0.0

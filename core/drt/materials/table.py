@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..kernels import kernel
+from ..kernels import inline_kernel, kernel
 from ..kernels.vec3 import load, store
 from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample
 from .diffuse import INV_PI, diffuse_eval, diffuse_sample
@@ -113,7 +113,7 @@ MaterialData = namedtuple("MaterialData", [
     "transmission_or_delta", "has_diffuse", "summary"])
 
 
-@kernel
+@inline_kernel
 def bsdf_eval(md, m, wo, wi):
     """md: MaterialData; m: material index; wo, wi: local unit 3-tuples. Returns (f, pdf): f the
     3-tuple Σ color_l·f_l·|cos θi| over the material's non-delta lobes, pdf = Σ p_l·pdf_l per
@@ -141,7 +141,7 @@ def bsdf_eval(md, m, wo, wi):
     return (f0, f1, f2), pdf
 
 
-@kernel
+@inline_kernel
 def bsdf_sample(md, m, wo, u_lobe, u0, u1):
     """md: MaterialData; m: material index; wo: local unit 3-tuple; u_lobe in [0, 1) picks the
     lobe (and, rescaled inside the picked interval, glass's reflect/refract choice); (u0, u1) in

@@ -26,7 +26,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from ..kernels import kernel
+from ..kernels import inline_kernel, kernel
 
 __all__ = ["PixelFilter", "FilterData", "FILTER_KINDS", "filter_sample", "filter_sample_1d"]
 
@@ -79,7 +79,7 @@ def filter_sample_1d(fd, u):
     return _interp(u, fd.cdf, fd.edges)
 
 
-@kernel
+@inline_kernel
 def filter_sample(fd, u0, u1):
     """Pixel-filter offset (dx, dy) in pixels from the pixel centre for (u0, u1) ∈ [0, 1)²;
     fd = ``PixelFilter.data``.  Every sample carries weight 1."""

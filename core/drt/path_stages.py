@@ -1,0 +1,400 @@
+"""The compiled stages of the wavefront path tracer (called by ``drt.integrator``).
+
+A batch of paths lives in arrays (``Paths``); per bounce the integrator asks Embree for the
+closest hits of all live rays, then ``shade`` does everything else for every live path in one
+compiled loop, and Embree answers the shadow rays that ``shade`` queued, which ``add_unoccluded``
+adds to the film. Per path and bounce ``shade``:
+
+1. collects the emitters the ray passed or hit — light shapes (lights are transparent emitters,
+   as in Cycles), a sun disk and the world for rays that escape, the emission of the surface
+   hit — each MIS-weighted against the light sampling done at the previous vertex;
+2. stops the path if it had reached a bounce limit (Cycles: a path past a limit still collects
+   the emission of its next hit);
+3. next-event estimation: samples a light, evaluates the BSDF, weights by the chosen heuristic
+   and queues a shadow ray;
+4. samples the BSDF to continue, counts bounces like Cycles, applies Russian roulette after
+   ``RR_START_BOUNCE`` bounces, and writes the surviving path back *compacted* (live paths stay
+   at the front of the arrays: slot j ≤ i is written only after path j was read).
+
+Sample dimensions (each a 2-D point from ``sample_2d``):
+
+| dim | use |
+|---|---|
+| 0 | pixel filter offset |
+| 1 | lens position |
+| 2 | (shutter time, unused) |
+| 3 + 4b | (light selection, BSDF lobe selection) at bounce b |
+| 4 + 4b | light sample position |
+| 5 + 4b | BSDF direction |
+| 6 + 4b | (Russian roulette, unused) |
+
+Directions follow docs/architecture.md: ``wo`` points back along the path, ``wi`` toward the
+next vertex; the local frame's z is the shading normal on the geometric front side.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+
+from .camera import camera_ray
+from .kernels import inline_kernel, kernel
+from .kernels.vec3 import add, build_frame, dot, load, mul, neg, normalize, scale, store, sub, to_local, to_world
+from .lights.common import I_VISIBLE_CAMERA
+from .lights import (emissive_pdf, light_sample, shape_emission, shape_intersect, sun_emission, sun_in_cone,
+                     world_pdf, world_radiance)
+from .materials import LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, bsdf_eval, bsdf_sample
+from .sampling.pixel_filter import filter_sample
+from .sampling.sequences import sample_2d
+from .sampling.warps import cosine_hemisphere, uniform_hemisphere
+from .trace import offset_point
+
+D_PIXEL, D_LENS, D_TIME, D_BOUNCE0, DIMS_PER_BOUNCE = 0, 1, 2, 3, 4
+RR_START_BOUNCE = 3
+SHADOW_EPSILON = 1e-4  # relative shortening of shadow rays so they stop before the light's surface
+# largest radiance a sample may carry: its square (the variance pass) still fits float32
+MAX_SAMPLE_RADIANCE = 1e18
+
+# direct-light strategies (scene.DIRECT_STRATEGIES order) and continuation strategies
+DIRECT_MIS_POWER, DIRECT_MIS_BALANCE, DIRECT_LIGHT, DIRECT_BSDF = 0, 1, 2, 3
+INDIRECT_BSDF, INDIRECT_COSINE, INDIRECT_UNIFORM = 0, 1, 2
+
+StageSettings = namedtuple("StageSettings", [
+    "width", "height",                    # image size in pixels
+    "max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
+    "clamp_direct", "clamp_indirect",     # 0: off
+    "direct", "indirect",                 # DIRECT_* / INDIRECT_* codes
+    "film_transparent",                   # camera rays that miss get alpha 0
+    "motion",                             # anything moves: draw a shutter time per sample
+])
+
+Paths = namedtuple("Paths", [
+    "o", "d", "tmax", "tau",              # rays (n, 3), (n, 3), (n,), (n,) shutter fraction
+    "throughput",                         # (n, 3)
+    "prev_pdf", "prev_delta",             # BSDF pdf of the ray / it left the camera or a delta lobe
+    "prev_p", "prev_n", "prev_wo", "prev_mat",  # the vertex the ray left (MIS pdfs, selection hint)
+    "counts",                             # (n, 4) int32: bounces, diffuse, glossy, transmission
+    "terminate",                          # (n,) bool: collect emission at the next hit, then stop
+    "slot", "pixel", "index",             # batch row, flat pixel id, sample number
+])
+
+Outputs = namedtuple("Outputs", ["radiance", "alpha", "depth", "normal", "albedo", "eye", "forward"])
+
+ShadowRays = namedtuple("ShadowRays", ["o", "d", "tmax", "tau", "contrib", "slot"])
+
+Surfaces = namedtuple("Surfaces", [
+    "material",       # (T,) int32 per global triangle
+    "normals",        # (T, 3, 3) float32 per-corner shading normals ((0, 3, 3): none in the scene)
+    "has_normals",    # (T,) bool
+])
+
+HitArrays = namedtuple("HitArrays", [
+    "prim", "t", "b1", "b2",              # Embree's answer (prim −1: miss)
+    "p", "ng",                            # (n, 3) float64 hit point and unit geometric normal
+    "normal_xform",                       # (n, 3, 3): local→world normal map of moving hits
+    "moving",                             # (n,) bool: normal_xform applies ((0,) when none)
+])
+
+
+@kernel
+def power_heuristic(pdf_a, pdf_b):
+    """Veach's power heuristic (β = 2) weight of strategy a; 0 where both pdfs are 0."""
+    a2 = pdf_a * pdf_a
+    denom = a2 + pdf_b * pdf_b
+    return a2 / denom if denom > 0.0 else 0.0
+
+
+@kernel
+def balance_heuristic(pdf_a, pdf_b):
+    """Veach's balance heuristic weight of strategy a; 0 where both pdfs are 0."""
+    denom = pdf_a + pdf_b
+    return pdf_a / denom if denom > 0.0 else 0.0
+
+
+@inline_kernel
+def hit_weight(direct, prev_delta, bsdf_pdf, light_pdf):
+    """MIS weight of an emitter found by a BSDF-sampled ray (1 after camera/delta rays)."""
+    if prev_delta or direct == DIRECT_BSDF:
+        return 1.0
+    if direct == DIRECT_LIGHT:  # next-event estimation counted it, unless it could not sample it
+        return 0.0 if light_pdf > 0.0 else 1.0
+    if direct == DIRECT_MIS_BALANCE:
+        return balance_heuristic(bsdf_pdf, light_pdf)
+    return power_heuristic(bsdf_pdf, light_pdf)
+
+
+@inline_kernel
+def nee_weight(direct, light_delta, light_pdf, bsdf_pdf):
+    """MIS weight of a next-event sample (1 for delta lights and light-only estimation)."""
+    if light_delta or direct == DIRECT_LIGHT:
+        return 1.0
+    if direct == DIRECT_MIS_BALANCE:
+        return balance_heuristic(light_pdf, bsdf_pdf)
+    return power_heuristic(light_pdf, bsdf_pdf)
+
+
+@inline_kernel
+def clamp(settings, c, indirect):
+    """Cycles's sample clamping: light found at the first vertex (by NEE there, or by the BSDF
+    ray leaving it) is direct, deeper is indirect; a limit ≤ 0 is off."""
+    limit = settings.clamp_indirect if indirect else settings.clamp_direct
+    if limit > 0.0:
+        peak = max(c[0], max(c[1], c[2]))
+        if peak > limit:
+            return scale(c, limit / peak)
+    return c
+
+
+@kernel
+def any_positive(c):
+    return c[0] > 0.0 or c[1] > 0.0 or c[2] > 0.0
+
+
+@inline_kernel
+def shading_normal(surf, hits, i, prim, ng):
+    """Interpolated shading normal at hit i, on the geometric front side (ng if flat shaded)."""
+    if surf.normals.shape[0] == 0 or not surf.has_normals[prim]:
+        return ng
+    b1, b2 = hits.b1[i], hits.b2[i]
+    b0 = 1.0 - b1 - b2
+    nc = surf.normals[prim]
+    n = (b0 * nc[0, 0] + b1 * nc[1, 0] + b2 * nc[2, 0],
+         b0 * nc[0, 1] + b1 * nc[1, 1] + b2 * nc[2, 1],
+         b0 * nc[0, 2] + b1 * nc[1, 2] + b2 * nc[2, 2])
+    if hits.moving.shape[0] and hits.moving[i]:
+        m = hits.normal_xform[i]
+        n = (m[0, 0] * n[0] + m[0, 1] * n[1] + m[0, 2] * n[2],
+             m[1, 0] * n[0] + m[1, 1] * n[1] + m[1, 2] * n[2],
+             m[2, 0] * n[0] + m[2, 1] * n[1] + m[2, 2] * n[2])
+    n, length = normalize(n)
+    if not length > 1e-12:
+        return ng
+    if dot(n, ng) < 0.0:  # shading normals live on the geometric front side
+        return neg(n)
+    return n
+
+
+@inline_kernel
+def material_hint(md, mat, n, wo):
+    """The light-selection hint of a shading point (all zero: nothing known, e.g. camera rays)."""
+    if mat < 0:
+        return ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
+    s = md.summary[mat]
+    return (n, wo, s[0], s[1], s[2], s[3])
+
+
+@kernel
+def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
+    """Primary rays for camera samples (x column from the left, row from the TOP, sample index);
+    initialises the path state and the outputs of every batch row."""
+    W, H = settings.width, settings.height
+    for i in range(x.shape[0]):
+        pixel = row[i] * W + x[i]
+        idx = index[i]
+        u0, u1 = sample_2d(sd, pixel, idx, D_PIXEL)
+        dx, dy = filter_sample(fd, u0, u1)
+        px = x[i] + 0.5 + dx
+        py = (H - 1 - row[i]) + 0.5 + dy  # the camera wants v from the bottom
+        l0, l1 = sample_2d(sd, pixel, idx, D_LENS)
+        tau = 0.0
+        if settings.motion:
+            tau = sample_2d(sd, pixel, idx, D_TIME)[0]
+        o, d, tmax, eye, forward = camera_ray(cd, px, py, l0, l1, tau)
+        store(paths.o, i, o)
+        store(paths.d, i, d)
+        paths.tmax[i] = tmax
+        paths.tau[i] = tau
+        store(paths.throughput, i, (1.0, 1.0, 1.0))
+        paths.prev_pdf[i] = 0.0
+        paths.prev_delta[i] = True
+        store(paths.prev_p, i, o)
+        store(paths.prev_n, i, (0.0, 0.0, 0.0))
+        store(paths.prev_wo, i, (0.0, 0.0, 0.0))
+        paths.prev_mat[i] = -1
+        for c in range(4):
+            paths.counts[i, c] = 0
+        paths.terminate[i] = False
+        paths.slot[i] = i
+        paths.pixel[i] = pixel
+        paths.index[i] = idx
+        store(out.radiance, i, (0.0, 0.0, 0.0))
+        out.alpha[i] = 1.0
+        out.depth[i] = np.inf
+        store(out.normal, i, (0.0, 0.0, 0.0))
+        store(out.albedo, i, (0.0, 0.0, 0.0))
+        store(out.eye, i, eye)
+        store(out.forward, i, forward)
+
+
+@kernel
+def shade(sd, md, ld, surf, settings, depth_i, live, paths, hits, out, shadow):
+    """One bounce for paths [0, live) (see the module docstring). Returns (paths still alive,
+    now compacted to the front; shadow rays queued in ``shadow``)."""
+    camera = depth_i == 0
+    base = D_BOUNCE0 + DIMS_PER_BOUNCE * depth_i
+    direct = settings.direct
+    n_shadow = 0
+    j = 0
+    for i in range(live):
+        slot = paths.slot[i]
+        o = load(paths.o, i)
+        d = load(paths.d, i)
+        thr = load(paths.throughput, i)
+        prev_pdf = paths.prev_pdf[i]
+        prev_delta = paths.prev_delta[i]
+        prev_p = load(paths.prev_p, i)
+        prev_n = load(paths.prev_n, i)
+        bounce = paths.counts[i, 0]
+        prev_hint = material_hint(md, paths.prev_mat[i], prev_n, load(paths.prev_wo, i))
+        prim = hits.prim[i]
+        t_geom = hits.t[i] if prim >= 0 else np.inf
+        deep = bounce > 1  # light reached through more than one vertex is "indirect"
+        acc = (0.0, 0.0, 0.0)
+
+        # --- emitters along the ray: light shapes (transparent), then a sun disk and the world
+        for k in range(ld.n_shapes):
+            t = shape_intersect(ld, k, o, d)
+            if t < t_geom:
+                light, le, lpdf = shape_emission(ld, k, o, d, t, prev_p, prev_hint)
+                if camera and ld.li[light, I_VISIBLE_CAMERA] == 0:
+                    continue
+                w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
+                acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
+        if prim < 0:
+            sun = sun_in_cone(ld, d)
+            if sun >= 0 and not (camera and ld.li[sun, I_VISIBLE_CAMERA] == 0):
+                le, lpdf = sun_emission(ld, sun, prev_p, d, prev_hint)
+                w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
+                acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
+            if camera and settings.film_transparent:
+                out.alpha[slot] = 0.0
+            else:
+                le = world_radiance(ld, d)
+                wpdf = world_pdf(ld, prev_p, prev_n, d, prev_hint)
+                w = hit_weight(direct, prev_delta, prev_pdf, wpdf)
+                acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
+            store(out.radiance, slot, add(load(out.radiance, slot), acc))
+            continue
+
+        # --- the surface hit: its emission (also for paths stopping here at a bounce limit)
+        mat = surf.material[prim]
+        p = load(hits.p, i)
+        ng = load(hits.ng, i)
+        if md.has_emission[mat]:
+            le = load(md.emission, mat)
+            lpdf = emissive_pdf(ld, prim, prev_p, p, ng, prev_hint)
+            w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
+            acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
+        store(out.radiance, slot, add(load(out.radiance, slot), acc))
+        if paths.terminate[i]:
+            continue
+
+        ns = shading_normal(surf, hits, i, prim, ng)
+        wo = neg(d)
+        if camera:
+            out.depth[slot] = max(dot(sub(p, load(out.eye, slot)), load(out.forward, slot)), 0.0)
+            store(out.normal, slot, ns)
+            store(out.albedo, slot, load(md.albedo, mat))
+        pixel = paths.pixel[i]
+        idx = paths.index[i]
+        u_light_select, u_lobe = sample_2d(sd, pixel, idx, base)
+        t_ax, b_ax = build_frame(ns)
+        wo_l = to_local(wo, t_ax, b_ax, ns)
+        # lights are sampled over the hemisphere wo is in; transmitted light stays reachable by
+        # BSDF sampling, whose MIS weight is then 1
+        n_wo = ns if wo_l[2] >= 0.0 else neg(ns)
+
+        # --- next-event estimation
+        if direct != DIRECT_BSDF and ld.n_strategies > 0 and not md.delta_only[mat]:
+            hint = material_hint(md, mat, n_wo, wo)
+            ul0, ul1 = sample_2d(sd, pixel, idx, base + 1)
+            wi, dist, le, lpdf, l_delta, l_valid = light_sample(ld, p, n_wo, hint, u_light_select, ul0, ul1)
+            if l_valid and lpdf > 0.0:
+                wi_l = to_local(wi, t_ax, b_ax, ns)
+                f, bpdf = bsdf_eval(md, mat, wo_l, wi_l)
+                # geometric and shading normals must agree on reflection vs transmission
+                same_geo = dot(wi, ng) * dot(wo, ng) > 0.0
+                same_sh = wi_l[2] * wo_l[2] > 0.0
+                if same_geo == same_sh and any_positive(f):
+                    w = nee_weight(direct, l_delta, lpdf, bpdf)
+                    c = clamp(settings, scale(mul(mul(thr, f), le), w / lpdf), bounce > 0)
+                    store(shadow.o, n_shadow, offset_point(p, ng, wi))
+                    store(shadow.d, n_shadow, wi)
+                    shadow.tmax[n_shadow] = dist * (1.0 - SHADOW_EPSILON) if math.isfinite(dist) else np.inf
+                    shadow.tau[n_shadow] = paths.tau[i]
+                    store(shadow.contrib, n_shadow, c)
+                    shadow.slot[n_shadow] = slot
+                    n_shadow += 1
+
+        # --- continue the path by sampling the BSDF
+        ub0, ub1 = sample_2d(sd, pixel, idx, base + 2)
+        wi_l, weight, bpdf, kind, b_delta, b_valid = bsdf_sample(md, mat, wo_l, u_lobe, ub0, ub1)
+        if settings.indirect != INDIRECT_BSDF and not md.transmission_or_delta[mat]:
+            # the lecture's hemisphere estimators, on wo's side of the surface
+            if settings.indirect == INDIRECT_COSINE:
+                wi_l = cosine_hemisphere(ub0, ub1)
+                bpdf = wi_l[2] / math.pi
+            else:
+                wi_l = uniform_hemisphere(ub0, ub1)
+                bpdf = 0.5 / math.pi
+            if wo_l[2] < 0.0:
+                wi_l = (wi_l[0], wi_l[1], -wi_l[2])
+            f, _ = bsdf_eval(md, mat, wo_l, wi_l)
+            b_valid = bpdf > 0.0
+            weight = scale(f, 1.0 / bpdf) if b_valid else (0.0, 0.0, 0.0)
+            b_delta = False
+            kind = LOBE_DIFFUSE if md.has_diffuse[mat] else LOBE_GLOSSY
+        wi = to_world(wi_l, t_ax, b_ax, ns)
+        refl_geo = dot(wi, ng) * dot(wo, ng) > 0.0
+        refl_sh = wi_l[2] * wo_l[2] > 0.0
+        alive = b_valid and refl_geo == refl_sh and any_positive(weight)
+        thr = mul(thr, weight)
+        n_bounce = bounce + 1
+        n_diffuse = paths.counts[i, 1] + (1 if kind == LOBE_DIFFUSE else 0)
+        n_glossy = paths.counts[i, 2] + (1 if kind == LOBE_GLOSSY else 0)
+        n_transmission = paths.counts[i, 3] + (1 if kind == LOBE_TRANSMISSION else 0)
+        limit = (n_bounce > settings.max_bounces or n_diffuse > settings.diffuse_bounces
+                 or n_glossy > settings.glossy_bounces or n_transmission > settings.transmission_bounces)
+        if depth_i + 1 >= RR_START_BOUNCE:
+            u_rr = sample_2d(sd, pixel, idx, base + 3)[0]
+            q = min(max(max(thr[0], max(thr[1], thr[2])), 0.0), 1.0)
+            if not u_rr < q:
+                alive = False
+            elif q > 0.0:
+                thr = scale(thr, 1.0 / q)
+        if not alive:
+            continue
+
+        # --- write the continuing path to slot j ≤ i (compaction in place)
+        store(paths.o, j, offset_point(p, ng, wi))
+        store(paths.d, j, wi)
+        paths.tmax[j] = np.inf
+        paths.tau[j] = paths.tau[i]
+        store(paths.throughput, j, thr)
+        paths.prev_pdf[j] = bpdf
+        paths.prev_delta[j] = b_delta
+        store(paths.prev_p, j, p)
+        store(paths.prev_n, j, n_wo)
+        store(paths.prev_wo, j, wo)
+        paths.prev_mat[j] = mat
+        paths.counts[j, 0] = n_bounce
+        paths.counts[j, 1] = n_diffuse
+        paths.counts[j, 2] = n_glossy
+        paths.counts[j, 3] = n_transmission
+        paths.terminate[j] = limit
+        paths.slot[j] = slot
+        paths.pixel[j] = pixel
+        paths.index[j] = idx
+        j += 1
+    return j, n_shadow
+
+
+@kernel
+def add_unoccluded(shadow, count, blocked, radiance):
+    """Add the contribution of every queued shadow ray that reached its light."""
+    for s in range(count):
+        if not blocked[s]:
+            slot = shadow.slot[s]
+            store(radiance, slot, add(load(radiance, slot), load(shadow.contrib, s)))
