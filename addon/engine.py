@@ -95,10 +95,15 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         flags = compat.view_layer_pass_flags(depsgraph.view_layer)
         wanted = [p for p in PASSES if flags[p[5]]]
 
+        kernels = compat.core_module("kernels")
+        if not kernels.kernels_compiled():  # the first render of an install compiles (~30 s)
+            self.report({"INFO"}, f"DRT: {kernels.COMPILING_NOTICE}")
         self.update_stats("", "DRT | Building acceleration structures")
         context = render_mod.prepare(drt_scene)
         for w in getattr(context, "warnings", []):
             self.report({"WARNING"}, f"DRT: {w}")
+        if not kernels.kernels_compiled():
+            self.update_stats("", "DRT | Compiling render kernels (first render only, about half a minute)")
         t_render = time.perf_counter()
         last_draw = [0.0]
         crop = border_crop(scene, width, height)
@@ -122,7 +127,8 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         try:
             film = render_mod.render(drt_scene, spp=spp, sample_offset=offset,
                                      sample_count=count, progress=progress,
-                                     cancel=self.cancel_requested, context=context)
+                                     cancel=self.cancel_requested, context=context,
+                                     threads=render_threads(scene))
             fill_layer(result.layers[0], film, crop, wanted)
         finally:
             self.end_result(result)
@@ -130,6 +136,14 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         done = getattr(stats, "samples_done", count or spp)
         self.update_stats("", f"DRT | {done} samples in "
                               f"{_format_seconds(time.perf_counter() - t_start)}")
+
+
+def render_threads(scene) -> int | None:
+    """Blender's Performance > Threads setting: a fixed count, or None (auto: every core)."""
+    r = scene.render
+    if getattr(r, "threads_mode", "AUTO") == "FIXED":
+        return max(1, int(r.threads))
+    return None
 
 
 def border_crop(scene, width, height) -> tuple[slice, slice]:

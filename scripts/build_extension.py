@@ -3,7 +3,7 @@
     python scripts/build_extension.py [--out dist] [--no-download] [--legacy-only]
 
 1. Stages ``addon/`` with the core (``core/drt``) copied in as the sub-package ``drt`` and the
-   embreex wheels listed in ``addon/blender_manifest.toml`` (downloaded with pip into
+   wheels (embreex, numba, llvmlite) listed in ``addon/blender_manifest.toml`` (downloaded with pip into
    ``build/wheels``, reused when present).
 2. Extension (Blender 4.2+): runs Blender's own extension builder, shipped in the bpy wheel at
    ``bpy/<ver>/scripts/addons_core/bl_pkg/cli/blender_ext.py``, with ``--split-platforms``:
@@ -55,8 +55,9 @@ def download_wheels(names: list[str], dest: str = WHEEL_CACHE) -> list[str]:
         if not os.path.exists(path):
             dist, version, py, _abi, plat = name[:-4].split("-", 4)
             platform = plat.split(".")[-1]
+            python = f"{py[2]}.{py[3:]}"  # cp311 -> 3.11, cp313 -> 3.13
             subprocess.run([sys.executable, "-m", "pip", "download", f"{dist}=={version}",
-                            "--no-deps", "--only-binary=:all:", "--python-version", "3.11",
+                            "--no-deps", "--only-binary=:all:", "--python-version", python,
                             "--platform", platform, "-d", dest], check=True)
         if not os.path.exists(path):
             raise SystemExit(f"wheel {name} was not downloaded")
@@ -101,6 +102,11 @@ def build_extension(out: str, wheels: list[str]) -> list[str]:
     return sorted(glob.glob(os.path.join(out, f"drt-{manifest_version()}-*.zip")))
 
 
+def legacy_wheels(wheels: list[str]) -> list[str]:
+    """The wheels the legacy add-on vendors: Linux x86-64 for Python 3.11 (Blender 3.4 - 4.1)."""
+    return [w for w in wheels if "manylinux" in w and "-cp311-" in os.path.basename(w)]
+
+
 def build_legacy(out: str, linux_wheels: list[str]) -> str:
     stage = os.path.join(REPO, "build", "legacy", LEGACY_NAME)
     stage_addon(stage, linux_wheels)
@@ -124,7 +130,7 @@ def main(argv=None) -> int:
     built = []
     if not opts.legacy_only:
         built += build_extension(opts.out, wheels)
-    built.append(build_legacy(opts.out, [w for w in wheels if "manylinux" in w]))
+    built.append(build_legacy(opts.out, legacy_wheels(wheels)))
     for b in built:
         print(f"built {b} ({os.path.getsize(b) / 1e6:.1f} MB)")
     return 0

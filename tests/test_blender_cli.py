@@ -32,7 +32,7 @@ def install(tmp_path_factory):
     scripts = root / "scripts"
     sys.path.insert(0, os.path.join(REPO, "scripts"))
     import build_extension as b
-    wheels = b.download_wheels([w for w in b.manifest_wheels() if "manylinux" in w])
+    wheels = b.download_wheels([w for w in b.manifest_wheels() if "manylinux" in w and "-cp311-" in w])
     dest = b.stage_addon(str(scripts / "addons" / b.LEGACY_NAME), wheels)
     os.remove(os.path.join(dest, "blender_manifest.toml"))
     modules = scripts / "modules"

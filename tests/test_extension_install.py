@@ -44,21 +44,25 @@ print("CORE", sorted(m for m in sys.modules if m.endswith("drt.integrator")), fl
 """
 
 
-def linux_wheel() -> str:
+def linux_wheels() -> list[str]:
+    """The manifest's linux-x64 wheels for this Python (embreex, numba, llvmlite)."""
     import build_extension as b
-    return b.download_wheels([w for w in b.manifest_wheels() if "manylinux" in w])[0]
+    tag = f"-cp{sys.version_info[0]}{sys.version_info[1]}-"
+    return b.download_wheels([w for w in b.manifest_wheels() if "manylinux" in w and tag in w])
 
 
-def build_linux_extension(tmp, wheel) -> str:
+def build_linux_extension(tmp, wheels) -> str:
     """A linux-x64 extension zip of the current tree (manifest narrowed to that platform)."""
     import build_extension as b
     stage = b.stage_addon(os.path.join(tmp, "stage", "drt"))
     os.makedirs(os.path.join(stage, "wheels"))
-    shutil.copy2(wheel, os.path.join(stage, "wheels"))
+    for wheel in wheels:
+        shutil.copy2(wheel, os.path.join(stage, "wheels"))
     manifest = os.path.join(stage, "blender_manifest.toml")
     text = open(manifest, encoding="utf-8").read()
     text = re.sub(r"platforms = \[[^\]]*\]", 'platforms = ["linux-x64"]', text)
-    text = re.sub(r"wheels = \[[^\]]*\]", f'wheels = ["./wheels/{os.path.basename(wheel)}"]', text)
+    listed = ", ".join(f'"./wheels/{os.path.basename(w)}"' for w in wheels)
+    text = re.sub(r"wheels = \[[^\]]*\]", f"wheels = [{listed}]", text)
     open(manifest, "w", encoding="utf-8").write(text)
     out = os.path.join(tmp, "dist")
     os.makedirs(out)
@@ -70,10 +74,11 @@ def build_linux_extension(tmp, wheel) -> str:
 
 def test_extension_zip_installs_enables_and_renders(tmp_path):
     try:
-        wheel = linux_wheel()
+        wheels = linux_wheels()
     except (subprocess.CalledProcessError, SystemExit) as e:
-        pytest.skip(f"could not fetch the embreex wheel: {e}")
-    zip_path = build_linux_extension(str(tmp_path), wheel)
+        pytest.skip(f"could not fetch the wheels: {e}")
+    assert {os.path.basename(w).split("-")[0] for w in wheels} == {"embreex", "numba", "llvmlite"}
+    zip_path = build_linux_extension(str(tmp_path), wheels)
     user = tmp_path / "user"
     user.mkdir()
     out = tmp_path / "render.exr"

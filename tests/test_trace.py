@@ -102,11 +102,88 @@ def test_swept_box_culling_never_loses_a_hit():
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         tau = rng.random(n)
         culled = tr.intersect(o, d, tau=tau)
-        for obj in tr.moving:  # no culling: every ray is a candidate
-            obj.candidates = lambda o, d, tmax, rows=None: np.arange(len(o)) if rows is None else rows
+        for obj in tr.moving:  # no culling: an infinite swept box makes every ray a candidate
+            obj.box_lo[:] = -np.inf
+            obj.box_hi[:] = np.inf
         full = tr.intersect(o, d, tau=tau)
         assert full.hit.sum() > 200, deforming
         assert np.array_equal(culled.prim, full.prim), deforming
         np.testing.assert_array_equal(culled.t, full.t)
         blocked = tr.occluded(o, d, np.full(n, np.inf), tau)
         assert np.array_equal(blocked, full.hit)
+
+
+def _random_rays(rng, n):
+    target = rng.uniform(-3.5, 4.5, size=(n, 3))
+    o = rng.uniform(-8, 8, size=(n, 3))
+    d = target - o
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return o, d, rng.random(n)
+
+
+def test_moving_hit_points_normals_and_transforms():
+    """Hit points lie on their rays; normals are the world triangle's (vertices at the ray's τ
+    mapped by the object's transform at τ), unit, counter-clockwise front; moving_linear holds
+    that transform for moving hits and the identity elsewhere, and is None without moving hits."""
+    rng = np.random.default_rng(7)
+    for deforming in (False, True):
+        tr = _spinning_scene(deforming)
+        mm = tr.geom.moving[0]
+        o, d, tau = _random_rays(rng, 3000)
+        hits = tr.intersect(o, d, tau=tau)
+        hit = hits.hit
+        assert hit.sum() > 100 and not hit.all()
+        # Embree's t and barycentrics (rigid) are float32; the exact deforming test is float64
+        np.testing.assert_allclose(hits.p[hit], o[hit] + hits.t[hit, None] * d[hit],
+                                   atol=1e-9 if deforming else 2e-5)
+        lin, trans = mm.motion.at(tau[hit])
+        np.testing.assert_array_equal(hits.moving_linear[hit], lin)
+        np.testing.assert_array_equal(hits.moving_linear[~hit], np.broadcast_to(np.eye(3), ((~hit).sum(), 3, 3)))
+        tri = mm.triangles[hits.prim[hit] - mm.prim_offset]
+        v = mm.positions[tri]
+        if deforming:
+            w = tau[hit][:, None, None]
+            v = (1 - w) * v + w * mm.positions_close[tri]
+        world = np.einsum("nij,nkj->nki", lin, v) + trans[:, None]
+        n_ref = np.cross(world[:, 1] - world[:, 0], world[:, 2] - world[:, 0])
+        n_ref /= np.linalg.norm(n_ref, axis=1, keepdims=True)
+        np.testing.assert_allclose(hits.ng[hit], n_ref, atol=1e-9)
+        # rays that miss everything: no moving hit, no transforms
+        far = tr.intersect(o[~hit], d[~hit], tau=tau[~hit])
+        assert not far.hit.any() and far.moving_linear is None
+
+
+def test_occlusion_of_moving_objects_respects_tmax():
+    rng = np.random.default_rng(8)
+    for deforming in (False, True):
+        tr = _spinning_scene(deforming)
+        o, d, tau = _random_rays(rng, 3000)
+        hits = tr.intersect(o, d, tau=tau)
+        tmax = np.where(rng.random(len(o)) < 0.5, hits.t * 0.999, hits.t * 1.001)
+        tmax[~hits.hit] = rng.uniform(0, 20, (~hits.hit).sum())
+        expect = hits.hit & (hits.t < tmax)
+        assert expect.sum() > 50 and (hits.hit & ~expect).sum() > 50
+        np.testing.assert_array_equal(tr.occluded(o, d, tmax, tau), expect)
+        limited = tr.intersect(o, d, tau=tau, tmax=tmax)
+        np.testing.assert_array_equal(limited.hit, expect)
+
+
+def test_concurrent_queries_match_serial():
+    """Several threads query one tracer at once (the render loop does): no shared scratch."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(9)
+    tr = _spinning_scene(True)
+    batches = [_random_rays(rng, 2000) for _ in range(8)]
+
+    def query(b):
+        o, d, tau = b
+        h = tr.intersect(o, d, tau=tau)
+        return h.prim, h.t, h.p, tr.occluded(o, d, np.full(len(o), np.inf), tau)
+
+    serial = [query(b) for b in batches]
+    with ThreadPoolExecutor(4) as pool:
+        parallel = list(pool.map(query, batches * 3))
+    for k, got in enumerate(parallel):
+        for a, b in zip(serial[k % len(batches)], got):
+            np.testing.assert_array_equal(a, b)

@@ -195,6 +195,10 @@ def cmd_render(args) -> int:
         stop.set()
 
     signal.signal(signal.SIGINT, on_sigint)
+    from .kernels import COMPILING_NOTICE, kernels_compiled
+
+    if not kernels_compiled():
+        print(f"drt: {COMPILING_NOTICE}", file=sys.stderr, flush=True)
     bar = Progress()
     try:
         film = render(

@@ -14,7 +14,6 @@ merge into the full image (``merge_films``).
 from __future__ import annotations
 
 import os
-import sys
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -29,6 +28,7 @@ from .camera import Camera
 from .film import Film, luminance
 from .geometry import build_geometry
 from .integrator import Integrator
+from .kernels import mark_kernels_compiled
 from .lights import EmissiveTriangles, LightSet
 from .materials import MaterialTable
 from .sampling.pixel_filter import PixelFilter
@@ -140,17 +140,6 @@ class _ThreadWorkers:
         self.pool.shutdown(wait=True)
 
 
-def _use_processes(parallel: str, threads: int, paths: int) -> bool:
-    if parallel == "threads" or threads < 2:
-        return False
-    if parallel == "processes":
-        return True
-    # auto: not inside Blender (its executable is not a Python to spawn) and only for jobs big
-    # enough to repay a second or so of worker start-up
-    inside_blender = "bpy" in sys.modules and not sys.executable.endswith(("python", "python3", "python3.11"))
-    return not inside_blender and paths >= 32 * BATCH_PATHS
-
-
 def _pixel_region(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """Columns (from the left) and rows (from the top) of the pixels to render (border aware)."""
     w, h = scene.render.width, scene.render.height
@@ -208,8 +197,10 @@ def render(
     of its mean luminance falls below the threshold (``film.sample_count`` records what each
     pixel took). Stopping depends only on the pixel's own samples, so it stays deterministic.
 
-    parallel: "threads", "processes" or "auto" (processes for large jobs outside Blender). The
-    image is bit-identical in every mode: batches are added to the film in a fixed order.
+    parallel: "threads" (or "auto", the same): batches run on ``threads`` Python threads of this
+    process; the compiled kernels and Embree release the GIL, so threads use every core (the
+    ``drt.worker`` subprocess pool they replaced is gone, see docs/decisions.md). The image is
+    bit-identical for any thread count: batches are added to the film in a fixed order.
     """
     t0 = time.perf_counter()
     ctx = context or prepare(scene, seed=seed, sampler=sampler, direct=direct, indirect=indirect)
@@ -246,14 +237,9 @@ def render(
 
     done = sample_offset
     cancelled = False
-    overrides = {"seed": seed, "sampler": sampler, "direct": direct, "indirect": indirect}
-    if _use_processes(parallel, threads, npix * count):
-        from .worker import WorkerPool
-
-        light_scene = replace(scene, header={}, arrays={})  # the arrays live in scene.meshes too
-        workers = WorkerPool(light_scene, {k: v for k, v in overrides.items() if v is not None}, spp, threads)
-    else:
-        workers = _ThreadWorkers(ctx, threads)
+    if parallel not in ("threads", "auto"):
+        raise ValueError(f"parallel must be 'threads' or 'auto', got {parallel!r}")
+    workers = _ThreadWorkers(ctx, threads)
 
     def collect(future):
         """Wait for a batch, polling cancel meanwhile (so Esc/Ctrl-C is seen within ~0.05 s)."""
@@ -304,6 +290,8 @@ def render(
         if not aborted:
             workers.close()
     stats.cancelled = cancelled
+    if stats.samples_done:
+        mark_kernels_compiled()
     stats.seconds = time.perf_counter() - t0
     stats.rays, stats.embree_seconds = workers.counters()
     stats.nan_samples = film.nan_samples

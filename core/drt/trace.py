@@ -8,14 +8,22 @@ array it is given (used as tfar). So:
 * motion blur cannot use Embree's own time: a rigidly moving object gets an Embree scene in its
   local space and each ray is transformed into it by the object's transform *at that ray's time*
   (exact, no time slices); deforming meshes are intersected exactly at each ray's time by a
-  vectorised ray/triangle test (fine for the modest meshes that deform in practice).
+  compiled ray/triangle test behind one level of cluster boxes (fine for the modest meshes that
+  deform in practice).
+
+The moving-object work around Embree (swept-box culling, per-ray transforms, merging hits, the
+deforming-mesh intersector, hit points and normals) is compiled (``@kernel``, docs/kernels.md);
+each query allocates its own scratch arrays, so concurrent queries from several threads are
+safe.
 
 All positions are in the shifted world frame of ``geometry.SceneGeometry``.
 """
 
 from __future__ import annotations
 
+import math
 import time as _time
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,9 +32,8 @@ from embreex.mesh_construction import TriangleMesh
 
 from .geometry import SceneGeometry
 from .kernels import kernel
-from .kernels.vec3 import load, store
-from .motion import apply_linear, apply_linear_transposed, invert_linear
-from .vecmath import row_norm
+from .kernels.vec3 import cross, dot, load, store, sub
+from .motion import apply_rows, motion_at
 
 # Spawn offset: relative part scales with |p| (float32 spacing is 6e-8·|p|, Embree's hit error
 # a small multiple of it); the absolute part covers points near the origin.
@@ -122,42 +129,418 @@ def _unit_face_normals(positions, triangles, chunk=1 << 20) -> np.ndarray:
     return out
 
 
-class _RigidObject:
+# ---------------------------------------------------------------------- moving objects: kernels
+
+@kernel
+def _fmin(a, b):
+    """np.fmin: the smaller value, ignoring a NaN operand."""
+    if a != a:
+        return b
+    if b != b:
+        return a
+    return a if a < b else b
+
+
+@kernel
+def _fmax(a, b):
+    """np.fmax: the larger value, ignoring a NaN operand."""
+    if a != a:
+        return b
+    if b != b:
+        return a
+    return a if a > b else b
+
+
+@kernel
+def _slab(lo, hi, o, inv_d):
+    """Entry and exit distances (near, far) of the ray o + t·d (``inv_d`` = 1/d, 3-tuples)
+    through the box [lo, hi]; the ray misses where near > far (or either is NaN). NaNs of 0·inf
+    (a ray in a slab's boundary plane) are skipped, as np.fmin/np.fmax do."""
+    a0 = (lo[0] - o[0]) * inv_d[0]
+    b0 = (hi[0] - o[0]) * inv_d[0]
+    a1 = (lo[1] - o[1]) * inv_d[1]
+    b1 = (hi[1] - o[1]) * inv_d[1]
+    a2 = (lo[2] - o[2]) * inv_d[2]
+    b2 = (hi[2] - o[2]) * inv_d[2]
+    near = _fmax(_fmax(_fmin(a0, b0), _fmin(a1, b1)), _fmin(a2, b2))
+    far = _fmin(_fmin(_fmax(a0, b0), _fmax(a1, b1)), _fmax(a2, b2))
+    return near, far
+
+
+@kernel
+def _reciprocal(d):
+    return (1.0 / d[0], 1.0 / d[1], 1.0 / d[2])
+
+
+@kernel
+def _inverse_rows(r0, r1, r2):
+    """Rows of the inverse of the matrix with rows r0, r1, r2 (cofactors / determinant, as
+    ``motion.invert_linear``); a singular matrix (an object scaled to zero) gives zeros, so rays
+    mapped through it have no direction and hit nothing."""
+    c0 = cross(r1, r2)  # cofactor rows: the inverse's columns
+    c1 = cross(r2, r0)
+    c2 = cross(r0, r1)
+    det = dot(r0, c0)
+    scale = max(max(max(abs(r0[0]), abs(r0[1])), max(abs(r0[2]), abs(r1[0]))),
+                max(max(abs(r1[1]), abs(r1[2])), max(max(abs(r2[0]), abs(r2[1])), abs(r2[2]))))
+    inv_det = 0.0
+    if abs(det) > 1e-12 * max(scale, 1e-300) ** 3:
+        inv_det = 1.0 / det
+    return ((c0[0] * inv_det, c1[0] * inv_det, c2[0] * inv_det),
+            (c0[1] * inv_det, c1[1] * inv_det, c2[1] * inv_det),
+            (c0[2] * inv_det, c1[2] * inv_det, c2[2] * inv_det))
+
+
+@kernel
+def _ray_to_local(md, tau, o, d):
+    """The ray (o, d) in the local space of the object with motion ``md`` at shutter fraction
+    tau (direction not renormalised: t stays a world distance)."""
+    r0, r1, r2, trans = motion_at(md, tau)
+    i0, i1, i2 = _inverse_rows(r0, r1, r2)
+    return apply_rows(i0, i1, i2, sub(o, trans)), apply_rows(i0, i1, i2, d)
+
+
+@kernel
+def _store_motion(md, tau, i, linear, translation):
+    """Row i of ``linear`` (n, 3, 3) and ``translation`` (n, 3): the object's local→world map
+    at tau."""
+    r0, r1, r2, trans = motion_at(md, tau)
+    for j in range(3):
+        linear[i, 0, j] = r0[j]
+        linear[i, 1, j] = r1[j]
+        linear[i, 2, j] = r2[j]
+        translation[i, j] = trans[j]
+
+
+@kernel
+def _in_swept_box(box_lo, box_hi, o, d, tmax):
+    """Does the segment (0, tmax) of the ray meet the object's swept box? Rays that miss it
+    cannot hit the object at any τ."""
+    near, far = _slab((box_lo[0], box_lo[1], box_lo[2]), (box_hi[0], box_hi[1], box_hi[2]),
+                      o, _reciprocal(d))
+    return near <= far and far >= 0.0 and near <= tmax
+
+
+@kernel
+def _rigid_candidates(md, box_lo, box_hi, o, d, tau, tmax, skip, idx, o_local, d_local, tfar):
+    """The rays (rows of o, d, tau, tmax; not those with ``skip[i]`` when skip is non-empty)
+    whose segment meets the swept box: their indices into ``idx``, their local-space origins and
+    directions at their own τ into ``o_local``, ``d_local`` and tmax into ``tfar`` (float32, for
+    Embree). Returns the count."""
+    count = 0
+    check_skip = skip.shape[0] > 0
+    for i in range(o.shape[0]):
+        if check_skip and skip[i]:
+            continue
+        oi = load(o, i)
+        di = load(d, i)
+        if not _in_swept_box(box_lo, box_hi, oi, di, tmax[i]):
+            continue
+        o_l, d_l = _ray_to_local(md, tau[i], oi, di)
+        idx[count] = i
+        for j in range(3):
+            o_local[count, j] = o_l[j]
+            d_local[count, j] = d_l[j]
+        tfar[count] = tmax[i]
+        count += 1
+    return count
+
+
+@kernel
+def _rigid_merge(md, prim_offset, tau, idx, count, r_t, r_prim, r_u, r_v, t, prim, b1, b2,
+                 linear, translation):
+    """Merge Embree's hits on a rigid object (row k belongs to ray idx[k]) into the closest
+    hits where closer; records the object's local→world map at the ray's τ. Returns the number
+    of rays whose hit changed."""
+    merged = 0
+    for k in range(count):
+        i = idx[k]
+        if r_prim[k] < 0 or not (r_t[k] < t[i]):
+            continue
+        t[i] = r_t[k]
+        prim[i] = r_prim[k] + prim_offset
+        b1[i] = r_u[k]
+        b2[i] = r_v[k]
+        _store_motion(md, tau[i], i, linear, translation)
+        merged += 1
+    return merged
+
+
+@kernel
+def _merge_blocked(idx, count, result, blocked):
+    """Occlusion answers from Embree (row k: ray idx[k]; >= 0 means blocked)."""
+    for k in range(count):
+        if result[k] >= 0:
+            blocked[idx[k]] = True
+
+
+@kernel
+def _deformed_vertex(dd, vertex, tau):
+    """A deforming mesh's vertex at shutter fraction tau (linear between open and close)."""
+    w = tau
+    c = 1.0 - w
+    return (c * dd.positions[vertex, 0] + w * dd.positions_close[vertex, 0],
+            c * dd.positions[vertex, 1] + w * dd.positions_close[vertex, 1],
+            c * dd.positions[vertex, 2] + w * dd.positions_close[vertex, 2])
+
+
+@kernel
+def _triangle_hit(dd, k, o, d, tau, t_best):
+    """Möller–Trumbore against triangle k of the deforming mesh at tau: (t, u, v), t = -1 unless
+    the hit lies in (0, t_best)."""
+    v0 = _deformed_vertex(dd, dd.triangles[k, 0], tau)
+    v1 = _deformed_vertex(dd, dd.triangles[k, 1], tau)
+    v2 = _deformed_vertex(dd, dd.triangles[k, 2], tau)
+    e1 = sub(v1, v0)
+    e2 = sub(v2, v0)
+    pvec = cross(d, e2)
+    det = dot(e1, pvec)
+    if not (abs(det) > 1e-20):
+        return -1.0, 0.0, 0.0
+    inv_det = 1.0 / det
+    tvec = sub(o, v0)
+    u = dot(tvec, pvec) * inv_det
+    qvec = cross(tvec, e1)
+    v = dot(d, qvec) * inv_det
+    tt = dot(e2, qvec) * inv_det
+    if u >= 0.0 and v >= 0.0 and u + v <= 1.0 and tt > 0.0 and tt < t_best:
+        return tt, u, v
+    return -1.0, 0.0, 0.0
+
+
+@kernel
+def _deforming_hit(dd, o, d, tau, tmax, any_hit):
+    """The closest hit in (0, tmax) of the ray (o, d) (local space, 3-tuples) against the
+    deforming mesh at tau: (t, triangle, b1, b2), triangle -1 on a miss. The whole-mesh box,
+    then each cluster's box (bounding its motion over the shutter) cull; ``any_hit`` returns at
+    the first hit found (occlusion)."""
+    inv_d = _reciprocal(d)
+    t_best = tmax
+    best = -1
+    bu = 0.0
+    bv = 0.0
+    near, far = _slab((dd.all_lo[0], dd.all_lo[1], dd.all_lo[2]),
+                      (dd.all_hi[0], dd.all_hi[1], dd.all_hi[2]), o, inv_d)
+    if not (near <= far and far > 0.0 and near < t_best):
+        return t_best, best, bu, bv
+    n_tri = dd.triangles.shape[0]
+    for c in range(dd.lo.shape[0]):
+        near, far = _slab(load(dd.lo, c), load(dd.hi, c), o, inv_d)
+        if not (near <= far and far > 0.0 and near < t_best):
+            continue
+        for k in range(c * CLUSTER_SIZE, min((c + 1) * CLUSTER_SIZE, n_tri)):
+            tt, u, v = _triangle_hit(dd, k, o, d, tau, t_best)
+            if tt > 0.0:
+                t_best = tt
+                best = k
+                bu = u
+                bv = v
+                if any_hit:
+                    return t_best, best, bu, bv
+    return t_best, best, bu, bv
+
+
+@kernel
+def _deforming_intersect(md, box_lo, box_hi, dd, prim_offset, o, d, tau, t, prim, b1, b2,
+                         linear, translation):
+    """Closest hits against a deforming (and possibly rigidly moving) mesh, each ray at its
+    own τ, merged into (t, prim, b1, b2) where closer, with the object's local→world map."""
+    merged = 0
+    for i in range(o.shape[0]):
+        oi = load(o, i)
+        di = load(d, i)
+        if not _in_swept_box(box_lo, box_hi, oi, di, t[i]):
+            continue
+        o_l, d_l = _ray_to_local(md, tau[i], oi, di)
+        tt, k, u, v = _deforming_hit(dd, o_l, d_l, tau[i], t[i], False)
+        if k < 0:
+            continue
+        t[i] = tt
+        prim[i] = k + prim_offset
+        b1[i] = u
+        b2[i] = v
+        _store_motion(md, tau[i], i, linear, translation)
+        merged += 1
+    return merged
+
+
+@kernel
+def _deforming_occluded(md, box_lo, box_hi, dd, o, d, tau, tmax, blocked):
+    """Marks ``blocked`` the rays not yet blocked that hit the deforming mesh in (0, tmax)."""
+    for i in range(o.shape[0]):
+        if blocked[i]:
+            continue
+        oi = load(o, i)
+        di = load(d, i)
+        if not _in_swept_box(box_lo, box_hi, oi, di, tmax[i]):
+            continue
+        o_l, d_l = _ray_to_local(md, tau[i], oi, di)
+        _, k, _, _ = _deforming_hit(dd, o_l, d_l, tau[i], tmax[i], True)
+        if k >= 0:
+            blocked[i] = True
+
+
+@kernel
+def _deforming_rows(dd, o, d, tau, t, prim, b1, b2):
+    """``_deforming_hit`` for every row (rays already in the mesh's space); t holds tmax."""
+    for i in range(o.shape[0]):
+        tt, k, u, v = _deforming_hit(dd, load(o, i), load(d, i), tau[i], t[i], False)
+        if k >= 0:
+            t[i] = tt
+            prim[i] = k
+            b1[i] = u
+            b2[i] = v
+
+
+@kernel
+def _finish_linear(prim, first_moving, linear):
+    """Identity rows of ``linear`` for rays that did not hit a moving object (global triangle
+    ids of moving objects start at ``first_moving``); returns whether any ray did."""
+    any_moving = False
+    for i in range(prim.shape[0]):
+        if prim[i] >= first_moving:
+            any_moving = True
+            continue
+        for r in range(3):
+            for c in range(3):
+                linear[i, r, c] = 1.0 if r == c else 0.0
+    return any_moving
+
+
+@kernel
+def _moving_surface(positions, positions_close, deforming, triangles, prim_offset, tau, d, prim,
+                    b1, b2, linear, translation, p, ng):
+    """Hit points and unit geometric normals (front = counter-clockwise side) of the hits on
+    one moving object, in float64 from its local triangle (at the ray's τ if it deforms) mapped
+    by the hit's local→world transform; normals go through the inverse transpose. A degenerate
+    (zero-area) triangle has no normal: it faces the ray."""
+    n_tri = triangles.shape[0]
+    for i in range(prim.shape[0]):
+        k = prim[i] - prim_offset
+        if k < 0 or k >= n_tri:
+            continue
+        a = triangles[k, 0]
+        b = triangles[k, 1]
+        c = triangles[k, 2]
+        if deforming:
+            w = tau[i]
+            cw = 1.0 - w
+            v0 = (cw * positions[a, 0] + w * positions_close[a, 0],
+                  cw * positions[a, 1] + w * positions_close[a, 1],
+                  cw * positions[a, 2] + w * positions_close[a, 2])
+            v1 = (cw * positions[b, 0] + w * positions_close[b, 0],
+                  cw * positions[b, 1] + w * positions_close[b, 1],
+                  cw * positions[b, 2] + w * positions_close[b, 2])
+            v2 = (cw * positions[c, 0] + w * positions_close[c, 0],
+                  cw * positions[c, 1] + w * positions_close[c, 1],
+                  cw * positions[c, 2] + w * positions_close[c, 2])
+        else:
+            v0 = load(positions, a)
+            v1 = load(positions, b)
+            v2 = load(positions, c)
+        e1 = sub(v1, v0)
+        e2 = sub(v2, v0)
+        u = b1[i]
+        v = b2[i]
+        p_local = (v0[0] + u * e1[0] + v * e2[0], v0[1] + u * e1[1] + v * e2[1],
+                   v0[2] + u * e1[2] + v * e2[2])
+        r0 = (linear[i, 0, 0], linear[i, 0, 1], linear[i, 0, 2])
+        r1 = (linear[i, 1, 0], linear[i, 1, 1], linear[i, 1, 2])
+        r2 = (linear[i, 2, 0], linear[i, 2, 1], linear[i, 2, 2])
+        pw = apply_rows(r0, r1, r2, p_local)
+        for j in range(3):
+            p[i, j] = pw[j] + translation[i, j]
+        i0, i1, i2 = _inverse_rows(r0, r1, r2)
+        n_l = cross(e1, e2)
+        nx = i0[0] * n_l[0] + i1[0] * n_l[1] + i2[0] * n_l[2]
+        ny = i0[1] * n_l[0] + i1[1] * n_l[1] + i2[1] * n_l[2]
+        nz = i0[2] * n_l[0] + i1[2] * n_l[1] + i2[2] * n_l[2]
+        length = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if length > 0.0:
+            ng[i, 0] = nx / length
+            ng[i, 1] = ny / length
+            ng[i, 2] = nz / length
+        else:
+            ng[i, 0] = -d[i, 0]
+            ng[i, 1] = -d[i, 1]
+            ng[i, 2] = -d[i, 2]
+
+
+# ---------------------------------------------------------------------- moving objects: data
+
+CLUSTER_SIZE = 16  # triangles per bounding box in the deforming-mesh culling level
+
+DeformingData = namedtuple("DeformingData", ["positions", "positions_close", "triangles", "lo",
+                                             "hi", "all_lo", "all_hi"])
+DeformingData.__doc__ = """A deforming mesh for the kernels, in its local space: positions and
+positions_close (V, 3) float64 at shutter open / close (vertices move linearly in between),
+triangles (T, 3) int64, and a one-level bounding hierarchy: cluster c holds the CLUSTER_SIZE
+consecutive triangles from c·CLUSTER_SIZE (meshes are stored with spatial coherence), its box
+lo[c], hi[c] ((C, 3) float64) bounds them over the whole shutter (the box of all vertices at
+open and close contains every in-between position); all_lo, all_hi (3,) bound every cluster."""
+
+
+def deforming_data(mm) -> DeformingData:
+    """``DeformingData`` of a mesh with ``positions``, ``positions_close`` and ``triangles``."""
+    pos = np.ascontiguousarray(mm.positions, dtype=np.float64)
+    pos_close = np.ascontiguousarray(mm.positions_close, dtype=np.float64)
+    tri = np.ascontiguousarray(mm.triangles, dtype=np.int64).reshape(-1, 3)
+    t = len(tri)
+    c = -(-t // CLUSTER_SIZE)
+    pad = c * CLUSTER_SIZE - t
+    both = np.concatenate([pos[tri], pos_close[tri]], axis=1)  # (T, 6, 3)
+    lo = both.min(axis=1)
+    hi = both.max(axis=1)
+    lo = np.concatenate([lo, np.full((pad, 3), np.inf)]).reshape(c, CLUSTER_SIZE, 3).min(axis=1)
+    hi = np.concatenate([hi, np.full((pad, 3), -np.inf)]).reshape(c, CLUSTER_SIZE, 3).max(axis=1)
+    if c:
+        margin = 1e-7 * (1.0 + np.abs(np.concatenate([lo, hi])).max())
+        lo, hi = lo - margin, hi + margin
+        all_lo, all_hi = lo.min(axis=0), hi.max(axis=0)
+    else:  # no triangles: an empty box
+        all_lo, all_hi = np.full(3, np.inf), np.full(3, -np.inf)
+    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)  # noqa: E731
+    return DeformingData(positions=pos, positions_close=pos_close, triangles=tri, lo=f64(lo),
+                         hi=f64(hi), all_lo=f64(all_lo).reshape(3), all_hi=f64(all_hi).reshape(3))
+
+
+def _intersect_deforming(mm, o, d, tau, tmax):
+    """Exact closest hits against a deforming mesh (``mm``: positions, positions_close,
+    triangles) for rays already in its space, each ray seeing the mesh at its own τ. Returns
+    (t, prim, b1, b2): t = tmax and prim = -1 where nothing is hit in (0, tmax)."""
+    dd = deforming_data(mm)
+    o = np.ascontiguousarray(o, dtype=np.float64).reshape(-1, 3)
+    d = np.ascontiguousarray(d, dtype=np.float64).reshape(-1, 3)
+    n = len(o)
+    t = np.array(tmax, dtype=np.float64).reshape(n)
+    prim = np.full(n, -1, dtype=np.int64)
+    b1 = np.zeros(n)
+    b2 = np.zeros(n)
+    _deforming_rows(dd, o, d, np.ascontiguousarray(tau, dtype=np.float64).reshape(n), t, prim, b1, b2)
+    return t, prim, b1, b2
+
+
+class _MovingObject:
+    """One moving object for the tracer: its swept box, its motion for the kernels, and either
+    an Embree scene of its local triangles (rigid) or its ``DeformingData``."""
+
     def __init__(self, mm):
         self.mesh = mm
+        self.prim_offset = int(mm.prim_offset)
+        self.motion = mm.motion.data
+        self.positions = np.ascontiguousarray(mm.positions, dtype=np.float64)
+        self.triangles = np.ascontiguousarray(mm.triangles, dtype=np.int64)
         self.scene = None
+        self.deforming = None
         if mm.positions_close is None:
             self.scene = rtcs.EmbreeScene()
             TriangleMesh(self.scene, mm.positions.astype(np.float32), mm.triangles.astype(np.int32))
+            self.positions_close = self.positions
+        else:
+            self.deforming = deforming_data(mm)
+            self.positions_close = self.deforming.positions_close
+        # the culling box; setting it to ±inf disables culling (tests)
         self.box_lo, self.box_hi = _swept_box(mm)
-
-    def rays_to_local(self, o, d, tau, rows):
-        """The object's transform at each ray's τ (linear parts, translations) and rays ``rows``
-        of (o, d) in its local space (directions not renormalised: t stays a world distance)."""
-        lin, trans = self.mesh.motion.at(tau[rows])
-        inv = invert_linear(lin)
-        return lin, trans, apply_linear(inv, o[rows] - trans), apply_linear(inv, d[rows])
-
-    def candidates(self, o, d, tmax, rows=None) -> np.ndarray:
-        """Indices (into o) of the rays whose segment (0, tmax) meets the swept box; ``rows``
-        restricts the test to those indices. Rays that miss it cannot hit the object at any τ,
-        so they skip the per-ray transform and the trace."""
-        if rows is not None:
-            o, d, tmax = o[rows], d[rows], tmax[rows]
-        with np.errstate(divide="ignore"):
-            near, far = _slab(self.box_lo, self.box_hi, o, 1.0 / d)
-        hit = np.flatnonzero((near <= far) & (far >= 0) & (near <= tmax))
-        return hit if rows is None else rows[hit]
-
-
-def _slab(lo, hi, o, inv_d) -> tuple[np.ndarray, np.ndarray]:
-    """Entry and exit distances of rays o + t·d (``inv_d`` = 1/d) through boxes [lo, hi]; all
-    arguments broadcast, the last axis is xyz. A ray misses where near > far."""
-    with np.errstate(invalid="ignore"):
-        t0 = (lo - o) * inv_d
-        t1 = (hi - o) * inv_d
-    # fmin/fmax skip the NaN of 0·inf (a ray in a slab's boundary plane)
-    return np.fmax.reduce(np.fmin(t0, t1), axis=-1), np.fmin.reduce(np.fmax(t0, t1), axis=-1)
 
 
 def _swept_box(mm) -> tuple[np.ndarray, np.ndarray]:
@@ -173,7 +556,11 @@ def _swept_box(mm) -> tuple[np.ndarray, np.ndarray]:
     t0, t1 = m.open.translation, m.close.translation
     lo, hi = np.minimum(t0, t1) - rho, np.maximum(t0, t1) + rho
     pad = 1e-6 * (np.abs(lo) + np.abs(hi) + rho) + 1e-9
-    return lo - pad, hi + pad
+    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64).reshape(3).copy()  # noqa: E731
+    return f64(lo - pad), f64(hi + pad)
+
+
+_NO_SKIP = np.zeros(0, dtype=bool)
 
 
 class Tracer:
@@ -181,8 +568,9 @@ class Tracer:
 
     Rays: origins ``o`` (n, 3) and unit directions ``d`` (n, 3) float64 in the shifted world
     frame; ``tau`` (n,) shutter fractions (only used when something moves); ``tmax`` (n,).
-    Thread-safe: the render loop calls it from several worker threads at once (Embree releases
-    the GIL). ``embree_seconds`` accumulates time spent inside Embree calls.
+    Thread-safe: the render loop calls it from several worker threads at once (Embree and the
+    kernels release the GIL; every query allocates its own scratch arrays). ``embree_seconds``
+    accumulates time spent inside Embree calls.
     """
 
     def __init__(self, geom: SceneGeometry):
@@ -191,18 +579,23 @@ class Tracer:
         if geom.static_count:
             self.static = rtcs.EmbreeScene()
             TriangleMesh(self.static, geom.static_positions, geom.static_triangles)
-        self.moving = [_RigidObject(mm) for mm in geom.moving]
+        self.moving = [_MovingObject(mm) for mm in geom.moving]
         self._static_ng = _unit_face_normals(geom.static_positions, geom.static_triangles) \
             if geom.static_count else None
         self.embree_seconds = 0.0
         self.rays_traced = 0
 
     # ------------------------------------------------------------------ embree wrappers
-    def _run(self, scene, o, d, tfar, occluded=False):
+    def _run(self, scene, o, d, tfar, occluded=False, scratch=False):
+        """Embree on rays (o, d) with tfar; ``scratch``: o, d, tfar are already contiguous
+        float32 arrays of this query that Embree may overwrite."""
         t0 = _time.perf_counter()
-        o32 = np.ascontiguousarray(o, dtype=np.float32)
-        d32 = np.ascontiguousarray(d, dtype=np.float32)
-        dists = np.ascontiguousarray(tfar, dtype=np.float32).copy()
+        if scratch:
+            o32, d32, dists = o, d, tfar
+        else:
+            o32 = np.ascontiguousarray(o, dtype=np.float32)
+            d32 = np.ascontiguousarray(d, dtype=np.float32)
+            dists = np.ascontiguousarray(tfar, dtype=np.float32).copy()
         if occluded:
             out = scene.run(o32, d32, dists=dists, query="OCCLUDED")
         else:
@@ -210,6 +603,21 @@ class Tracer:
         self.embree_seconds += _time.perf_counter() - t0
         self.rays_traced += len(o32)
         return out
+
+    @staticmethod
+    def _moving_inputs(o, d, tau):
+        n = len(o)
+        o64 = np.ascontiguousarray(o, dtype=np.float64).reshape(n, 3)
+        d64 = np.ascontiguousarray(d, dtype=np.float64).reshape(n, 3)
+        tau = np.zeros(n) if tau is None else np.ascontiguousarray(tau, dtype=np.float64).reshape(n)
+        return o64, d64, tau
+
+    @staticmethod
+    def _local_rays(n):
+        """Scratch for the candidate rays of a rigid object: indices, local origins and
+        directions, tfar (float32 for Embree)."""
+        return (np.empty(n, dtype=np.int64), np.empty((n, 3), dtype=np.float32),
+                np.empty((n, 3), dtype=np.float32), np.empty(n, dtype=np.float32))
 
     # ------------------------------------------------------------------ queries
     def intersect(self, o, d, tau=None, tmax=None) -> Hits:
@@ -229,34 +637,33 @@ class Tracer:
             prim[hit] = r["primID"][hit]
             b1[hit], b2[hit] = r["u"][hit], r["v"][hit]
         if self.moving and n:
-            tau = np.zeros(n) if tau is None else tau
+            o64, d64, tau = self._moving_inputs(o, d, tau)
+            linear = np.empty((n, 3, 3))
+            translation = np.empty((n, 3))
+            local = None
+            merged = 0
             for obj in self.moving:
-                rows = obj.candidates(o, d, t)
-                if not len(rows):
+                if obj.deforming is not None:
+                    merged += _deforming_intersect(obj.motion, obj.box_lo, obj.box_hi, obj.deforming,
+                                                   obj.prim_offset, o64, d64, tau, t, prim, b1, b2,
+                                                   linear, translation)
                     continue
-                lin, trans, o_l, d_l = obj.rays_to_local(o, d, tau, rows)
-                t_rows = t[rows]
-                if obj.scene is not None:
-                    r = self._run(obj.scene, o_l, d_l, t_rows)
-                    hit = (r["primID"] >= 0) & (r["tfar"] < t_rows)
-                    tl, pl, u, v = r["tfar"], r["primID"], r["u"], r["v"]
-                else:
-                    tl, pl, u, v, _ = _intersect_deforming(obj.mesh, o_l, d_l, tau[rows], t_rows)
-                    hit = pl >= 0
-                if not np.any(hit):
+                if local is None:
+                    local = self._local_rays(n)
+                idx, o_l, d_l, tfar = local
+                count = _rigid_candidates(obj.motion, obj.box_lo, obj.box_hi, o64, d64, tau, t,
+                                          _NO_SKIP, idx, o_l, d_l, tfar)
+                if not count:
                     continue
-                if linear is None:
-                    linear = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
-                    translation = np.zeros((n, 3))
-                r_hit = rows[hit]
-                t[r_hit] = tl[hit]
-                prim[r_hit] = pl[hit] + obj.mesh.prim_offset
-                b1[r_hit], b2[r_hit] = u[hit], v[hit]
-                linear[r_hit] = lin[hit]
-                translation[r_hit] = trans[hit]
+                r = self._run(obj.scene, o_l[:count], d_l[:count], tfar[:count], scratch=True)
+                merged += _rigid_merge(obj.motion, obj.prim_offset, tau, idx, count, r["tfar"],
+                                       r["primID"], r["u"], r["v"], t, prim, b1, b2, linear,
+                                       translation)
+            if not merged or not _finish_linear(prim, self.geom.static_count, linear):
+                linear = translation = None
         t[prim < 0] = np.inf
         hits = Hits(t, prim, b1, b2, ng, linear)
-        self._surface_geometry(hits, o, d, tau, translation if linear is not None else None)
+        self._surface_geometry(hits, o, d, tau, translation)
         return hits
 
     def _surface_geometry(self, hits, o, d, tau, translation):
@@ -265,32 +672,15 @@ class Tracer:
         n = len(hits.t)
         hits.p = np.zeros((n, 3))
         g = self.geom
+        d64 = np.ascontiguousarray(d, dtype=np.float64)
         if g.static_count:
             static_surface(g.static_positions, g.static_triangles, self._static_ng, g.static_count,
-                           np.ascontiguousarray(d, dtype=np.float64), hits.prim, hits.b1, hits.b2,
-                           hits.p, hits.ng)
-        for obj in self.moving:
-            mm = obj.mesh
-            sel = (hits.prim >= mm.prim_offset) & (hits.prim < mm.prim_offset + len(mm.triangles))
-            if not np.any(sel):
-                continue
-            tri = mm.triangles[hits.prim[sel] - mm.prim_offset]
-            v = mm.positions[tri]
-            if mm.positions_close is not None:
-                w = tau[sel][:, None, None]
-                v = (1 - w) * v + w * mm.positions_close[tri]
-            e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
-            lin = hits.moving_linear[sel]
-            p_local = v[:, 0] + hits.b1[sel, None] * e1 + hits.b2[sel, None] * e2
-            hits.p[sel] = apply_linear(lin, p_local) + translation[sel]
-            # normals transform by the inverse transpose of the local→world map
-            ng = apply_linear_transposed(invert_linear(lin), np.cross(e1, e2))
-            length = row_norm(ng)
-            good = length > 0
-            ng[good] /= length[good, None]
-            # a degenerate (zero-area) triangle has no normal: face the ray
-            ng[~good] = -d[sel][~good]
-            hits.ng[sel] = ng
+                           d64, hits.prim, hits.b1, hits.b2, hits.p, hits.ng)
+        if hits.moving_linear is not None:
+            for obj in self.moving:
+                _moving_surface(obj.positions, obj.positions_close, obj.deforming is not None,
+                                obj.triangles, obj.prim_offset, tau, d64, hits.prim, hits.b1,
+                                hits.b2, hits.moving_linear, translation, hits.p, hits.ng)
         miss = hits.prim < 0
         if np.any(miss):  # on a miss, p is where the ray ends (o + tmax·d, or o)
             t = np.where(np.isfinite(hits.t[miss]), hits.t[miss], 0.0)
@@ -304,108 +694,22 @@ class Tracer:
         if self.static is not None and n:
             blocked = self._run(self.static, o, d, tmax, occluded=True) >= 0
         if self.moving and n:
-            tau = np.zeros(n) if tau is None else tau
+            o64, d64, tau = self._moving_inputs(o, d, tau)
+            tmax = np.ascontiguousarray(tmax).reshape(n)
+            blocked = np.ascontiguousarray(blocked)
+            local = None
             for obj in self.moving:
-                idx = np.nonzero(~blocked)[0]
-                if not len(idx):
-                    break
-                idx = obj.candidates(o, d, tmax, idx)
-                if not len(idx):
+                if obj.deforming is not None:
+                    _deforming_occluded(obj.motion, obj.box_lo, obj.box_hi, obj.deforming, o64, d64,
+                                        tau, tmax, blocked)
                     continue
-                _, _, o_l, d_l = obj.rays_to_local(o, d, tau, idx)
-                if obj.scene is not None:
-                    blocked[idx] = self._run(obj.scene, o_l, d_l, tmax[idx], occluded=True) >= 0
-                else:
-                    _, pl, *_ = _intersect_deforming(obj.mesh, o_l, d_l, tau[idx], tmax[idx].copy())
-                    blocked[idx] = pl >= 0
+                if local is None:
+                    local = self._local_rays(n)
+                idx, o_l, d_l, tfar = local
+                count = _rigid_candidates(obj.motion, obj.box_lo, obj.box_hi, o64, d64, tau, tmax,
+                                          blocked, idx, o_l, d_l, tfar)
+                if count:
+                    r = self._run(obj.scene, o_l[:count], d_l[:count], tfar[:count], occluded=True,
+                                  scratch=True)
+                    _merge_blocked(idx, count, r, blocked)
         return blocked
-
-
-CLUSTER_SIZE = 16  # triangles per bounding box in the deforming-mesh culling level
-
-
-class DeformingBounds:
-    """A one-level bounding hierarchy for a deforming mesh: consecutive triangles (meshes are
-    stored with spatial coherence) grouped in clusters whose boxes bound their motion over the
-    whole shutter (the box of all vertices at open and close contains every in-between
-    position, since vertices move linearly)."""
-
-    def __init__(self, mm):
-        tri = mm.triangles
-        t = len(tri)
-        self.count = t
-        c = -(-t // CLUSTER_SIZE)
-        pad = c * CLUSTER_SIZE - t
-        self.members = np.concatenate([np.arange(t), np.full(pad, -1)]).reshape(c, CLUSTER_SIZE)
-        both = np.concatenate([mm.positions[tri], mm.positions_close[tri]], axis=1)  # (T, 6, 3)
-        lo = both.min(axis=1)
-        hi = both.max(axis=1)
-        lo = np.concatenate([lo, np.full((pad, 3), np.inf)]).reshape(c, CLUSTER_SIZE, 3).min(axis=1)
-        hi = np.concatenate([hi, np.full((pad, 3), -np.inf)]).reshape(c, CLUSTER_SIZE, 3).max(axis=1)
-        margin = 1e-7 * (1.0 + np.abs(np.concatenate([lo, hi])).max())
-        self.lo, self.hi = lo - margin, hi + margin
-
-
-def _intersect_deforming(mm, o, d, tau, tmax, chunk_elems=2_000_000):
-    """Exact closest hit against a deforming mesh whose vertices move linearly from
-    ``positions`` to ``positions_close``: each ray sees the mesh at its own τ. Rays are culled
-    against cluster boxes (slab test), then Möller–Trumbore runs on the surviving
-    (ray, triangle) pairs only. Returns (t, prim, b1, b2, ng_local)."""
-    if getattr(mm, "_bounds", None) is None:
-        mm._bounds = DeformingBounds(mm)
-    bounds = mm._bounds
-    n = len(o)
-    t_best = np.asarray(tmax, dtype=np.float64).copy()
-    prim = np.full(n, -1, dtype=np.int64)
-    b1 = np.zeros(n)
-    b2 = np.zeros(n)
-    ng = np.zeros((n, 3))
-    n_clusters = len(bounds.lo)
-    step = max(1, chunk_elems // max(n_clusters, 1))
-    with np.errstate(divide="ignore"):
-        inv_d = 1.0 / d
-    # first the box around every cluster: most rays of a frame miss a small deforming mesh,
-    # and the per-cluster test below costs n_rays × n_clusters
-    g_near, g_far = _slab(bounds.lo.min(axis=0), bounds.hi.max(axis=0), o, inv_d)
-    candidates = np.flatnonzero((g_near <= g_far) & (g_far > 0) & (g_near < t_best))
-    for s in range(0, len(candidates), step):
-        rows = candidates[s:s + step]
-        # slab test of every ray of the chunk against every cluster box
-        near, far = _slab(bounds.lo[None], bounds.hi[None], o[rows, None], inv_d[rows, None])
-        ri, ci = np.nonzero((near <= far) & (far > 0) & (near < t_best[rows, None]))
-        if not len(ri):
-            continue
-        ray = np.repeat(rows[ri], CLUSTER_SIZE)
-        tri_id = bounds.members[ci].reshape(-1)
-        keep = tri_id >= 0
-        ray, tri_id = ray[keep], tri_id[keep]
-        corners = mm.triangles[tri_id]
-        w = tau[ray][:, None, None]
-        v = (1 - w) * mm.positions[corners] + w * mm.positions_close[corners]  # (p, 3, 3)
-        e1 = v[:, 1] - v[:, 0]
-        e2 = v[:, 2] - v[:, 0]
-        dd = d[ray]
-        pvec = np.cross(dd, e2)
-        det = np.einsum("pk,pk->p", e1, pvec)
-        ok = np.abs(det) > 1e-20
-        inv_det = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-        tvec = o[ray] - v[:, 0]
-        u = np.einsum("pk,pk->p", tvec, pvec) * inv_det
-        qvec = np.cross(tvec, e1)
-        vv = np.einsum("pk,pk->p", dd, qvec) * inv_det
-        tt = np.einsum("pk,pk->p", e2, qvec) * inv_det
-        valid = ok & (u >= 0) & (vv >= 0) & (u + vv <= 1) & (tt > 0) & (tt < t_best[ray])
-        if not np.any(valid):
-            continue
-        ray, tri_id, tt, u, vv = ray[valid], tri_id[valid], tt[valid], u[valid], vv[valid]
-        e1, e2 = e1[valid], e2[valid]
-        # closest candidate per ray: sort by (ray, t) and take each ray's first
-        order = np.lexsort((tt, ray))
-        first = order[np.r_[True, ray[order][1:] != ray[order][:-1]]]
-        r = ray[first]
-        t_best[r] = tt[first]
-        prim[r] = tri_id[first]
-        b1[r] = u[first]
-        b2[r] = vv[first]
-        ng[r] = np.cross(e1[first], e2[first])
-    return t_best, prim, b1, b2, ng

@@ -137,6 +137,29 @@ _configure_numba_cache()
 
 import numba  # noqa: E402  (after the cache location is set)
 
+_READY_MARK = "compiled"
+#: what a user is told before the first render of an install (compiling takes ~30 s on 2 cores)
+COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this version takes about "
+                    "half a minute longer; later renders start in about a second")
+
+
+def kernels_compiled() -> bool:
+    """Has a render already compiled and cached the kernels of this source state? (False also
+    when the cache location is unknown: then every process compiles.)"""
+    path = os.environ.get("NUMBA_CACHE_DIR")
+    return bool(path) and os.path.exists(os.path.join(path, _READY_MARK))
+
+
+def mark_kernels_compiled() -> None:
+    """Record that the render kernels are in the cache (called after a render finished)."""
+    path = os.environ.get("NUMBA_CACHE_DIR")
+    if path and not os.path.exists(os.path.join(path, _READY_MARK)):
+        try:
+            with open(os.path.join(path, _READY_MARK), "w") as f:
+                f.write(f"numba {numba.__version__}\n")
+        except OSError:
+            pass
+
 KERNEL_OPTIONS = dict(nogil=True, cache=True, error_model="numpy", _nrt=False)
 
 

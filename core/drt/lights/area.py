@@ -23,7 +23,7 @@ import numpy as np
 
 from . import _warps
 from .common import AREA, T_EPSILON, camera_visible, light_frame, luminance, scalar_kernel, unit
-from ..kernels.vec3 import dot, load, sub
+from ..kernels.vec3 import dot, sub
 from .common import I_IS_ELLIPSE, I_PLAIN, I_SOLID_ANGLE, L_AREA, L_CORNER, L_EX, L_EY, L_EZ, L_HALF_SPREAD, L_LEN_X, L_LEN_Y, L_NORMAL, L_POS, L_RADIANCE, L_SPREAD_NORM, L_TAN_HALF  # noqa: F401 (table columns)
 from ..kernels.vec3 import load_col3
 

@@ -27,7 +27,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from ..kernels import inline_kernel, kernel
+from ..kernels import kernel
 
 #: Rec.709 / sRGB luminance weights (Blender's default scene-linear space).
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])

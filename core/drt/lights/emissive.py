@@ -15,7 +15,7 @@ import numpy as np
 
 from . import _warps
 from .common import luminance, scalar_kernel
-from ..kernels.vec3 import dot, load, sub
+from ..kernels.vec3 import dot, sub
 from .common import T_AREA, T_E1, T_E2, T_NG, T_RADIANCE, T_V0  # noqa: F401 (table columns)
 from ..kernels.vec3 import load_col3
 

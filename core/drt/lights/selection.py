@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .common import scalar_kernel
-from ..kernels.vec3 import dot, load, sub
+from ..kernels.vec3 import dot, sub
 from .common import S_CENTRE, S_FACING, S_IS_SUN, S_IS_WORLD, S_LOCAL, S_ONE_SIDED, S_RADIUS2, S_SCALE, S_SUN_DIR, S_SUN_SIN2  # noqa: F401 (table columns)
 from ..kernels.vec3 import load_col3
 

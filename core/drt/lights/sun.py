@@ -15,7 +15,7 @@ import numpy as np
 
 from . import _warps
 from .common import SUN, camera_visible, luminance, scalar_kernel, unit
-from ..kernels.vec3 import dot, load
+from ..kernels.vec3 import dot
 from .common import I_IS_DELTA, L_COS_HALF, L_INTENSITY, L_ONE_MINUS_COS, L_RADIANCE, L_TO_SUN  # noqa: F401 (table columns)
 from ..kernels.vec3 import load_col3
 

@@ -4,7 +4,7 @@ Every value is a pure function of (seed, pixel, index, dim) (and of ``spp`` for 
 strata depend on it): nothing is carried between calls, so any subset of samples can be drawn on
 its own and a render of sample range [k, n) reproduces exactly those samples of a full render.
 Samples come in 2-D *dimensions* (``dim``): dimension 0 is the pixel filter, 1 the lens, and so on
-(the table lives in ``drt/integrator.py``).  The generators are scalar compiled kernels
+(the table lives in ``drt/path_stages.py``).  The generators are scalar compiled kernels
 (``sample_2d(sd, pixel, index, dim)`` with ``sd = Sampler.data``) doing uint32 arithmetic in int64
 (every product masked to 32 bits); the numpy functions below are thin wrappers over them.
 
@@ -61,9 +61,9 @@ common start of every per-sample hash."""
 
 @kernel
 def mul32(a, b):
-    """(a·b) mod 2^32 for a, b in [0, 2^32), as int64 (two partial products < 2^49: numba's
-    signed multiply must not overflow)."""
-    return (a * (b & 0xFFFF) + (((a * (b >> 16)) & 0xFFFF) << 16)) & 0xFFFFFFFF
+    """(a·b) mod 2^32 for a, b in [0, 2^32), as int64. The product is formed in uint64, whose
+    multiply wraps (numba's signed multiply may not overflow: it is marked no-signed-wrap)."""
+    return np.int64((np.uint64(a) * np.uint64(b)) & np.uint64(0xFFFFFFFF))
 
 
 @kernel

@@ -1,0 +1,129 @@
+"""Throughput of the compiled renderer: rays/s against Embree's raw rate on the same rays, and
+thread scaling in one process (the CLI's core, and inside Blender through the add-on).
+
+    python benchmarks/kernel_throughput.py [SCENE.npz] [--resolution 256x256] [--spp 16]
+                                           [--no-blender]
+
+1. Renders the scene warm (kernels loaded) on 1 and 2 threads; prints samples/s, rays/s and the
+   2-thread speed-up (best of two runs each).
+2. Records every ray batch the 1-thread render gave Embree (closest-hit and occlusion), replays
+   exactly those batches through embreex alone on one thread, and prints Embree's raw rays/s and
+   the renderer's rays/s as a fraction of it (the rest of the time is DRT's own work).
+3. Unless --no-blender: in a bpy subprocess with the add-on registered, F12-renders the .blend
+   beside the scene with Performance > Threads fixed at 1 and at 2 (after a warm-up render) and
+   prints the speed-up inside Blender.
+Nothing is asserted: it prints figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+from dataclasses import replace
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+
+BLENDER_SCRIPT = r"""
+import sys, time, bpy
+sys.path.insert(0, sys.argv[1])
+import addon
+addon.register()
+bpy.ops.wm.open_mainfile(filepath=sys.argv[2])
+sc = bpy.context.scene
+sc.render.engine = "DRT"
+sc.render.resolution_x, sc.render.resolution_y = int(sys.argv[3]), int(sys.argv[4])
+sc.render.resolution_percentage = 100
+sc.drt.samples = int(sys.argv[5])
+sc.render.threads_mode = "FIXED"
+best = {}
+for threads in (2, 1, 2, 1):
+    sc.render.threads = threads
+    t0 = time.perf_counter()
+    bpy.ops.render.render()
+    best[threads] = min(best.get(threads, 1e9), time.perf_counter() - t0)
+print("BLENDER_THREADS", best[1], best[2], flush=True)
+"""
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("scene", nargs="?", default=os.path.join(REPO, "blend_scenes", "cornell_box.npz"))
+    ap.add_argument("--resolution", default="256x256")
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--no-blender", action="store_true")
+    args = ap.parse_args(argv)
+    import numpy as np
+
+    from drt.render import prepare, render
+    from drt.scene_file import load_scene
+
+    w, h = (int(v) for v in args.resolution.split("x"))
+    scene = load_scene(args.scene)
+    scene = replace(scene, render=replace(scene.render, width=w, height=h))
+    ctx = prepare(scene)
+    render(scene, spp=1, threads=2, context=ctx)  # load (or compile) the kernels
+
+    best, rays = {}, 0
+    for threads in (1, 2, 1, 2):
+        t0 = time.perf_counter()
+        film = render(scene, spp=args.spp, threads=threads, context=ctx)
+        dt = time.perf_counter() - t0
+        best[threads] = min(best.get(threads, 1e9), dt)
+        rays = film.stats.rays
+    paths = w * h * args.spp
+    print(f"scene {os.path.basename(args.scene)} {w}x{h} at {args.spp} spp: {paths} camera paths, {rays} rays")
+    for t in (1, 2):
+        print(f"  {t} thread{'s' if t > 1 else ' '}: {best[t]:.3f} s, {paths / best[t] / 1e3:7.0f} k samples/s, "
+              f"{rays / best[t] / 1e6:6.2f} Mrays/s")
+    print(f"  thread scaling (2 vs 1): {best[1] / best[2]:.2f}x")
+
+    # record the batches Embree sees in a 1-thread render, then replay them through Embree alone
+    tracer = ctx.tracer
+    recorded = []
+    original = tracer._run
+
+    def recording(emb_scene, o, d, tfar, occluded=False):
+        recorded.append((emb_scene, np.ascontiguousarray(o, dtype=np.float32),
+                         np.ascontiguousarray(d, dtype=np.float32),
+                         np.ascontiguousarray(tfar, dtype=np.float32).copy(), occluded))
+        return original(emb_scene, o, d, tfar, occluded)
+
+    tracer._run = recording
+    try:
+        t0 = time.perf_counter()
+        render(scene, spp=args.spp, threads=1, context=ctx)
+        drt_seconds = time.perf_counter() - t0
+    finally:
+        tracer._run = original
+    n_rays = sum(len(r[1]) for r in recorded)
+    t0 = time.perf_counter()
+    for emb_scene, o, d, tfar, occluded in recorded:
+        dists = tfar.copy()
+        if occluded:
+            emb_scene.run(o, d, dists=dists, query="OCCLUDED")
+        else:
+            emb_scene.run(o, d, dists=dists, output=1)
+    embree_seconds = time.perf_counter() - t0
+    drt_rate, raw_rate = n_rays / drt_seconds, n_rays / embree_seconds
+    print(f"  Embree alone on the same {n_rays} rays (1 thread): {raw_rate / 1e6:.2f} Mrays/s; "
+          f"DRT whole renderer (1 thread): {drt_rate / 1e6:.2f} Mrays/s = {100 * drt_rate / raw_rate:.0f}% of Embree's rate")
+
+    blend = os.path.splitext(args.scene)[0] + ".blend"
+    if not args.no_blender and os.path.exists(blend):
+        p = subprocess.run([sys.executable, "-c", BLENDER_SCRIPT, REPO, blend, str(w), str(h), str(args.spp)],
+                           capture_output=True, text=True)
+        line = [ln for ln in p.stdout.splitlines() if ln.startswith("BLENDER_THREADS")]
+        if p.returncode != 0 or not line:
+            print(f"  inside Blender: failed ({p.stderr.strip()[-300:]})")
+        else:
+            one, two = (float(v) for v in line[-1].split()[1:])
+            print(f"  inside Blender (bpy, F12): 1 thread {one:.3f} s, 2 threads {two:.3f} s: {one / two:.2f}x")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
