@@ -93,6 +93,40 @@ def static_surface(positions, triangles, face_normals, static_count, d, prim, b1
                 ng[i, axis] = -d[i, axis]
 
 
+_NO_TMAX = np.zeros(0)
+
+
+@kernel
+def _rays32(o, d, tmax, o32, d32, t32):
+    """Rays as Embree takes them: float32 origins, directions and tfar (clamped to 3e38, the
+    largest float32 Embree accepts as "unbounded"); tmax (n,) float64 or (0,): unbounded."""
+    for i in range(o.shape[0]):
+        for axis in range(3):
+            o32[i, axis] = o[i, axis]
+            d32[i, axis] = d[i, axis]
+        t32[i] = min(tmax[i], 3.0e38) if tmax.shape[0] else 3.0e38
+
+
+@kernel
+def _static_hits(r_prim, r_tfar, r_u, r_v, o, d, t, prim, b1, b2, p):
+    """Embree's static answer in float64 arrays: t (inf on a miss), prim (−1), barycentrics, and
+    p = o for misses (hits get their point from the triangle in `static_surface`)."""
+    for i in range(r_prim.shape[0]):
+        k = r_prim[i]
+        if k >= 0:
+            t[i] = r_tfar[i]
+            prim[i] = k
+            b1[i] = r_u[i]
+            b2[i] = r_v[i]
+        else:
+            t[i] = np.inf
+            prim[i] = -1
+            b1[i] = 0.0
+            b2[i] = 0.0
+            for axis in range(3):
+                p[i, axis] = o[i, axis]
+
+
 @dataclass
 class Hits:
     """Closest hits. t: (n,) distance along the unit direction (inf: miss); prim: (n,) global
@@ -622,14 +656,16 @@ class Tracer:
     # ------------------------------------------------------------------ queries
     def intersect(self, o, d, tau=None, tmax=None) -> Hits:
         n = len(o)
+        linear = None
+        translation = None
+        if self.static is not None and n and not self.moving:
+            return self._intersect_static(o, d, tmax)
         t = np.full(n, np.inf) if tmax is None else np.asarray(tmax, dtype=np.float64).copy()
         t = np.minimum(t, 3.0e38)
         prim = np.full(n, -1, dtype=np.int64)
         b1 = np.zeros(n)
         b2 = np.zeros(n)
         ng = np.zeros((n, 3))
-        linear = None
-        translation = None
         if self.static is not None and n:
             r = self._run(self.static, o, d, t)
             hit = r["primID"] >= 0
@@ -666,6 +702,24 @@ class Tracer:
         self._surface_geometry(hits, o, d, tau, translation)
         return hits
 
+    def _intersect_static(self, o, d, tmax) -> Hits:
+        """`intersect` for scenes where nothing moves: two kernels around one Embree call, no
+        per-bounce numpy passes."""
+        n = len(o)
+        o = np.ascontiguousarray(o, dtype=np.float64)
+        d = np.ascontiguousarray(d, dtype=np.float64)
+        tmax = _NO_TMAX if tmax is None else np.ascontiguousarray(tmax, dtype=np.float64)
+        o32, d32, t32 = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.float32)
+        _rays32(o, d, tmax, o32, d32, t32)
+        r = self._run(self.static, o32, d32, t32, scratch=True)
+        t, prim, b1, b2 = np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n)
+        p, ng = np.empty((n, 3)), np.empty((n, 3))
+        _static_hits(r["primID"], r["tfar"], r["u"], r["v"], o, d, t, prim, b1, b2, p)
+        g = self.geom
+        static_surface(g.static_positions, g.static_triangles, self._static_ng, g.static_count,
+                       d, prim, b1, b2, p, ng)
+        return Hits(t, prim, b1, b2, ng, None, p)
+
     def _surface_geometry(self, hits, o, d, tau, translation):
         """Fill ``hits.p`` and ``hits.ng`` (unit, front side) from the triangles themselves, in
         float64: more accurate than Embree's float32 values, and the winding is ours to define."""
@@ -689,6 +743,11 @@ class Tracer:
     def occluded(self, o, d, tmax, tau=None) -> np.ndarray:
         """(n,) bool: is anything hit in (0, tmax)?"""
         n = len(o)
+        if self.static is not None and n and not self.moving:
+            o32, d32, t32 = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.float32)
+            _rays32(np.ascontiguousarray(o, dtype=np.float64), np.ascontiguousarray(d, dtype=np.float64),
+                    np.ascontiguousarray(np.broadcast_to(tmax, (n,)), dtype=np.float64), o32, d32, t32)
+            return self._run(self.static, o32, d32, t32, occluded=True, scratch=True) >= 0
         blocked = np.zeros(n, dtype=bool)
         tmax = np.minimum(np.asarray(tmax, dtype=np.float64), 3.0e38)
         if self.static is not None and n:

@@ -33,10 +33,21 @@ __all__ = ["PixelFilter", "FilterData", "FILTER_KINDS", "filter_sample", "filter
 FILTER_KINDS = ("BLACKMAN_HARRIS", "GAUSSIAN", "BOX")
 KIND_BLACKMAN_HARRIS, KIND_GAUSSIAN, KIND_BOX = 0, 1, 2  # FilterData.kind
 
-FilterData = namedtuple("FilterData", ["kind", "width", "radius", "cdf", "edges"])
+FilterData = namedtuple("FilterData", ["kind", "width", "radius", "cdf", "edges", "guide"])
 FilterData.__doc__ = """The pixel filter for the kernels: kind (int64: 0 BLACKMAN_HARRIS, 1 GAUSSIAN,
 2 BOX), width and radius (float64, px), and the tabulated forward CDF: cdf (m + 1,) float64 at the
-cell edges (m + 1,) float64 (px) of [−radius, radius]."""
+cell edges (m + 1,) float64 (px) of [−radius, radius]; guide (G,) int64: for u in [k/G, (k+1)/G)
+the search for u's cell starts at guide[k], the last edge j with cdf[j] ≤ k/G (a few steps
+instead of a binary search over the m cells)."""
+
+#: guide-table entries (≈ the number of CDF cells: the walk from a guide entry is a step or two)
+GUIDE_SIZE = 4096
+
+
+def _guide_table(cdf: np.ndarray, size: int = GUIDE_SIZE) -> np.ndarray:
+    """(size,) int64: the last j with cdf[j] ≤ k/size, for each k (0 where none is)."""
+    k = np.arange(size, dtype=np.float64) / size
+    return np.maximum(np.searchsorted(cdf, k, side="right") - 1, 0).astype(np.int64)
 
 
 @kernel
@@ -71,12 +82,38 @@ def _interp(x, xp, fp):
 
 
 @kernel
+def _interp_guided(x, xp, fp, guide):
+    """``_interp`` with the cell found from the guide table (the same cell, the same value)."""
+    n = xp.shape[0]
+    if x != x or x < xp[0] or x > xp[n - 1]:
+        return _interp(x, xp, fp)
+    g = guide.shape[0]
+    k = int(x * g)
+    if k >= g:
+        k = g - 1
+    if k < 0:
+        k = 0
+    j = guide[k]  # xp[j] <= k/g <= x: walk to the largest j with xp[j] <= x
+    while j + 1 < n and xp[j + 1] <= x:
+        j += 1
+    if j == n - 1 or xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    r = slope * (x - xp[j]) + fp[j]
+    if r != r:
+        r = slope * (x - xp[j + 1]) + fp[j + 1]
+        if r != r and fp[j] == fp[j + 1]:
+            r = fp[j]
+    return r
+
+
+@kernel
 def filter_sample_1d(fd, u):
     """One offset (px) along one axis, distributed ∝ the filter; monotone in u ∈ [0, 1)."""
     if fd.kind == 2:  # BOX
         return (u - 0.5) * fd.width
     # piecewise-linear inversion of the tabulated CDF (uniform inside each cell)
-    return _interp(u, fd.cdf, fd.edges)
+    return _interp_guided(u, fd.cdf, fd.edges, fd.guide)
 
 
 @inline_kernel
@@ -138,7 +175,8 @@ class PixelFilter:
         self._norm = self._integral()
         self._build_table(int(table_size))
         self.data = FilterData(kind=int(FILTER_KINDS.index(kind)), width=float(self.width),
-                               radius=float(self.radius), cdf=self._cdf, edges=self._edges)
+                               radius=float(self.radius), cdf=self._cdf, edges=self._edges,
+                               guide=_guide_table(self._cdf))
 
     def __repr__(self) -> str:
         return f"PixelFilter(kind={self.kind!r}, width={self.width})"
