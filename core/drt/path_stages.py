@@ -20,7 +20,7 @@ Sample dimensions (each a 2-D point from ``sample_2d``):
 
 | dim | use |
 |---|---|
-| 0 | pixel filter offset |
+| 0 | pixel filter offset (with dim 1: one 4-D sample, see ``sample_4d``) |
 | 1 | lens position |
 | 2 | (shutter time, unused) |
 | 3 + 4b | (light selection, BSDF lobe selection) at bounce b |
@@ -47,7 +47,7 @@ from .lights import (emissive_pdf, light_sample, shape_emission, shape_intersect
                      world_pdf, world_radiance)
 from .materials import LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, bsdf_eval, bsdf_sample
 from .sampling.pixel_filter import filter_sample
-from .sampling.sequences import sample_2d
+from .sampling.sequences import sample_2d, sample_4d
 from .sampling.warps import cosine_hemisphere, uniform_hemisphere
 from .trace import offset_point
 
@@ -193,11 +193,12 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
     for i in range(x.shape[0]):
         pixel = row[i] * W + x[i]
         idx = index[i]
-        u0, u1 = sample_2d(sd, pixel, idx, D_PIXEL)
+        # pixel filter and lens from one jointly stratified 4-D sample (D_PIXEL, D_LENS): with
+        # depth of field the image depends on both together
+        u0, u1, l0, l1 = sample_4d(sd, pixel, idx, D_PIXEL)
         dx, dy = filter_sample(fd, u0, u1)
         px = x[i] + 0.5 + dx
         py = (H - 1 - row[i]) + 0.5 + dy  # the camera wants v from the bottom
-        l0, l1 = sample_2d(sd, pixel, idx, D_LENS)
         tau = 0.0
         if settings.motion:
             tau = sample_2d(sd, pixel, idx, D_TIME)[0]

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..kernels import kernel
 
-__all__ = ["Sampler", "SamplerData", "SAMPLER_KINDS", "sample_2d", "sample_2d_batch",
+__all__ = ["Sampler", "SamplerData", "SAMPLER_KINDS", "sample_2d", "sample_4d", "sample_2d_batch",
            "hash_u32", "reverse_bits", "sobol_2d", "nested_uniform_scramble", "permute_index"]
 
 SAMPLER_KINDS = ("SOBOL", "STRATIFIED", "RANDOM")
@@ -120,6 +120,58 @@ def sobol_dim1(index):
 
 
 @kernel
+def sobol_dim2(index):
+    """Third Sobol dimension (Joe & Kuo: x² + x + 1, m = 1, 3) of index, 32-bit fixed point:
+    v_k = v_{k−1} ⊕ v_{k−2} ⊕ (v_{k−2} >> 2)."""
+    r = 0
+    p1 = 0
+    p2 = 0
+    k = 1
+    while index != 0:
+        if k == 1:
+            v = 0x80000000
+        elif k == 2:
+            v = 0xC0000000
+        else:
+            v = p1 ^ p2 ^ (p2 >> 2)
+        if index & 1:
+            r ^= v
+        index >>= 1
+        p2 = p1
+        p1 = v
+        k += 1
+    return r
+
+
+@kernel
+def sobol_dim3(index):
+    """Fourth Sobol dimension (Joe & Kuo: x³ + x + 1, m = 1, 3, 1) of index, 32-bit fixed
+    point: v_k = v_{k−2} ⊕ v_{k−3} ⊕ (v_{k−3} >> 3)."""
+    r = 0
+    p1 = 0
+    p2 = 0
+    p3 = 0
+    k = 1
+    while index != 0:
+        if k == 1:
+            v = 0x80000000
+        elif k == 2:
+            v = 0xC0000000
+        elif k == 3:
+            v = 0x20000000
+        else:
+            v = p2 ^ p3 ^ (p3 >> 3)
+        if index & 1:
+            r ^= v
+        index >>= 1
+        p3 = p2
+        p2 = p1
+        p1 = v
+        k += 1
+    return r
+
+
+@kernel
 def permute32(i, n, key):
     """Hashed permutation of [0, n) (Kensler 2013), i in [0, n), one permutation per key: a
     bijection on the next power of two, cycle-walked into [0, n)."""
@@ -188,6 +240,39 @@ def sample_2d(sd, pixel, index, dim):
     x = nested_uniform_scramble32(reverse32(shuffled), hash32(h ^ 0x2545F491))
     y = nested_uniform_scramble32(sobol_dim1(shuffled), hash32(h ^ 0x9E3779B9))
     return float(x) * _INV_2_32, float(y) * _INV_2_32
+
+
+@kernel
+def sample_4d(sd, pixel, index, dim):
+    """A 4-D sample (u0, u1, u2, u3) of (pixel, index) for the dimension pair (dim, dim + 1),
+    jointly stratified: SOBOL takes the first four Sobol dimensions of one shuffled index (Burley
+    2020's 4-D padding, as Cycles does for the pixel filter and the lens), each Owen-scrambled
+    on its own; (u0, u1) equals ``sample_2d(sd, pixel, index, dim)``. STRATIFIED and RANDOM pad
+    two 2-D samples, (dim) and (dim + 1)."""
+    if sd.kind != KIND_SOBOL:
+        u0, u1 = sample_2d(sd, pixel, index, dim)
+        u2, u3 = sample_2d(sd, pixel, index, dim + 1)
+        return u0, u1, u2, u3
+    pixel &= 0xFFFFFFFF
+    index &= 0xFFFFFFFF
+    dim &= 0xFFFFFFFF
+    h = hash32(hash32(sd.prefix ^ pixel) ^ dim)
+    shuffled = nested_uniform_scramble32(index, h)
+    x = nested_uniform_scramble32(reverse32(shuffled), hash32(h ^ 0x2545F491))
+    y = nested_uniform_scramble32(sobol_dim1(shuffled), hash32(h ^ 0x9E3779B9))
+    z = nested_uniform_scramble32(sobol_dim2(shuffled), hash32(h ^ 0x5BD1E995))
+    w = nested_uniform_scramble32(sobol_dim3(shuffled), hash32(h ^ 0x27D4EB2F))
+    return float(x) * _INV_2_32, float(y) * _INV_2_32, float(z) * _INV_2_32, float(w) * _INV_2_32
+
+
+@kernel
+def _sample_4d_rows(sd, pixel, index, dim, out):
+    for k in range(pixel.shape[0]):
+        a, b, c, e = sample_4d(sd, pixel[k], index[k], dim)
+        out[k, 0] = a
+        out[k, 1] = b
+        out[k, 2] = c
+        out[k, 3] = e
 
 
 @kernel
@@ -350,6 +435,15 @@ class Sampler:
         self.data = SamplerData(kind=int(code), seed=int(self.seed), spp=int(self.spp),
                                 nx=int(self._grid[0]), ny=int(self._grid[1]),
                                 prefix=_hash_prefix(self.seed, salt))
+
+    def sample_4d(self, pixel, index, dim) -> np.ndarray:
+        """pixel, index: (n,) ints; dim: int. Returns (n, 4) float64: the jointly stratified
+        samples of dimensions (dim, dim + 1) (see the ``sample_4d`` kernel)."""
+        pixel = np.ascontiguousarray(np.asarray(pixel, dtype=np.int64).reshape(-1))
+        index = np.ascontiguousarray(np.broadcast_to(np.asarray(index, dtype=np.int64), pixel.shape))
+        out = np.empty((len(pixel), 4))
+        _sample_4d_rows(self.data, pixel, index, int(dim), out)
+        return out
 
     def __repr__(self) -> str:
         return f"Sampler(kind={self.kind!r}, seed={self.seed}, spp={self.spp})"
