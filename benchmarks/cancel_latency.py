@@ -1,5 +1,5 @@
 """How fast a render stops when cancelled: the ``cancel`` callback (Esc in Blender) with worker
-threads and with worker processes, and SIGINT (Ctrl-C) on the CLI.
+threads, and SIGINT (Ctrl-C) on the CLI.
 
     python benchmarks/cancel_latency.py [--repeats 3] [--threads 2] [--resolution 320x240]
 
@@ -64,7 +64,7 @@ def main(argv=None):
     scene = scene_from_dict(header, arrays)
     print(f"scene: Cornell box {w}x{h}, 4096 spp requested; batches of {BATCH_PATHS} paths; {args.threads} workers")
     baseline = threading.active_count()
-    for parallel in ("threads", "processes"):
+    for parallel in ("threads",):
         lat, leftover = [], []
         for i in range(args.repeats):
             cancel = CancelAt(0.5 + 0.5 * i)

@@ -1,12 +1,14 @@
 """Peak memory (RSS) of large jobs: a 3840×2160 frame at 1 spp, the same at higher spp on a
-smaller frame (memory must not grow with samples), and a multi-million-triangle mesh.
+smaller frame (memory must not grow with samples), a multi-million-triangle mesh, and a 4K
+frame of a 1M-triangle mesh.
 
-    python benchmarks/memory.py [--cases 4k,spp,tris] [--threads 2] [--triangles 4000000]
+    python benchmarks/memory.py [--cases 4k,spp1,spp16,tris,4ktris] [--threads 2]
+                                [--triangles 4000000]
 
 Each case runs in a fresh Python process (so ``ru_maxrss`` is that case's own peak) and prints
-one line: RSS after imports, after loading/building the scene, the peak during the render and
-the peak of the largest worker process (worker processes are used for large CLI-sized jobs).
-Never asserts anything; the budget is stated in docs/robustness.md.
+one line: RSS after imports, after loading/building the scene and the peak during the render
+(one process: batches run on threads). Never asserts anything; the budget is stated in
+docs/robustness.md.
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ def grid_mesh(n: int):
     return pos, tri
 
 
-def run_case(case: str, threads: int, triangles: int, parallel: str) -> dict:
+def run_case(case: str, threads: int, triangles: int) -> dict:
     import numpy as np
 
     from drt.render import prepare, render
@@ -66,9 +68,13 @@ def run_case(case: str, threads: int, triangles: int, parallel: str) -> dict:
         h, a = cornell_box(3840, 2160, 1)
     elif case.startswith("spp"):
         h, a = cornell_box(480, 270, int(case[3:]))
-    elif case == "tris":
+    elif case in ("tris", "4ktris"):
+        if case == "4ktris":
+            triangles, (w, hh) = 1_000_000, (3840, 2160)
+        else:
+            w, hh = 640, 360
         n = int(round((triangles / 2) ** 0.5))
-        h = base_header(640, 360, 1, world=(0.2, 0.2, 0.2),
+        h = base_header(w, hh, 1, world=(0.2, 0.2, 0.2),
                         camera={"type": "PERSP", "matrix_world": look_at((0, -2.5, 1.5), (0, 0, 0)), "lens": 35.0})
         a = {}
         m = add_material(h, "white", [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}])
@@ -86,39 +92,37 @@ def run_case(case: str, threads: int, triangles: int, parallel: str) -> dict:
     out["prepare_s"] = time.perf_counter() - t0
     out["rss_prepared_mb"] = rss_mb()
     t0 = time.perf_counter()
-    film = render(scene, context=ctx, threads=threads, parallel=parallel)
+    film = render(scene, context=ctx, threads=threads)
     out["render_s"] = time.perf_counter() - t0
     out["pixels"] = scene.render.width * scene.render.height
     out["spp"] = film.stats.samples_done
     out["peak_mb"] = peak_mb()
-    out["worker_peak_mb"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     assert np.all(np.isfinite(film.combined))
     return out
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--cases", default="4k,spp1,spp16,tris")
+    ap.add_argument("--cases", default="4k,spp1,spp16,tris,4ktris")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--triangles", type=int, default=4_000_000)
-    ap.add_argument("--parallel", default="auto", choices=["auto", "threads", "processes"])
     ap.add_argument("--case", help=argparse.SUPPRESS)  # internal: run one case here, print JSON
     args = ap.parse_args(argv)
     if args.case:
-        print(json.dumps(run_case(args.case, args.threads, args.triangles, args.parallel)))
+        print(json.dumps(run_case(args.case, args.threads, args.triangles)))
         return
     print(f"{'case':8} {'pixels':>9} {'spp':>4} {'tris':>9} {'imports':>8} {'scene':>8} {'prepared':>9} "
-          f"{'peak':>8} {'worker':>8} {'render s':>9}   (MB)")
+          f"{'peak':>8} {'render s':>9}   (MB)")
     for case in args.cases.split(","):
         r = subprocess.run([sys.executable, __file__, "--case", case, "--threads", str(args.threads),
-                            "--triangles", str(args.triangles), "--parallel", args.parallel],
+                            "--triangles", str(args.triangles)],
                            capture_output=True, text=True)
         if r.returncode != 0:
             print(f"{case:8} failed: {r.stderr.strip().splitlines()[-1] if r.stderr.strip() else r.returncode}")
             continue
         d = json.loads(r.stdout.strip().splitlines()[-1])
         print(f"{case:8} {d['pixels']:9d} {d['spp']:4d} {d.get('triangles', 34):9d} {d['rss_imports_mb']:8.0f} "
-              f"{d['rss_scene_mb']:8.0f} {d['rss_prepared_mb']:9.0f} {d['peak_mb']:8.0f} {d['worker_peak_mb']:8.0f} "
+              f"{d['rss_scene_mb']:8.0f} {d['rss_prepared_mb']:9.0f} {d['peak_mb']:8.0f} "
               f"{d['render_s']:9.1f}", flush=True)
 
 

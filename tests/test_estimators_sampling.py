@@ -24,14 +24,14 @@ def _recording_render(monkeypatch, header, arrays, spp=4):
         used.add(int(dim))
         return original(sd, pixel, index, dim)
 
-    original_4d = stages.sample_4d
+    original_5d = stages.sample_5d
 
-    def spy_4d(sd, pixel, index, dim):
-        used.update((int(dim), int(dim) + 1))
-        return original_4d(sd, pixel, index, dim)
+    def spy_5d(sd, pixel, index, dim, with_time):
+        used.update((int(dim), int(dim) + 1) + ((int(dim) + 2,) if with_time else ()))
+        return original_5d(sd, pixel, index, dim, with_time)
 
     monkeypatch.setattr(stages, "sample_2d", spy)
-    monkeypatch.setattr(stages, "sample_4d", spy_4d)
+    monkeypatch.setattr(stages, "sample_5d", spy_5d)
     monkeypatch.setattr(stages, "camera_stage", stages.camera_stage.py_func)
     monkeypatch.setattr(stages, "shade", stages.shade.py_func)
     rng_calls = []

@@ -16,7 +16,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import math
+
 import numpy as np
+
+from .kernels import kernel
 
 from .motion import RigidMotion, invert_linear
 from .scene import Scene
@@ -60,12 +64,48 @@ def _shift_matrix(m: np.ndarray, shift: np.ndarray) -> np.ndarray:
     return out
 
 
+@kernel
+def _points_to_world(positions, m, out, lo, hi):
+    """out (V, 3) float32 = m[:3, :3]·p + m[:3, 3] for each local point p (computed in float64);
+    lo, hi (3,) are widened to the float64 world points' bounds."""
+    for i in range(positions.shape[0]):
+        x, y, z = float(positions[i, 0]), float(positions[i, 1]), float(positions[i, 2])
+        for r in range(3):
+            w = m[r, 0] * x + m[r, 1] * y + m[r, 2] * z + m[r, 3]
+            out[i, r] = w
+            if w < lo[r]:
+                lo[r] = w
+            if w > hi[r]:
+                hi[r] = w
+
+
+@kernel
+def _normals_to_world(normals, inv_t, out):
+    """out (T, 3, 3) float32: per-corner normals through the inverse transpose ``inv_t`` (3, 3),
+    renormalised in float64 (a zero normal stays zero)."""
+    for t in range(normals.shape[0]):
+        for c in range(3):
+            x, y, z = float(normals[t, c, 0]), float(normals[t, c, 1]), float(normals[t, c, 2])
+            a = inv_t[0, 0] * x + inv_t[0, 1] * y + inv_t[0, 2] * z
+            b = inv_t[1, 0] * x + inv_t[1, 1] * y + inv_t[1, 2] * z
+            e = inv_t[2, 0] * x + inv_t[2, 1] * y + inv_t[2, 2] * z
+            length = math.sqrt(a * a + b * b + e * e)
+            if length > 0.0:
+                a, b, e = a / length, b / length, e / length
+            else:
+                a = b = e = 0.0
+            out[t, c, 0] = a
+            out[t, c, 1] = b
+            out[t, c, 2] = e
+
+
 def _transform_normals(n: np.ndarray, m: np.ndarray) -> np.ndarray:
-    inv_t = invert_linear(m[:3, :3]).T
-    out = transform_rows(n.reshape(-1, 3).astype(np.float64), inv_t)
-    length = np.linalg.norm(out, axis=1, keepdims=True)
-    out = np.where(length > 0, out / np.where(length > 0, length, 1), 0.0)
-    return out.reshape(n.shape)
+    """Per-corner normals (T, 3, 3) to world space by the object matrix m (4×4): inverse
+    transpose of its linear part, renormalised; float32."""
+    inv_t = np.ascontiguousarray(invert_linear(m[:3, :3]).T, dtype=np.float64)
+    out = np.empty(np.shape(n), dtype=np.float32)
+    _normals_to_world(np.ascontiguousarray(n), inv_t, out)
+    return out
 
 
 def build_geometry(scene: Scene) -> SceneGeometry:
@@ -104,9 +144,9 @@ def build_geometry(scene: Scene) -> SceneGeometry:
                     lo, hi = np.minimum(lo, w.min(0)), np.maximum(hi, w.max(0))
             continue
         m = _shift_matrix(obj.matrix, shift)
-        world = transform_rows(mesh.positions, m[:3, :3]) + m[:3, 3]
-        lo, hi = np.minimum(lo, world.min(0)), np.maximum(hi, world.max(0))
-        static_pos.append(world.astype(np.float32))
+        world = np.empty((len(mesh.positions), 3), dtype=np.float32)
+        _points_to_world(np.ascontiguousarray(mesh.positions), np.ascontiguousarray(m, dtype=np.float64), world, lo, hi)
+        static_pos.append(world)
         static_tri.append((mesh.triangles + v_offset).astype(np.int32))
         v_offset += len(world)
         nw = _transform_normals(mesh.normals, m) if mesh.normals is not None else None

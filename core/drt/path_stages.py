@@ -20,7 +20,7 @@ Sample dimensions (each a 2-D point from ``sample_2d``):
 
 | dim | use |
 |---|---|
-| 0 | pixel filter offset (with dim 1: one 4-D sample, see ``sample_4d``) |
+| 0 | pixel filter offset (dims 0–2 are one 5-D sample, see ``sample_5d``) |
 | 1 | lens position |
 | 2 | (shutter time, unused) |
 | 3 + 4b | (light selection, BSDF lobe selection) at bounce b |
@@ -47,7 +47,7 @@ from .lights import (emissive_pdf, light_sample, shape_emission, shape_intersect
                      world_pdf, world_radiance)
 from .materials import LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, bsdf_eval, bsdf_sample
 from .sampling.pixel_filter import filter_sample
-from .sampling.sequences import sample_2d, sample_4d
+from .sampling.sequences import sample_2d, sample_5d
 from .sampling.warps import cosine_hemisphere, uniform_hemisphere
 from .trace import offset_point
 
@@ -193,15 +193,12 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
     for i in range(x.shape[0]):
         pixel = row[i] * W + x[i]
         idx = index[i]
-        # pixel filter and lens from one jointly stratified 4-D sample (D_PIXEL, D_LENS): with
-        # depth of field the image depends on both together
-        u0, u1, l0, l1 = sample_4d(sd, pixel, idx, D_PIXEL)
+        # pixel filter, lens and shutter time from one jointly stratified 5-D sample (D_PIXEL,
+        # D_LENS, D_TIME): with depth of field or motion blur the image depends on them together
+        u0, u1, l0, l1, tau = sample_5d(sd, pixel, idx, D_PIXEL, settings.motion)
         dx, dy = filter_sample(fd, u0, u1)
         px = x[i] + 0.5 + dx
         py = (H - 1 - row[i]) + 0.5 + dy  # the camera wants v from the bottom
-        tau = 0.0
-        if settings.motion:
-            tau = sample_2d(sd, pixel, idx, D_TIME)[0]
         o, d, tmax, eye, forward = camera_ray(cd, px, py, l0, l1, tau)
         store(paths.o, i, o)
         store(paths.d, i, d)

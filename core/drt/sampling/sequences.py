@@ -29,7 +29,7 @@ import numpy as np
 
 from ..kernels import kernel
 
-__all__ = ["Sampler", "SamplerData", "SAMPLER_KINDS", "sample_2d", "sample_4d", "sample_2d_batch",
+__all__ = ["Sampler", "SamplerData", "SAMPLER_KINDS", "sample_2d", "sample_5d", "sample_2d_batch",
            "hash_u32", "reverse_bits", "sobol_2d", "nested_uniform_scramble", "permute_index"]
 
 SAMPLER_KINDS = ("SOBOL", "STRATIFIED", "RANDOM")
@@ -172,6 +172,34 @@ def sobol_dim3(index):
 
 
 @kernel
+def sobol_dim4(index):
+    """Fifth Sobol dimension (Joe & Kuo: x³ + x² + 1, m = 1, 1, 1) of index, 32-bit fixed
+    point: v_k = v_{k−1} ⊕ v_{k−3} ⊕ (v_{k−3} >> 3)."""
+    r = 0
+    p1 = 0
+    p2 = 0
+    p3 = 0
+    k = 1
+    while index != 0:
+        if k == 1:
+            v = 0x80000000
+        elif k == 2:
+            v = 0x40000000
+        elif k == 3:
+            v = 0x20000000
+        else:
+            v = p1 ^ p3 ^ (p3 >> 3)
+        if index & 1:
+            r ^= v
+        index >>= 1
+        p3 = p2
+        p2 = p1
+        p1 = v
+        k += 1
+    return r
+
+
+@kernel
 def permute32(i, n, key):
     """Hashed permutation of [0, n) (Kensler 2013), i in [0, n), one permutation per key: a
     bijection on the next power of two, cycle-walked into [0, n)."""
@@ -243,16 +271,18 @@ def sample_2d(sd, pixel, index, dim):
 
 
 @kernel
-def sample_4d(sd, pixel, index, dim):
-    """A 4-D sample (u0, u1, u2, u3) of (pixel, index) for the dimension pair (dim, dim + 1),
-    jointly stratified: SOBOL takes the first four Sobol dimensions of one shuffled index (Burley
-    2020's 4-D padding, as Cycles does for the pixel filter and the lens), each Owen-scrambled
-    on its own; (u0, u1) equals ``sample_2d(sd, pixel, index, dim)``. STRATIFIED and RANDOM pad
-    two 2-D samples, (dim) and (dim + 1)."""
+def sample_5d(sd, pixel, index, dim, with_fifth):
+    """A 5-D sample (u0 … u4) of (pixel, index) for the dimensions (dim, dim + 1, dim + 2),
+    jointly stratified: SOBOL takes the first five Sobol dimensions of one shuffled index (Burley
+    2020's padding in higher dimensions; the camera's pixel filter, lens and shutter time, whose
+    image depends on all of them together), each Owen-scrambled on its own; (u0, u1) equals
+    ``sample_2d(sd, pixel, index, dim)``. u4 is computed only ``with_fifth`` (else 0).
+    STRATIFIED and RANDOM pad 2-D samples: (dim), (dim + 1), (dim + 2)[0]."""
     if sd.kind != KIND_SOBOL:
         u0, u1 = sample_2d(sd, pixel, index, dim)
         u2, u3 = sample_2d(sd, pixel, index, dim + 1)
-        return u0, u1, u2, u3
+        u4 = sample_2d(sd, pixel, index, dim + 2)[0] if with_fifth else 0.0
+        return u0, u1, u2, u3, u4
     pixel &= 0xFFFFFFFF
     index &= 0xFFFFFFFF
     dim &= 0xFFFFFFFF
@@ -262,17 +292,21 @@ def sample_4d(sd, pixel, index, dim):
     y = nested_uniform_scramble32(sobol_dim1(shuffled), hash32(h ^ 0x9E3779B9))
     z = nested_uniform_scramble32(sobol_dim2(shuffled), hash32(h ^ 0x5BD1E995))
     w = nested_uniform_scramble32(sobol_dim3(shuffled), hash32(h ^ 0x27D4EB2F))
-    return float(x) * _INV_2_32, float(y) * _INV_2_32, float(z) * _INV_2_32, float(w) * _INV_2_32
+    u4 = 0.0
+    if with_fifth:
+        u4 = float(nested_uniform_scramble32(sobol_dim4(shuffled), hash32(h ^ 0x165667B1))) * _INV_2_32
+    return (float(x) * _INV_2_32, float(y) * _INV_2_32, float(z) * _INV_2_32, float(w) * _INV_2_32, u4)
 
 
 @kernel
-def _sample_4d_rows(sd, pixel, index, dim, out):
+def _sample_5d_rows(sd, pixel, index, dim, out):
     for k in range(pixel.shape[0]):
-        a, b, c, e = sample_4d(sd, pixel[k], index[k], dim)
+        a, b, c, e, f = sample_5d(sd, pixel[k], index[k], dim, True)
         out[k, 0] = a
         out[k, 1] = b
         out[k, 2] = c
         out[k, 3] = e
+        out[k, 4] = f
 
 
 @kernel
@@ -436,13 +470,13 @@ class Sampler:
                                 nx=int(self._grid[0]), ny=int(self._grid[1]),
                                 prefix=_hash_prefix(self.seed, salt))
 
-    def sample_4d(self, pixel, index, dim) -> np.ndarray:
-        """pixel, index: (n,) ints; dim: int. Returns (n, 4) float64: the jointly stratified
-        samples of dimensions (dim, dim + 1) (see the ``sample_4d`` kernel)."""
+    def sample_5d(self, pixel, index, dim) -> np.ndarray:
+        """pixel, index: (n,) ints; dim: int. Returns (n, 5) float64: the jointly stratified
+        samples of dimensions (dim, dim + 1, dim + 2) (see the ``sample_5d`` kernel)."""
         pixel = np.ascontiguousarray(np.asarray(pixel, dtype=np.int64).reshape(-1))
         index = np.ascontiguousarray(np.broadcast_to(np.asarray(index, dtype=np.int64), pixel.shape))
-        out = np.empty((len(pixel), 4))
-        _sample_4d_rows(self.data, pixel, index, int(dim), out)
+        out = np.empty((len(pixel), 5))
+        _sample_5d_rows(self.data, pixel, index, int(dim), out)
         return out
 
     def __repr__(self) -> str:
