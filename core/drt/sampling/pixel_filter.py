@@ -51,6 +51,20 @@ def _guide_table(cdf: np.ndarray, size: int = GUIDE_SIZE) -> np.ndarray:
 
 
 @kernel
+def _interp_cell(x, xp, fp, j):
+    """np.interp's value at x in cell j (xp[j] ≤ x, j the last such), with its NaN fallbacks."""
+    if j == xp.shape[0] - 1 or xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    r = slope * (x - xp[j]) + fp[j]
+    if r != r:
+        r = slope * (x - xp[j + 1]) + fp[j + 1]
+        if r != r and fp[j] == fp[j + 1]:
+            r = fp[j]
+    return r
+
+
+@kernel
 def _interp(x, xp, fp):
     """``np.interp(x, xp, fp)`` for one x (numpy's algorithm: the cell j with xp[j] ≤ x <
     xp[j + 1], the same slope formula and its NaN fallbacks), so results are bit-identical."""
@@ -69,16 +83,7 @@ def _interp(x, xp, fp):
             lo = mid + 1
         else:
             hi = mid
-    j = lo - 1
-    if j == n - 1 or xp[j] == x:
-        return fp[j]
-    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
-    r = slope * (x - xp[j]) + fp[j]
-    if r != r:
-        r = slope * (x - xp[j + 1]) + fp[j + 1]
-        if r != r and fp[j] == fp[j + 1]:
-            r = fp[j]
-    return r
+    return _interp_cell(x, xp, fp, lo - 1)
 
 
 @kernel
@@ -96,15 +101,7 @@ def _interp_guided(x, xp, fp, guide):
     j = guide[k]  # xp[j] <= k/g <= x: walk to the largest j with xp[j] <= x
     while j + 1 < n and xp[j + 1] <= x:
         j += 1
-    if j == n - 1 or xp[j] == x:
-        return fp[j]
-    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
-    r = slope * (x - xp[j]) + fp[j]
-    if r != r:
-        r = slope * (x - xp[j + 1]) + fp[j + 1]
-        if r != r and fp[j] == fp[j + 1]:
-            r = fp[j]
-    return r
+    return _interp_cell(x, xp, fp, j)
 
 
 @kernel

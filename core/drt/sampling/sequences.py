@@ -120,83 +120,54 @@ def sobol_dim1(index):
 
 
 @kernel
-def sobol_dim2(index):
-    """Third Sobol dimension (Joe & Kuo: x² + x + 1, m = 1, 3) of index, 32-bit fixed point:
-    v_k = v_{k−1} ⊕ v_{k−2} ⊕ (v_{k−2} >> 2)."""
+def sobol_poly(index, s, a1, a2, v1, v2, v3):
+    """A Sobol dimension of index (32-bit fixed point) for a primitive polynomial of degree
+    s ≤ 3: x^s + a1·x^(s−1) + a2·x^(s−2) + … + 1, with initial direction numbers v1 … vs
+    (m_k << (32 − k)). Later ones follow Bratley & Fox's recurrence
+    v_k = a1·v_{k−1} ⊕ a2·v_{k−2} ⊕ v_{k−s} ⊕ (v_{k−s} >> s)."""
     r = 0
     p1 = 0
     p2 = 0
+    p3 = 0
     k = 1
     while index != 0:
         if k == 1:
-            v = 0x80000000
-        elif k == 2:
-            v = 0xC0000000
+            v = v1
+        elif k <= s:
+            v = v2 if k == 2 else v3
         else:
-            v = p1 ^ p2 ^ (p2 >> 2)
+            q = p1 if s == 1 else (p2 if s == 2 else p3)
+            v = q ^ (q >> s)
+            if a1 and s >= 2:
+                v ^= p1
+            if a2 and s >= 3:
+                v ^= p2
         if index & 1:
             r ^= v
         index >>= 1
+        p3 = p2
         p2 = p1
         p1 = v
         k += 1
     return r
+
+
+@kernel
+def sobol_dim2(index):
+    """Third Sobol dimension (Joe & Kuo: x² + x + 1, m = 1, 3)."""
+    return sobol_poly(index, 2, 1, 0, 0x80000000, 0xC0000000, 0)
 
 
 @kernel
 def sobol_dim3(index):
-    """Fourth Sobol dimension (Joe & Kuo: x³ + x + 1, m = 1, 3, 1) of index, 32-bit fixed
-    point: v_k = v_{k−2} ⊕ v_{k−3} ⊕ (v_{k−3} >> 3)."""
-    r = 0
-    p1 = 0
-    p2 = 0
-    p3 = 0
-    k = 1
-    while index != 0:
-        if k == 1:
-            v = 0x80000000
-        elif k == 2:
-            v = 0xC0000000
-        elif k == 3:
-            v = 0x20000000
-        else:
-            v = p2 ^ p3 ^ (p3 >> 3)
-        if index & 1:
-            r ^= v
-        index >>= 1
-        p3 = p2
-        p2 = p1
-        p1 = v
-        k += 1
-    return r
+    """Fourth Sobol dimension (Joe & Kuo: x³ + x + 1, m = 1, 3, 1)."""
+    return sobol_poly(index, 3, 0, 1, 0x80000000, 0xC0000000, 0x20000000)
 
 
 @kernel
 def sobol_dim4(index):
-    """Fifth Sobol dimension (Joe & Kuo: x³ + x² + 1, m = 1, 1, 1) of index, 32-bit fixed
-    point: v_k = v_{k−1} ⊕ v_{k−3} ⊕ (v_{k−3} >> 3)."""
-    r = 0
-    p1 = 0
-    p2 = 0
-    p3 = 0
-    k = 1
-    while index != 0:
-        if k == 1:
-            v = 0x80000000
-        elif k == 2:
-            v = 0x40000000
-        elif k == 3:
-            v = 0x20000000
-        else:
-            v = p1 ^ p3 ^ (p3 >> 3)
-        if index & 1:
-            r ^= v
-        index >>= 1
-        p3 = p2
-        p2 = p1
-        p1 = v
-        k += 1
-    return r
+    """Fifth Sobol dimension (Joe & Kuo: x³ + x² + 1, m = 1, 1, 1)."""
+    return sobol_poly(index, 3, 1, 0, 0x80000000, 0x40000000, 0x20000000)
 
 
 @kernel
