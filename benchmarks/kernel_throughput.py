@@ -86,11 +86,10 @@ def main(argv=None) -> int:
     recorded = []
     original = tracer._run
 
-    def recording(emb_scene, o, d, tfar, occluded=False):
-        recorded.append((emb_scene, np.ascontiguousarray(o, dtype=np.float32),
-                         np.ascontiguousarray(d, dtype=np.float32),
-                         np.ascontiguousarray(tfar, dtype=np.float32).copy(), occluded))
-        return original(emb_scene, o, d, tfar, occluded)
+    def recording(emb_scene, o, d, tfar, occluded=False, scratch=False):
+        recorded.append((emb_scene, np.array(o, dtype=np.float32), np.array(d, dtype=np.float32),
+                         np.array(tfar, dtype=np.float32), occluded))
+        return original(emb_scene, o, d, tfar, occluded, scratch)
 
     tracer._run = recording
     try:
