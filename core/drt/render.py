@@ -94,7 +94,9 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
         raise SceneError("materials", str(e)) from None
     emissive = _emissive_triangles(scene, geom, materials)
     try:
-        lights = LightSet(scene.lights, scene.world_color, emissive, origin_shift=geom.origin_shift, scene_radius=geom.scene_radius)
+        # a constant-colour world is found by BSDF rays only, as in Cycles (see LightSet)
+        lights = LightSet(scene.lights, scene.world_color, emissive, origin_shift=geom.origin_shift,
+                          scene_radius=geom.scene_radius, world_nee=False)
     except ValueError as e:
         raise SceneError("lights", str(e)) from None
     tracer = Tracer(geom)

@@ -527,13 +527,20 @@ class LightSet:
     from every light position in ``lights`` (the integrator's re-centring; emissive vertices are
     taken as given). scene_radius: bounding radius of the scene for the sun/world selection
     weights (default: from the light positions and emissive vertices, at least 1 m).
+    world_nee: the world is a next-event strategy (default). The renderer passes False for a
+    constant-colour world, as Cycles does not sample a constant background either: BSDF rays
+    find it with a pdf proportional to the integrand's, and a world strategy would only add the
+    variance of choosing between it and the other lights (measured on a sun + grey world scene,
+    64 spp: relMSE 3.7e-5 with world NEE, 6.9e-6 without; Cycles 3.8e-6, identical with its
+    world sampling AUTOMATIC and NONE). Misses still see ``world_color``.
 
     ``data``: the `LightData` the kernels (and the compiled integrator) take.
     """
 
     def __init__(self, lights: list[dict], world_color=(0.0, 0.0, 0.0),
                  emissive: EmissiveTriangles | None = None, *, origin_shift=(0.0, 0.0, 0.0),
-                 scene_radius: float | None = None, selection: str = "DISTANCE"):
+                 scene_radius: float | None = None, selection: str = "DISTANCE",
+                 world_nee: bool = True):
         origin_shift = np.asarray(origin_shift, dtype=np.float64).reshape(3)
         group = EmissiveGroup(emissive) if emissive is not None else None
         if group is not None and len(group) == 0:
@@ -545,7 +552,8 @@ class LightSet:
         self.n_lights = len(self.lights)
         self.emissive = group
         world_color = np.asarray(world_color, dtype=np.float64).reshape(3)
-        self.world = WorldLight(world_color, self.scene_radius) if (world_color > 0).any() else None
+        self.world = WorldLight(world_color, self.scene_radius) if (world_color > 0).any() and world_nee else None
+        self.world_color = world_color
         self.strategies = list(self.lights)
         self.emissive_index = self.world_index = -1
         if self.emissive is not None:
@@ -572,6 +580,8 @@ class LightSet:
             self.lights, self.emissive, self.world.radiance if self.world is not None else None,
             pmf=self.pmf, cdf=self.cdf, per_point=self._per_point,
             selection=self._selection_tables())
+        if self.world is None and (world_color > 0).any():  # seen by rays that miss, not sampled
+            self.data = self.data._replace(world_color=np.array(world_color, dtype=np.float64))
 
     # ------------------------------------------------------------------------------ selection
     def _selection_tables(self) -> dict:
