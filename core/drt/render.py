@@ -37,6 +37,7 @@ from .scene import Scene, SceneError
 from .trace import Tracer
 
 BATCH_PATHS = 1 << 16
+MIN_BATCH_PATHS = 1 << 12
 
 
 @dataclass
@@ -228,9 +229,15 @@ def render(
     total_paths = max(npix * count, 1)
 
     def batches(first: int, k: int):
-        """(x, row, sample index) arrays of one pass, cut into batches."""
+        """(x, row, sample index) arrays of one pass, cut into batches: at most BATCH_PATHS
+        paths, and small enough that every thread gets work in the early, small passes (at
+        least two batches per thread, of at least MIN_BATCH_PATHS paths). Each pixel's samples
+        of a pass stay in one batch, so the film adds them in the same order whatever the cut:
+        the image does not depend on the thread count."""
         npix = len(xs)
-        per = max(1, BATCH_PATHS // max(k, 1))
+        k = max(k, 1)
+        spread = max(MIN_BATCH_PATHS // k, -(-npix // (2 * threads)))
+        per = max(1, min(BATCH_PATHS // k, spread))
         for start in range(0, npix, per):
             sl = slice(start, start + per)
             bx, by = xs[sl], ys[sl]
