@@ -47,7 +47,7 @@ def cycles_run(blend: str, spp: int, seed: int, threads: int, width: int, height
     from drt.bench import _CYCLES_SCRIPT, _read_rgba
 
     args = dict(blend=os.path.abspath(blend), seed=seed, threads=threads, width=width, height=height,
-                jobs=[[spp, os.path.abspath(out)]])
+                jobs=[[spp, os.path.abspath(out)]], warmup=False)  # a user's process renders cold
     wall, proc = _wall([sys.executable, "-c", _CYCLES_SCRIPT, json.dumps(args)])
     line = [ln for ln in proc.stdout.splitlines() if ln.startswith("CYCLES_RESULT ")]
     if proc.returncode != 0 or not line:

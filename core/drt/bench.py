@@ -206,6 +206,11 @@ im = sc.render.image_settings
 im.file_format = "OPEN_EXR"
 im.color_depth = "32"
 im.color_mode = "RGBA"
+# warm-up: the first render of a process also initialises Cycles's device and kernels, which
+# would make the first timed job look slower than a later, larger one
+if args.get("warmup", True):
+    cy.samples = 1
+    bpy.ops.render.render(write_still=False)
 out = []
 for spp, path in args["jobs"]:
     cy.samples = spp
