@@ -31,6 +31,63 @@ def test_source_key_is_stable_and_short():
     assert len(kernels.source_key()) == 16
 
 
+def _drt_import_graph():
+    """{module: set of drt modules it imports} for every module of the drt package (dotted names
+    relative to ``drt``; the package itself is ``""``), from the sources' import statements."""
+    import ast
+
+    root = os.path.join(REPO, "core", "drt")
+    files = {}
+    for folder, _dirs, names in os.walk(root):
+        for name in names:
+            if name.endswith(".py"):
+                parts = os.path.relpath(os.path.join(folder, name), root)[:-3].split(os.sep)
+                is_pkg = parts[-1] == "__init__"
+                files[".".join(parts[:-1] if is_pkg else parts)] = (os.path.join(folder, name), is_pkg)
+    graph = {}
+    for module, (path, is_pkg) in files.items():
+        package = module.split(".") if module else []
+        if not is_pkg:
+            package = package[:-1]
+        deps = set()
+        for node in ast.walk(ast.parse(open(path, encoding="utf-8").read())):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = package[:len(package) - node.level + 1]
+                    target = ".".join(base + (node.module.split(".") if node.module else []))
+                elif node.module == "drt" or (node.module or "").startswith("drt."):
+                    target = node.module[4:]
+                else:
+                    continue
+                for name in [target] + [f"{target}.{a.name}".strip(".") for a in node.names]:
+                    if name in files:
+                        deps.add(name)
+            elif isinstance(node, ast.Import):
+                deps.update(a.name[4:] for a in node.names if a.name[4:] in files and a.name.startswith("drt."))
+        graph[module] = deps
+    return graph
+
+
+def test_front_end_modules_are_outside_the_kernel_sources():
+    """Editing a FRONT_END_MODULES file keeps the kernel cache, which is only safe if no module
+    with kernel code imports it (directly or through others) and it defines no kernels itself."""
+    graph = _drt_import_graph()
+    assert kernels.FRONT_END_MODULES <= set(graph)
+    root = os.path.join(REPO, "core", "drt")
+    for module in kernels.FRONT_END_MODULES:
+        source = open(os.path.join(root, module + ".py"), encoding="utf-8").read()
+        assert "numba" not in source and "@kernel" not in source and "inline_kernel" not in source, module
+    kernel_modules = {m for m in graph if m not in kernels.FRONT_END_MODULES and m != "__main__"}
+    for module in kernel_modules:
+        reached, stack = set(), [module]
+        while stack:
+            m = stack.pop()
+            if m not in reached:
+                reached.add(m)
+                stack.extend(graph[m])
+        assert not reached & kernels.FRONT_END_MODULES, (module, reached & kernels.FRONT_END_MODULES)
+
+
 def test_old_cache_folders_are_pruned(tmp_path):
     old, fresh, keep = tmp_path / "old", tmp_path / "fresh", tmp_path / "keep"
     for d in (old, fresh, keep):

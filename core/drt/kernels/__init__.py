@@ -51,12 +51,22 @@ def cache_dir() -> str:
     return os.path.join(base, "drt", "numba")
 
 
+#: top-level modules of ``drt`` that hold no kernel code and that no kernel module imports, so
+#: editing them does not invalidate the compiled-kernel cache (checked by tests/test_kernels.py)
+FRONT_END_MODULES = frozenset({"__main__", "bench", "blend_bridge", "cli", "estimators", "exr",
+                               "integrator", "preview", "render", "scene_file"})
+
+
 def source_key() -> str:
-    """A short hash of every source file of the ``drt`` package and the numba/Python versions.
+    """A short hash of the ``drt`` source files that kernels are compiled from, and of the
+    numba/Python versions.
 
     numba's cache checks only the stamp of a kernel's *own* file, not of the kernels it calls in
     other files: after an upgrade (or an edit) a cached caller could keep stale inlined code. The
-    cache therefore lives in a folder per source state, and any change recompiles everything."""
+    cache therefore lives in a folder per source state, and any change to kernel code recompiles
+    everything. Edits to the front-end modules (``FRONT_END_MODULES``: command line, render
+    loop, file formats) keep the cache; tests/test_kernels.py checks that no kernel module
+    imports them."""
     import hashlib
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -64,7 +74,7 @@ def source_key() -> str:
     for folder, dirs, files in sorted(os.walk(root)):
         dirs.sort()
         for name in sorted(files):
-            if name.endswith(".py"):
+            if name.endswith(".py") and not (folder == root and name[:-3] in FRONT_END_MODULES):
                 path = os.path.join(folder, name)
                 h.update(os.path.relpath(path, root).encode())
                 try:
