@@ -352,7 +352,7 @@ def test_no_camera_on_the_command_line(driver, tmp_path):
              "-o", str(out), "--spp", "1"], cwd=REPO)
     assert p.returncode == 2, p.output[-3000:]
     last = p.stderr.strip().splitlines()[-1]
-    assert last.startswith("drt: error: cannot export") and \
+    assert last.startswith("drt: error: cannot read") and \
         last.endswith("the scene has no active camera"), last
     assert not out.exists()
 

@@ -30,4 +30,4 @@ def test_unreadable_blend_is_a_one_line_error(tmp_path, capsys):
     bad.write_bytes(b"not a blend file")
     assert main(["render", str(bad), "-o", str(tmp_path / "x.exr")]) == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
-    assert err.startswith("drt: error: cannot export")
+    assert err.startswith("drt: error: cannot read")

@@ -129,13 +129,9 @@ class BenchRow:
 
 def load_scene(path: str, frame: int | None = None):
     """A Scene from a .npz or (through bpy) a .blend."""
-    if path.lower().endswith(".blend"):
-        from .blend_bridge import scene_from_blend
+    from .loaders import load_scene as _load
 
-        return scene_from_blend(path, frame=frame)
-    from .scene_file import load_scene as _load
-
-    return _load(path)
+    return _load(path, frame=frame, warn=lambda w: print(f"drt: warning: {w}", file=sys.stderr))
 
 
 def _render(scene, ctx, spp, threads, seed, threshold, min_samples=None):

@@ -136,25 +136,24 @@ class Progress:
 
 
 def _load(args):
+    from .loaders import LoaderError, is_plugin_format, load_scene
     from .scene import SceneError
 
     path = args.scene
     if not os.path.exists(path):
         raise CliError(f"scene file not found: {path}")
-    if path.lower().endswith(".blend"):
-        from .blend_bridge import BlendError, scene_from_blend
-
-        try:
-            return scene_from_blend(path, frame=args.frame)
-        except BlendError as e:
-            raise CliError(str(e)) from None
-        except SceneError as e:
-            raise CliError(f"{path} exported an invalid scene: {e}", EXIT_FAILURE) from None
+    if os.path.isdir(path):
+        raise CliError(f"the scene is a directory, not a file: {path}")
+    plugin = is_plugin_format(path)
+    if args.frame is not None and not plugin:
+        raise CliError(f"--frame applies to animated scene files (.blend); {path} holds one exported frame")
     try:
-        from .scene_file import load_scene
-
-        return load_scene(path)
+        return load_scene(path, frame=args.frame, warn=lambda w: print(f"drt: warning: {w}", file=sys.stderr))
+    except LoaderError as e:
+        raise CliError(str(e)) from None
     except SceneError as e:
+        if plugin:
+            raise CliError(f"{path} exported an invalid scene: {e}", EXIT_FAILURE) from None
         raise CliError(f"invalid scene {path}: {e}") from None
 
 
@@ -256,24 +255,34 @@ def cmd_merge(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from .blend_bridge import BlendError, export_blend
-    from .scene import SceneError
+    from .loaders import LoaderError, is_plugin_format, read_scene_arrays
+    from .scene import SceneError, scene_from_dict
+    from .scene_file import save_scene
 
     if not os.path.exists(args.scene):
         raise CliError(f"scene file not found: {args.scene}")
+    if os.path.isdir(args.scene):
+        raise CliError(f"the scene is a directory, not a file: {args.scene}")
+    if not is_plugin_format(args.scene):
+        raise CliError(f"export reads .blend files (with the add-on package installed), not {args.scene}")
     _check_output(args.output, ".npz")
     try:
-        export_blend(args.scene, args.output, frame=args.frame)
-    except BlendError as e:
+        header, arrays, warnings = read_scene_arrays(args.scene, frame=args.frame)
+        for w in warnings:
+            print(f"drt: warning: {w}", file=sys.stderr)
+        scene_from_dict(header, arrays)  # never write a file the loader would refuse
+    except LoaderError as e:
         raise CliError(str(e)) from None
     except SceneError as e:
         raise CliError(f"{args.scene} exported an invalid scene: {e}", EXIT_FAILURE) from None
+    save_scene(args.output, header, arrays)
     print(f"drt: exported {args.scene} -> {args.output}")
     return EXIT_OK
 
 
 def cmd_bench(args) -> int:
     from . import bench
+    from .loaders import LoaderError
 
     if not os.path.exists(args.scene):
         raise CliError(f"scene file not found: {args.scene}")
@@ -298,10 +307,8 @@ def cmd_bench(args) -> int:
         raise CliError(str(e)) from None
     except RuntimeError as e:  # a failed Cycles render
         raise CliError(str(e), EXIT_FAILURE) from None
-    except Exception as e:
-        if type(e).__name__ == "BlendError":
-            raise CliError(str(e)) from None
-        raise
+    except LoaderError as e:
+        raise CliError(str(e)) from None
     return EXIT_OK
 
 
