@@ -37,13 +37,75 @@ IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "_vendor", "wheels")
 
 
 def manifest_wheels() -> list[str]:
-    text = open(os.path.join(ADDON, "blender_manifest.toml"), encoding="utf-8").read()
+    with open(os.path.join(ADDON, "blender_manifest.toml"), encoding="utf-8") as f:
+        text = f.read()
     return re.findall(r'"\./wheels/([^"]+\.whl)"', text)
 
 
 def manifest_version() -> str:
-    text = open(os.path.join(ADDON, "blender_manifest.toml"), encoding="utf-8").read()
+    with open(os.path.join(ADDON, "blender_manifest.toml"), encoding="utf-8") as f:
+        text = f.read()
     return re.search(r'^version = "([^"]+)"', text, re.M).group(1)
+
+
+#: Python of each Blender line the extension supports: 4.2 LTS - 5.0 run 3.11, 5.1 / 5.2 LTS 3.13
+PYTHON_TAGS = ("cp311", "cp313")
+#: a manifest platform -> the test a wheel's platform tag must pass to run there
+PLATFORM_TAGS = {
+    "linux-x64": lambda tag: tag.startswith("manylinux") and tag.endswith("_x86_64"),
+    "windows-x64": lambda tag: tag == "win_amd64",
+    "macos-arm64": lambda tag: tag.startswith("macosx_") and tag.endswith("_arm64"),
+    "macos-x64": lambda tag: tag.startswith("macosx_") and tag.endswith("_x86_64"),
+}
+
+
+def manifest_platforms() -> list[str]:
+    with open(os.path.join(ADDON, "blender_manifest.toml"), encoding="utf-8") as f:
+        text = f.read()
+    block = re.search(r"^platforms = \[([^\]]*)\]", text, re.M)
+    return re.findall(r'"([^"]+)"', block.group(1)) if block else []
+
+
+def check_wheel_matrix(wheels: list[str] | None = None, platforms: list[str] | None = None) -> list[str]:
+    """Problems with the manifest's wheel list (empty when it is complete): every distribution
+    needs, for every listed platform and every Python in PYTHON_TAGS, exactly one wheel whose
+    tags install there (a pure ``py3-none-any`` wheel covers them all, a ``cp39-abi3`` wheel every
+    Python from 3.9 on), and no wheel may be for
+    a platform or Python the manifest does not list."""
+    wheels = manifest_wheels() if wheels is None else wheels
+    platforms = manifest_platforms() if platforms is None else platforms
+    problems, covered = [], {}
+    for name in wheels:
+        parts = name[:-4].split("-")
+        if len(parts) not in (5, 6):
+            problems.append(f"{name}: not a wheel file name")
+            continue
+        dist, py_tags, abi, plat_tags = parts[0].lower(), parts[-3].split("."), parts[-2], parts[-1].split(".")
+        if "py3" in py_tags and abi == "none" and plat_tags == ["any"]:
+            for plat in platforms:
+                for py in PYTHON_TAGS:
+                    covered.setdefault((dist, plat, py), []).append(name)
+            continue
+        pys = [t for t in py_tags if t in PYTHON_TAGS]
+        if abi == "abi3":  # the stable ABI: a cp39-abi3 wheel runs on every CPython >= 3.9
+            pys = [py for py in PYTHON_TAGS if any(t.startswith("cp") and int(t[3:] or 0) <= int(py[3:])
+                                                   and t[2] == py[2] for t in py_tags)]
+        plats = [p for p in platforms if any(PLATFORM_TAGS.get(p, lambda t: False)(t) for t in plat_tags)]
+        if not pys:
+            problems.append(f"{name}: built for {'.'.join(py_tags)}, not one of {', '.join(PYTHON_TAGS)}")
+        if not plats:
+            problems.append(f"{name}: platform {'.'.join(plat_tags)} is not one the manifest lists")
+        for plat in plats:
+            for py in pys:
+                covered.setdefault((dist, plat, py), []).append(name)
+    for dist in sorted({k[0] for k in covered}):
+        for plat in platforms:
+            for py in PYTHON_TAGS:
+                found = covered.get((dist, plat, py), [])
+                if len(found) != 1:
+                    what = "no wheel" if not found else f"{len(found)} wheels"
+                    problems.append(f"{dist}: {what} for {plat} / {py}")
+    return problems
 
 
 def download_wheels(names: list[str], dest: str = WHEEL_CACHE) -> list[str]:
@@ -126,6 +188,9 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=os.path.join(REPO, "dist"))
     p.add_argument("--legacy-only", action="store_true")
     opts = p.parse_args(argv)
+    problems = check_wheel_matrix()
+    if problems:
+        raise SystemExit("blender_manifest.toml's wheels are incomplete:\n  " + "\n  ".join(problems))
     wheels = download_wheels(manifest_wheels())
     built = []
     if not opts.legacy_only:
