@@ -63,7 +63,8 @@ def documented_farm_command() -> list[str]:
     import re
     import shlex
 
-    text = open(os.path.join(REPO, "docs", "addon.md"), encoding="utf-8").read()
+    with open(os.path.join(REPO, "docs", "addon.md"), encoding="utf-8") as f:
+        text = f.read()
     lines = [ln.strip() for ln in text.splitlines()
              if re.match(r"^ {4}blender -b shot\.blend --addons drt_blender -E DRT .* -f \d+\s*(#.*)?$", ln)]
     assert len(lines) == 1, lines

@@ -59,7 +59,8 @@ def build_linux_extension(tmp, wheels) -> str:
     for wheel in wheels:
         shutil.copy2(wheel, os.path.join(stage, "wheels"))
     manifest = os.path.join(stage, "blender_manifest.toml")
-    text = open(manifest, encoding="utf-8").read()
+    with open(manifest, encoding="utf-8") as f:
+        text = f.read()
     text = re.sub(r"platforms = \[[^\]]*\]", 'platforms = ["linux-x64"]', text)
     listed = ", ".join(f'"./wheels/{os.path.basename(w)}"' for w in wheels)
     text = re.sub(r"wheels = \[[^\]]*\]", f"wheels = [{listed}]", text)

@@ -50,7 +50,9 @@ def _drt_import_graph():
         if not is_pkg:
             package = package[:-1]
         deps = set()
-        for node in ast.walk(ast.parse(open(path, encoding="utf-8").read())):
+        with open(path, encoding="utf-8") as f:
+            tree = ast.parse(f.read())
+        for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom):
                 if node.level:
                     base = package[:len(package) - node.level + 1]
@@ -75,7 +77,8 @@ def test_front_end_modules_are_outside_the_kernel_sources():
     assert kernels.FRONT_END_MODULES <= set(graph)
     root = os.path.join(REPO, "core", "drt")
     for module in kernels.FRONT_END_MODULES:
-        source = open(os.path.join(root, module + ".py"), encoding="utf-8").read()
+        with open(os.path.join(root, module + ".py"), encoding="utf-8") as f:
+            source = f.read()
         assert "numba" not in source and "@kernel" not in source and "inline_kernel" not in source, module
     kernel_modules = {m for m in graph if m not in kernels.FRONT_END_MODULES and m != "__main__"}
     for module in kernel_modules:

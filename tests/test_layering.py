@@ -27,7 +27,8 @@ def _core_sources():
 def test_core_has_no_static_import_of_blender_or_the_addon():
     offenders = []
     for path in _core_sources():
-        tree = ast.parse(open(path, encoding="utf-8").read())
+        with open(path, encoding="utf-8") as f:
+            tree = ast.parse(f.read())
         for node in ast.walk(tree):
             names = []
             if isinstance(node, ast.Import):

@@ -27,7 +27,8 @@ from drt.scene_file import load_scene, save_scene
 from scene_builders import cornell_box
 
 CORPUS = os.path.join(os.path.dirname(__file__), "fuzz_corpus")
-EXPECTED = json.load(open(os.path.join(CORPUS, "expected.json")))
+with open(os.path.join(CORPUS, "expected.json"), encoding="utf-8") as _f:
+    EXPECTED = json.load(_f)
 
 
 def npy(arr) -> bytes:

@@ -47,8 +47,13 @@ class EmissiveGroup:
         self.area = area[keep]
         self.radiance = radiance[keep]
         weight = weight[keep]
-        self.power = float(2.0 * np.pi * weight.sum())           # two-sided Lambertian flux
-        self.pmf = weight / weight.sum() if len(weight) else weight
+        # two-sided Lambertian flux; inf for emission near float64's limit (the samples such a
+        # light makes are dropped as Inf by the film, tests/fuzz_corpus/emission_1e308.npz), so
+        # the pmf is taken from weights scaled by their maximum, which stays finite
+        with np.errstate(over="ignore"):
+            self.power = float(2.0 * np.pi * weight.sum())
+        relative = weight / weight.max() if len(weight) else weight
+        self.pmf = relative / relative.sum() if len(weight) else weight
         self.cdf = np.cumsum(self.pmf)
         if len(self.cdf):
             self.cdf[-1] = 1.0

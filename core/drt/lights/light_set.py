@@ -467,11 +467,14 @@ def emissive_dir_pdf_rows(ld: LightData, tri, o, p_hit, ng) -> np.ndarray:
 
 # ------------------------------------------------------------------------------- selection
 def selection_distribution(power) -> tuple[np.ndarray, np.ndarray]:
-    """pmf and cdf (both (k,)) for choosing among k strategies ∝ power. Zero total → uniform.
+    """pmf and cdf (both (k,)) for choosing among k strategies ∝ power. Zero total → uniform;
+    infinite powers → uniform over the infinite ones.
     With one strategy the pmf is exactly [1.0]."""
     power = np.maximum(np.asarray(power, dtype=np.float64), 0.0)
     if len(power) == 0:
         return power, power
+    if np.isinf(power).any():  # emission at float64's limit: the limit of the pmf, uniform over those
+        power = np.isinf(power).astype(np.float64)
     total = power.sum()
     pmf = power / total if total > 0.0 else np.full(len(power), 1.0 / len(power))
     if len(pmf) == 1:
