@@ -362,7 +362,8 @@ def plot(rows, path, title=""):
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        print("bench: matplotlib is not installed (pip install 'drt[bench]'): no chart", file=sys.stderr)
+        print("bench: matplotlib is not installed, so no chart (pip install matplotlib; in a DRT checkout: "
+              "pip install -e '.[bench]')", file=sys.stderr)
         return
     fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=90)
     by = {}

@@ -25,6 +25,35 @@ class CliError(Exception):
         self.code = code
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with DRT's error format: one line ``drt: error: ...`` on stderr, exit code 2
+    (argparse's default prints the whole usage block first). ``--help`` is unchanged."""
+
+    def error(self, message):
+        sys.stderr.write(f"drt: error: {message} (see: {self.prog} --help)\n")
+        sys.exit(EXIT_USAGE)
+
+
+def _prog() -> str:
+    """``drt`` when run through the console script, ``python -m drt`` otherwise."""
+    return "drt" if os.path.basename(sys.argv[0] or "") in ("drt", "drt.exe") else "python -m drt"
+
+
+def _choice(*names: str):
+    """argparse type + choices for an option whose values are shown in lower case and accepted
+    in any case (``--sampler SOBOL`` and ``--sampler sobol`` are the same); the parsed value is
+    the upper-case name the core uses."""
+    allowed = {n.lower(): n for n in names}
+
+    def parse(text: str) -> str:
+        key = text.lower()
+        if key not in allowed:
+            raise argparse.ArgumentTypeError(f"invalid choice {text!r} (choose from {', '.join(allowed)})")
+        return allowed[key]
+
+    return dict(type=parse, metavar="{" + ",".join(allowed) + "}")
+
+
 def _resolution(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -55,8 +84,8 @@ _non_negative = _int_at_least(0)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m drt", description="DRT distribution ray tracer")
-    sub = p.add_subparsers(dest="command", required=True)
+    p = _Parser(prog=_prog(), description="DRT: a distribution ray tracer for Blender scenes")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND (render, merge, export, bench)")
 
     r = sub.add_parser("render", help="render a scene (.npz export or .blend) to an EXR")
     r.add_argument("scene", help="scene file: .npz (DRT export) or .blend (needs the bpy module)")
@@ -65,15 +94,19 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--seed", type=_non_negative, help="random seed (default: the scene's)")
     r.add_argument("--threads", type=_positive, help="worker threads (default: all cores)")
     r.add_argument("--resolution", type=_resolution, help="override WIDTHxHEIGHT (keeps the camera's framing)")
-    r.add_argument("--sampler", choices=["SOBOL", "STRATIFIED", "RANDOM"], help="sample generator")
-    r.add_argument("--direct", choices=["MIS_POWER", "MIS_BALANCE", "LIGHT", "BSDF"], help="direct-light estimator (default MIS_POWER)")
-    r.add_argument("--indirect", choices=["BSDF", "COSINE", "UNIFORM"], help="how paths continue (default BSDF)")
+    r.add_argument("--sampler", **_choice("SOBOL", "STRATIFIED", "RANDOM"),
+                   help="how sample positions are spread over pixel, lens, time and lights (default sobol)")
+    r.add_argument("--direct", **_choice("MIS_POWER", "MIS_BALANCE", "LIGHT", "BSDF"),
+                   help="how light from lamps is found: sample lights, sample the material, or both "
+                   "combined (mis_power, the default)")
+    r.add_argument("--indirect", **_choice("BSDF", "COSINE", "UNIFORM"),
+                   help="how bounce directions are chosen (default bsdf: follow the material)")
     r.add_argument("--adaptive-threshold", type=float, help="stop pixels whose relative standard error is below this (0: off)")
     r.add_argument("--adaptive-min-samples", type=_non_negative, help="samples before a pixel may stop (0: automatic)")
     r.add_argument("--sample-offset", type=_non_negative, default=0, help="first sample number (farm splitting)")
     r.add_argument("--sample-count", type=_positive, help="number of samples to render from --sample-offset")
     r.add_argument("--frame", type=int, help="frame to render (.blend only)")
-    r.add_argument("--png", help="also write an sRGB PNG preview here (needs Pillow)")
+    r.add_argument("--png", help="also write an 8-bit sRGB PNG preview here")
 
     m = sub.add_parser("merge", help="merge EXRs of disjoint sample ranges into one image")
     m.add_argument("inputs", nargs="+", help="EXR files written by `drt render --sample-offset/--sample-count`")
@@ -89,14 +122,14 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--reference", help="reference EXR (default: render one at --reference-spp)")
     b.add_argument("--reference-spp", type=_positive, default=1024, help="samples of the rendered reference (default 1024)")
     b.add_argument("--methods", nargs="+", help="presets (mis_power mis_balance light bsdf cosine uniform random "
-                   "stratified sobol adaptive) or DIRECT/INDIRECT/SAMPLER[/THRESHOLD]")
+                   "stratified sobol adaptive) or direct/indirect/sampler[/threshold], e.g. mis_power/bsdf/sobol")
     b.add_argument("--spp-list", nargs="+", type=_positive, help="sample counts (default 1 4 16 64)")
     b.add_argument("--cycles", action="store_true", help="also render with Cycles through bpy (needs the .blend)")
     b.add_argument("--threads", type=_positive, help="threads for DRT and Cycles (default: all cores)")
     b.add_argument("--resolution", type=_resolution, help="override WIDTHxHEIGHT")
     b.add_argument("--seed", type=_non_negative, default=0)
-    b.add_argument("--point", action="store_true", help="the lecture's direct-light estimators at the surface "
-                   "the image centre sees, instead of whole renders")
+    b.add_argument("--point", action="store_true", help="compare the direct-light estimators at the one "
+                   "surface point the image centre sees, instead of whole renders")
     b.add_argument("--no-chart", action="store_true", help="skip the PNG chart")
     return p
 
@@ -107,22 +140,38 @@ def build_parser() -> argparse.ArgumentParser:
 class Progress:
     """A one-line progress bar on a terminal; silent otherwise."""
 
-    def __init__(self, stream=sys.stderr):
+    def __init__(self, stream=sys.stderr, clock=time.perf_counter):
         self.stream = stream
         self.enabled = stream.isatty()
+        self.clock = clock
         self.last = 0.0
+        self.first = None  # (time, fraction) of the first finished batch
+
+    def eta(self, fraction: float) -> float:
+        """Seconds left, from the rate measured since the first finished batch: scene setup and
+        the first batch (loading kernels) are one-off costs, so extrapolating from the whole
+        elapsed time overestimated early ETAs 2-3x."""
+        now = self.clock()
+        if self.first is None:
+            self.first = (now, fraction)
+            return float("nan")
+        t0, f0 = self.first
+        if fraction <= f0 or now <= t0:
+            return float("nan")
+        return (1.0 - fraction) * (now - t0) / (fraction - f0)
 
     def __call__(self, fraction, stats):
+        eta = self.eta(fraction)
         if not self.enabled:
             return
-        now = time.perf_counter()
+        now = self.clock()
         if now - self.last < 0.1 and fraction < 1:
             return
         self.last = now
-        eta = stats.seconds * (1 - fraction) / fraction if fraction > 0 else float("nan")
         bar = "#" * int(fraction * 30)
+        eta_text = f"{eta:6.1f}s" if eta == eta else "    ..."
         self.stream.write(
-            f"\r[{bar:<30}] {fraction * 100:5.1f}%  ETA {eta:6.1f}s  {stats.rays_per_second / 1e6:6.2f} Mrays/s "
+            f"\r[{bar:<30}] {fraction * 100:5.1f}%  ETA {eta_text}  {stats.rays_per_second / 1e6:6.2f} Mrays/s "
         )
         self.stream.flush()
 
@@ -173,11 +222,14 @@ def cmd_render(args) -> int:
     from .scene import SceneError
 
     _check_output(args.output)
+    if args.png:
+        _check_output(args.png, ".png")
     if args.adaptive_threshold is not None and not (0 <= args.adaptive_threshold <= 1):
         raise CliError(f"--adaptive-threshold must be within [0, 1], got {args.adaptive_threshold}")
     scene = _load(args)
     if args.resolution:
         scene.render = replace(scene.render, width=args.resolution[0], height=args.resolution[1])
+    _check_film_memory(scene.render.width, scene.render.height)
     spp = args.spp or scene.render.spp
     if args.sample_offset >= spp:
         raise CliError(f"--sample-offset {args.sample_offset} must be below the sample count {spp}")
@@ -221,11 +273,31 @@ def cmd_render(args) -> int:
     nan_note = f", {st.nan_samples} NaN/Inf samples dropped" if st.nan_samples else ""
     state = "cancelled after" if st.cancelled else "rendered"
     print(
-        f"drt: {state} {w}x{h} at {st.samples_done} spp in {st.seconds:.2f}s: "
+        f"drt: {state} {w}x{h} at {spp_summary(st)} in {st.seconds:.2f}s: "
         f"{st.camera_paths / max(st.seconds, 1e-9) / 1e3:.1f} k samples/s, {st.rays_per_second / 1e6:.2f} Mrays/s, "
         f"{100 * st.embree_seconds / max(st.seconds * st.threads, 1e-9):.0f}% of thread time in Embree{nan_note} -> {args.output}"
     )
     return EXIT_INTERRUPTED if st.cancelled else EXIT_OK
+
+
+def spp_summary(st) -> str:
+    """The samples per pixel the film holds: ``16 spp`` when every pixel has the same count,
+    else mean and range (adaptive sampling, or a pass cut short by Ctrl-C)."""
+    if st.spp_min == st.spp_max:
+        return f"{st.spp_max} spp"
+    return f"{st.spp_mean:.1f} spp mean ({st.spp_min}-{st.spp_max} per pixel)"
+
+
+def _check_film_memory(width: int, height: int) -> None:
+    """Refuse, before any rendering work, a film that cannot fit in the memory available."""
+    from .render import FILM_BYTES_PER_PIXEL, film_memory_bytes
+    from .scene_file import _available_memory
+
+    need, avail = film_memory_bytes(width, height), _available_memory()
+    if avail is not None and need > avail:
+        gb = 1024.0**3
+        raise CliError(f"a {width}x{height} render needs {need / gb:.1f} GB of memory ({FILM_BYTES_PER_PIXEL} bytes "
+                       f"per pixel) but {avail / gb:.1f} GB are available: use a smaller --resolution")
 
 
 def cmd_merge(args) -> int:

@@ -1,7 +1,7 @@
 """EXR output and input through OpenEXR (scene-linear float32, top row first).
 
-Channels written: R, G, B, A (combined); Z (depth along the view axis; inf where nothing was
-hit); Normal.X/Y/Z (world-space shading normal); Albedo.R/G/B; SampleCount.Y (samples taken by
+Channels written: R, G, B, A (combined); Z (depth along the view axis; 1e10 where nothing was
+hit, Cycles's convention); Normal.X/Y/Z (world-space shading normal); Albedo.R/G/B; SampleCount.Y (samples taken by
 each pixel); Variance.Y (variance of the pixel mean's luminance). The header carries
 ``drt:sample_offset``, ``drt:sample_count``, ``drt:seed`` and ``drt:version`` so that renders of
 disjoint sample ranges can be merged exactly (``python -m drt merge``).

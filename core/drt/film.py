@@ -20,6 +20,11 @@ from .kernels import kernel
 LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)
 
 
+#: the Z-pass value of pixels that see only the background: Cycles writes 1e10 (measured with
+#: bpy 5.0, docs/conventions.md), and compositing setups (Z Combine, Defocus) expect it
+BACKGROUND_DEPTH = 1e10
+
+
 def luminance(rgb: np.ndarray) -> np.ndarray:
     """Rec.709 / linear sRGB luminance of (..., 3) radiance (no BLAS call: BLAS threads would
     spin beside the render's own)."""
@@ -127,7 +132,10 @@ class Film:
 
     @property
     def depth(self) -> np.ndarray:
-        return self._image(self.min_depth)
+        """(H, W) nearest hit distance along the view axis (Blender's Z pass); pixels where no
+        sample hit anything hold BACKGROUND_DEPTH (1e10), as in Cycles's Z pass, not inf."""
+        d = self.min_depth
+        return self._image(np.where(np.isfinite(d), d, BACKGROUND_DEPTH))
 
     @property
     def normal(self) -> np.ndarray:

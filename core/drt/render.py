@@ -40,6 +40,18 @@ BATCH_PATHS = 1 << 16
 MIN_BATCH_PATHS = 1 << 12
 
 
+#: bytes per pixel a render holds at its peak: the film's float64 accumulators (RGBA, luminance²,
+#: normal, albedo, depth: 12 values + an int64 count = 104 B), the pixel index arrays (32 B) and
+#: the float32 output passes with their float64 intermediates when the EXR is written (~84 B)
+FILM_BYTES_PER_PIXEL = 220
+
+
+def film_memory_bytes(width: int, height: int) -> int:
+    """Peak bytes of the per-pixel state of a ``width`` x ``height`` render (the scene's own
+    arrays and the per-batch path state, < 100 MB, come on top)."""
+    return int(width) * int(height) * FILM_BYTES_PER_PIXEL
+
+
 @dataclass
 class RenderStats:
     seconds: float = 0.0
@@ -52,6 +64,11 @@ class RenderStats:
     active_pixels: int = -1  # pixels still sampling (adaptive sampling); -1: all
     cancelled: bool = False
     threads: int = 1
+    # samples per pixel the film holds, over the rendered pixels (adaptive sampling and a
+    # cancelled pass make them differ from pixel to pixel)
+    spp_min: int = 0
+    spp_mean: float = 0.0
+    spp_max: int = 0
 
     @property
     def rays_per_second(self) -> float:
@@ -304,6 +321,9 @@ def render(
     stats.seconds = time.perf_counter() - t0
     stats.rays, stats.embree_seconds = workers.counters()
     stats.nan_samples = film.nan_samples
+    held = film.count[ys_all * film.width + xs_all]
+    if len(held):
+        stats.spp_min, stats.spp_mean, stats.spp_max = int(held.min()), float(held.mean()), int(held.max())
     film.meta.update(
         {
             "version": __version__,
