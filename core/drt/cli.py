@@ -134,6 +134,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--point", action="store_true", help="compare the direct-light estimators at the one "
                    "surface point the image centre sees, instead of whole renders")
     b.add_argument("--no-chart", action="store_true", help="skip the PNG chart")
+    b.add_argument("--denoise", action="store_true", help="add denoised curves: the first method + OIDN "
+                   "(needs the denoise extra) and, with --cycles, Cycles + its OpenImageDenoise")
     return p
 
 
@@ -413,6 +415,10 @@ def cmd_bench(args) -> int:
     parent = os.path.dirname(os.path.abspath(args.output))
     if not os.path.isdir(parent):
         raise CliError(f"output directory's parent does not exist: {parent}")
+    if args.denoise:
+        if args.point:
+            raise CliError("--denoise has no meaning with --point (no image to denoise)")
+        _check_denoise(args)
     try:
         for m in args.methods or ():
             if not args.point:
@@ -424,7 +430,7 @@ def cmd_bench(args) -> int:
             bench.bench(args.scene, args.output, reference=args.reference,
                         methods=args.methods or bench.DEFAULT_METHODS, spp_list=args.spp_list or bench.DEFAULT_SPP,
                         reference_spp=args.reference_spp, cycles=args.cycles, threads=args.threads,
-                        resolution=args.resolution, seed=args.seed, chart=not args.no_chart)
+                        resolution=args.resolution, seed=args.seed, chart=not args.no_chart, denoise=args.denoise)
     except ValueError as e:  # bad method names, sizes, invalid scenes (SceneError)
         raise CliError(str(e)) from None
     except RuntimeError as e:  # a failed Cycles render
