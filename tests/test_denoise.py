@@ -227,3 +227,18 @@ def test_blender_render_with_denoising(tmp_path):
     # Blender's own OIDN (2.3 in bpy 5.0) gives what the CLI's pyoidn gives on the same passes
     again = dn.denoise(noisy, albedo, normal)
     np.testing.assert_allclose(again, combined[..., :3], atol=2e-3)
+
+
+def test_bench_denoised_curve(box_file, tmp_path):
+    import json
+
+    out = tmp_path / "bench"
+    assert main(["bench", str(box_file), "-o", str(out), "--reference-spp", "64", "--spp-list", "1", "4",
+                 "--methods", "mis_power", "--denoise", "--no-chart", "--threads", "2"]) == 0
+    rows = json.loads((out / "bench.json").read_text())["rows"]
+    by = {(r["method"], r["spp"]): r for r in rows}
+    assert set(by) == {("mis_power", 1), ("mis_power", 4), ("mis_power+oidn", 1), ("mis_power+oidn", 4)}
+    for spp in (1, 4):
+        den, noisy = by[("mis_power+oidn", spp)], by[("mis_power", spp)]
+        assert den["relmse"] < noisy["relmse"] and den["seconds"] > noisy["seconds"]
+    assert main(["bench", str(box_file), "-o", str(out), "--point", "--denoise"]) == 2
