@@ -74,7 +74,8 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         except Exception as exc:  # noqa: BLE001 -- must not escape: see the module docstring
             traceback.print_exc()
             msg = str(exc) or exc.__class__.__name__
-            if not isinstance(exc, ExportError) and exc.__class__.__name__ != "SceneError":
+            if not isinstance(exc, ExportError) and \
+                    exc.__class__.__name__ not in ("SceneError", "DenoiserUnavailable"):
                 msg = f"{exc.__class__.__name__}: {msg}"
             self.report({"ERROR"}, f"DRT: {msg}")
 

@@ -242,3 +242,28 @@ def test_bench_denoised_curve(box_file, tmp_path):
         den, noisy = by[("mis_power+oidn", spp)], by[("mis_power", spp)]
         assert den["relmse"] < noisy["relmse"] and den["seconds"] > noisy["seconds"]
     assert main(["bench", str(box_file), "-o", str(out), "--point", "--denoise"]) == 2
+
+
+@pytest.mark.blender
+def test_blender_without_a_denoiser_reports_before_rendering(monkeypatch):
+    bpy = pytest.importorskip("bpy")
+    if REPO not in sys.path:
+        sys.path.insert(0, REPO)
+    import addon
+    from addon import denoising
+    from addon import engine as drt_engine
+
+    if not hasattr(bpy.types.Scene, "drt"):
+        addon.register()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(REPO, "blend_scenes", "cornell_box.blend"))
+    bpy.context.scene.drt.use_denoising = True
+    monkeypatch.setattr(denoising, "blender_oidn_library", lambda: None)
+    monkeypatch.setitem(sys.modules, "pyoidn", None)
+    monkeypatch.setattr(dn, "_backends", {})
+
+    def no_export(*args, **kwargs):
+        raise AssertionError("exported before the denoiser was checked")
+
+    monkeypatch.setattr(drt_engine, "export_depsgraph", no_export)
+    with pytest.raises(RuntimeError, match="DRT: denoising needs Open Image Denoise"):
+        bpy.ops.render.render()
