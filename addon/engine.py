@@ -12,7 +12,7 @@ import traceback
 import bpy
 import numpy as np
 
-from . import compat
+from . import compat, denoising
 from .export import ExportError, export_depsgraph
 
 # Film arrays are top row first; Blender's render result wants bottom row first.
@@ -58,6 +58,8 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         for name, channels, chan_id, kind, _attr, flag in PASSES:
             if flags[flag]:
                 self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
+        for name, channels, chan_id, kind in denoising.extra_passes(scene, renderlayer):
+            self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
 
     # --- final render -----------------------------------------------------------------------
 
@@ -72,13 +74,23 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         except Exception as exc:  # noqa: BLE001 -- must not escape: see the module docstring
             traceback.print_exc()
             msg = str(exc) or exc.__class__.__name__
-            if not isinstance(exc, ExportError) and exc.__class__.__name__ != "SceneError":
+            if not isinstance(exc, ExportError) and \
+                    exc.__class__.__name__ not in ("SceneError", "DenoiserUnavailable"):
                 msg = f"{exc.__class__.__name__}: {msg}"
             self.report({"ERROR"}, f"DRT: {msg}")
 
     def _render(self, depsgraph):
         scene = depsgraph.scene
         t_start = time.perf_counter()
+        dn_passes = denoising.extra_passes(scene, depsgraph.view_layer)
+        dn_lib, denoise_mod = None, None
+        if denoising.enabled(scene, depsgraph.view_layer):
+            if scene.drt.use_sample_subset:  # a range is an intermediate: merge, then denoise once
+                self.report({"WARNING"}, "DRT: denoising skipped for a sample subset; denoise the "
+                                         "merged image (drt merge --denoise)")
+            else:  # fail before any work when no denoiser is available
+                denoise_mod = compat.core_module("denoise")
+                dn_lib = denoising.backend_library(denoise_mod)
         self.update_stats("", "DRT | Exporting scene")
         exported = export_depsgraph(depsgraph, frame_set=self.frame_set)
         for w in exported.warnings:
@@ -130,6 +142,15 @@ class DRTRenderEngine(bpy.types.RenderEngine):
                                      cancel=self.cancel_requested, context=context,
                                      threads=render_threads(scene))
             fill_layer(result.layers[0], film, crop, wanted)
+            cancelled = getattr(getattr(film, "stats", None), "cancelled", False)
+            denoised = None
+            if denoise_mod is not None and not cancelled:
+                self.update_stats("", "DRT | Denoising")
+                denoised, info = denoising.denoise(film, scene, denoise_mod, dn_lib, render_threads(scene))
+                if info.replaced_pixels:
+                    self.report({"WARNING"}, f"DRT: {info.replaced_pixels} non-finite pixels filled before denoising")
+            denoising.fill_passes(result.layers[0], _set_pass, film, crop, dn_passes, denoised,
+                                  drt_scene.camera.matrix)
         finally:
             self.end_result(result)
         stats = getattr(film, "stats", None)

@@ -20,6 +20,32 @@ FILTER_ITEMS = (
     ("BOX", "Box", "Box filter", 2),
 )
 
+# Cycles's enums (cycles/properties.py), same ids, names and values
+DENOISING_PREFILTER_ITEMS = (
+    ("NONE", "None", "No prefiltering, use when guiding passes are noise-free", 1),
+    ("FAST", "Fast", "Denoise color and guiding passes together. Improves quality when guiding "
+     "passes are noisy using least amount of extra processing time", 2),
+    ("ACCURATE", "Accurate", "Prefilter noisy guiding passes before denoising color. Improves "
+     "quality when guiding passes are noisy using extra processing time", 3),
+)
+DENOISING_QUALITY_ITEMS = (
+    ("HIGH", "High", "High quality", 1),
+    ("BALANCED", "Balanced", "Balanced between performance and quality", 2),
+    ("FAST", "Fast", "High performance", 3),
+)
+DENOISING_INPUT_ITEMS = (
+    ("RGB", "None", "Don't use utility passes for denoising", 1),
+    ("RGB_ALBEDO", "Albedo", "Use albedo pass for denoising", 2),
+    ("RGB_ALBEDO_NORMAL", "Albedo and Normal", "Use albedo and normal passes for denoising", 3),
+)
+
+
+def _update_render_passes(self, context):
+    """The Noisy Image pass follows the switch (as Cycles's does)."""
+    vl = getattr(context, "view_layer", None)
+    if vl is not None:
+        vl.update_render_passes()
+
 
 class DRTSceneSettings(bpy.types.PropertyGroup):
     samples: IntProperty(
@@ -69,6 +95,22 @@ class DRTSceneSettings(bpy.types.PropertyGroup):
     sample_count: IntProperty(
         name="Length", description="Number of samples rendered (0: up to the sample count)",
         default=0, min=0)
+
+    # denoising: Cycles's controls (same ids and defaults except the switch, off: DRT stays an
+    # unbiased renderer unless asked); per view layer, Cycles's use_denoising and Denoising Data
+    use_denoising: BoolProperty(
+        name="Denoise", description="Denoise the final render with Open Image Denoise "
+        "(albedo and normal guides); the noisy image is kept in the Noisy Image pass",
+        default=False, update=_update_render_passes)
+    denoising_prefilter: EnumProperty(
+        name="Prefilter", description="Prefilter noisy guiding (albedo and normal) passes to "
+        "improve denoising quality", items=DENOISING_PREFILTER_ITEMS, default="ACCURATE")
+    denoising_quality: EnumProperty(
+        name="Quality", description="Overall denoising quality",
+        items=DENOISING_QUALITY_ITEMS, default="HIGH")
+    denoising_input_passes: EnumProperty(
+        name="Passes", description="Passes used by the denoiser to distinguish noise from shader "
+        "and geometry detail", items=DENOISING_INPUT_ITEMS, default="RGB_ALBEDO_NORMAL")
 
     @classmethod
     def register(cls):

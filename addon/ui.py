@@ -72,6 +72,60 @@ class DRT_RENDER_PT_sampling_subset(DRTRenderPanel, bpy.types.Panel):
         col.prop(d, "sample_count")
 
 
+class DRT_RENDER_PT_sampling_denoise(DRTRenderPanel, bpy.types.Panel):
+    """Cycles's Sampling > Render > Denoise, for DRT's final renders (Open Image Denoise)."""
+    bl_label = "Denoise"
+    bl_parent_id = "DRT_RENDER_PT_sampling"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.drt, "use_denoising", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        d = context.scene.drt
+        col = layout.column()
+        col.active = d.use_denoising
+        col.prop(d, "denoising_input_passes")
+        sub = col.column()
+        sub.active = d.use_denoising and d.denoising_input_passes != "RGB"
+        sub.prop(d, "denoising_prefilter")
+        col.prop(d, "denoising_quality")
+
+
+class DRT_VIEWLAYER_PT_passes_data(bpy.types.Panel):
+    """The passes DRT fills, and Cycles's per-layer Denoising / Denoising Data settings."""
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "view_layer"
+    bl_label = "Data"
+    bl_parent_id = "VIEWLAYER_PT_layer_passes"
+    COMPAT_ENGINES = {ENGINE}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        vl = context.view_layer
+        col = layout.column(heading="Include", align=True)
+        col.prop(vl, "use_pass_combined")
+        col.prop(vl, "use_pass_z")
+        col.prop(vl, "use_pass_normal")
+        col.prop(vl, "use_pass_diffuse_color", text="Albedo (Diffuse Color)")
+        cl = getattr(vl, "cycles", None)  # the Cycles add-on's view-layer settings, if enabled
+        if cl is not None:
+            col.prop(cl, "denoising_store_passes", text="Denoising Data")
+            col = layout.column(heading="Denoise")
+            col.active = context.scene.drt.use_denoising
+            col.prop(cl, "use_denoising", text="This View Layer")
+
+
 class DRT_RENDER_PT_light_paths(DRTRenderPanel, bpy.types.Panel):
     bl_label = "Light Paths"
 
@@ -126,9 +180,11 @@ class DRT_RENDER_PT_film(DRTRenderPanel, bpy.types.Panel):
 classes = (
     DRT_RENDER_PT_sampling,
     DRT_RENDER_PT_sampling_subset,
+    DRT_RENDER_PT_sampling_denoise,
     DRT_RENDER_PT_light_paths,
     DRT_RENDER_PT_motion_blur,
     DRT_RENDER_PT_film,
+    DRT_VIEWLAYER_PT_passes_data,
 )
 
 

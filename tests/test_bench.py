@@ -87,3 +87,22 @@ def test_bench_with_cycles_on_the_shipped_cornell_box(tmp_path):
     assert summary["time_to_relmse_0.01"]["cycles"]["seconds"] is not None
     # the two converged images agree (same scene, same units)
     assert summary["reference_agreement_relmse"] < 0.05
+
+
+def test_summary_with_denoised_curves():
+    """The Cycles+OIDN 16-spp error is the bar every curve is timed to; denoised curves never
+    stand in for the plain DRT/Cycles ratio."""
+    R = bench.BenchRow
+    rows = [R("mis_power", 4, 1.0, 0, 0.04, 4), R("mis_power", 16, 4.0, 0, 0.01, 16),
+            R("mis_power+oidn", 4, 1.2, 0, 0.004, 4), R("mis_power+oidn", 16, 4.2, 0, 0.002, 16),
+            R("cycles", 4, 0.5, 0, 0.04, 4, "cycles"), R("cycles", 16, 2.0, 0, 0.01, 16, "cycles"),
+            R("cycles+oidn", 4, 1.0, 0, 0.008, 4, "cycles"), R("cycles+oidn", 16, 2.0, 0, 0.004, 16, "cycles")]
+    s = bench.summarize(rows)
+    bar = s["time_to_cycles_oidn_16spp"]
+    assert bar["spp"] == 16 and bar["relmse"] == 0.004
+    assert bar["seconds"]["cycles+oidn"] == {"seconds": 2.0, "extrapolated": False}
+    assert bar["seconds"]["mis_power+oidn"] == {"seconds": 1.2, "extrapolated": False}
+    t = bar["seconds"]["mis_power"]  # slope −1 in log-log: 0.004 at 10 s, beyond the last point
+    assert math.isclose(t["seconds"], 10.0) and t["extrapolated"]
+    assert s["drt_method_for_ratio"] == "mis_power" and s["best_drt_method"] == "mis_power"
+    assert math.isclose(s["drt_over_cycles"], 2.0)

@@ -11,7 +11,13 @@ For a scene (.npz export, or .blend through bpy) the bench
    resolution, no denoising, adaptive sampling off, clamps 0, blur_glossy 0), against Cycles's
    own high-sample reference (each renderer is measured against its own converged image; the
    relMSE between the two references is reported as their agreement);
-4. writes ``bench.csv`` and ``bench.json`` of (method, spp, seconds, RMSE, relMSE), a log-log
+4. with ``denoise``: adds denoised curves, ``<method>+oidn`` for the first DRT method (the same
+   renders, then ``drt.denoise`` with Cycles's defaults: prefilter ACCURATE, quality HIGH; its
+   time is render + denoise) and ``cycles+oidn`` (Cycles's own OpenImageDenoise with albedo and
+   normal, prefilter ACCURATE, quality HIGH; its time includes the denoise); each against its
+   renderer's converged reference. The summary then also has the time each curve needs to reach
+   the relMSE Cycles+OIDN reaches at 16 spp (or the nearest measured count);
+5. writes ``bench.csv`` and ``bench.json`` of (method, spp, seconds, RMSE, relMSE), a log-log
    chart ``bench.png`` of relMSE against seconds (matplotlib, imported only here), and the time
    each method needs to reach relMSE 0.01 (log-log interpolation between measured points; a
    value beyond the last point is extrapolated along the last segment's slope and flagged).
@@ -154,9 +160,19 @@ def render_reference(scene, spp: int, threads: int, seed: int = 1234, log=print)
     return film.combined.astype(np.float64)
 
 
-def run_drt(scene, ref, methods, spp_list, threads, seed=0, log=print) -> list[BenchRow]:
+DENOISED_SUFFIX = "+oidn"
+
+
+def run_drt(scene, ref, methods, spp_list, threads, seed=0, log=print, denoise=()) -> list[BenchRow]:
+    """Rows for each method and spp; for methods in ``denoise`` also a ``<method>+oidn`` row
+    per render (seconds = render + OIDN, error of the denoised image)."""
     from .render import prepare
 
+    if denoise:
+        from .denoise import denoise_film
+
+        warm = prepare(scene, seed=seed)  # OIDN's first filter also loads its weights: not timed
+        denoise_film(_render(scene, warm, 1, threads, seed, 0.0), threads=threads)
     rows = []
     for name in methods:
         direct, indirect, sampler, threshold = parse_method(name)
@@ -170,6 +186,13 @@ def run_drt(scene, ref, methods, spp_list, threads, seed=0, log=print) -> list[B
             rows.append(row)
             log(f"bench: {name:>12} {spp:5d} spp  {row.seconds:8.2f} s  RMSE {row.rmse:.4g}  relMSE {row.relmse:.4g}"
                 + (f"  (mean {row.mean_spp:.1f} spp)" if threshold > 0 else ""))
+            if name in denoise:
+                den, info = denoise_film(film, threads=threads)
+                d = BenchRow(name + DENOISED_SUFFIX, int(spp), film.stats.seconds + info.seconds, rmse(den, ref),
+                             rel_mse(den, ref), row.mean_spp)
+                rows.append(d)
+                log(f"bench: {d.method:>12} {spp:5d} spp  {d.seconds:8.2f} s  RMSE {d.rmse:.4g}  relMSE {d.relmse:.4g}"
+                    f"  (OIDN {info.seconds:.2f} s)")
     return rows
 
 
@@ -190,9 +213,14 @@ cy.sample_clamp_direct = 0.0
 cy.sample_clamp_indirect = 0.0
 cy.blur_glossy = 0.0
 cy.seed = args["seed"]
+cy.denoiser = "OPENIMAGEDENOISE"
+cy.denoising_prefilter = "ACCURATE"
+cy.denoising_quality = "HIGH"
+cy.denoising_input_passes = "RGB_ALBEDO_NORMAL"
+cy.denoising_use_gpu = False
 for vl in sc.view_layers:
     if hasattr(vl, "cycles") and hasattr(vl.cycles, "use_denoising"):
-        vl.cycles.use_denoising = False
+        vl.cycles.use_denoising = True  # the scene setting below decides
 sc.render.threads_mode = "FIXED"
 sc.render.threads = args["threads"]
 sc.render.resolution_x, sc.render.resolution_y = args["width"], args["height"]
@@ -206,14 +234,17 @@ im.color_mode = "RGBA"
 # would make the first timed job look slower than a later, larger one
 if args.get("warmup", True):
     cy.samples = 1
+    cy.use_denoising = any(len(j) > 2 and j[2] for j in args["jobs"])  # OIDN's first run loads weights
     bpy.ops.render.render(write_still=False)
 out = []
-for spp, path in args["jobs"]:
+for job in args["jobs"]:
+    spp, path = job[:2]
+    cy.use_denoising = len(job) > 2 and bool(job[2])
     cy.samples = spp
     sc.render.filepath = path
     t0 = time.perf_counter()
     bpy.ops.render.render(write_still=True)
-    out.append({"spp": spp, "path": path, "seconds": time.perf_counter() - t0})
+    out.append({"spp": spp, "path": path, "seconds": time.perf_counter() - t0, "denoised": cy.use_denoising})
 print("CYCLES_RESULT " + json.dumps(out))
 """
 
@@ -229,10 +260,13 @@ def _read_rgba(path: str) -> np.ndarray:
 
 
 def run_cycles(blend: str, spp_list, ref_spp: int, width: int, height: int, threads: int, outdir: str,
-               seed: int = 0, log=print) -> tuple[list[dict], np.ndarray]:
-    """Render ``blend`` with Cycles at each spp and at ``ref_spp`` (the reference, another seed)
-    in one subprocess. Returns ([{spp, seconds, image}], reference image)."""
-    jobs = [[int(s), os.path.abspath(os.path.join(outdir, f"cycles_{s:05d}.exr"))] for s in spp_list]
+               seed: int = 0, log=print, denoise: bool = False) -> tuple[list[dict], np.ndarray]:
+    """Render ``blend`` with Cycles at each spp (and, with ``denoise``, again with its
+    OpenImageDenoise) and at ``ref_spp`` (the reference, another seed, never denoised) in one
+    subprocess. Returns ([{spp, seconds, denoised, image}], reference image)."""
+    jobs = [[int(s), os.path.abspath(os.path.join(outdir, f"cycles_{s:05d}.exr")), False] for s in spp_list]
+    if denoise:
+        jobs += [[int(s), os.path.abspath(os.path.join(outdir, f"cycles_oidn_{s:05d}.exr")), True] for s in spp_list]
     ref_path = os.path.abspath(os.path.join(outdir, f"cycles_reference_{ref_spp}.exr"))
     results = []
     for job_seed, job_list in ((seed + 7, [[ref_spp, ref_path]]), (seed, jobs)):
@@ -261,7 +295,8 @@ def _blend_for(scene_path: str) -> str | None:
 
 def bench(scene_path: str, outdir: str, *, reference: str | None = None, methods=DEFAULT_METHODS,
           spp_list=DEFAULT_SPP, reference_spp: int = 1024, cycles: bool = False, threads: int | None = None,
-          resolution: tuple[int, int] | None = None, seed: int = 0, chart: bool = True, log=print) -> dict:
+          resolution: tuple[int, int] | None = None, seed: int = 0, chart: bool = True, log=print,
+          denoise: bool = False) -> dict:
     """Run the bench; write bench.csv, bench.json (and bench.png) into ``outdir``; return the
     summary dict (also in bench.json)."""
     from .exr import read_exr
@@ -287,7 +322,8 @@ def bench(scene_path: str, outdir: str, *, reference: str | None = None, methods
         ref = render_reference(scene, reference_spp, threads, log=log)
         ref_note = f"DRT mis_power/SOBOL at {reference_spp} spp"
 
-    rows = run_drt(scene, ref, methods, spp_list, threads, seed=seed, log=log)
+    rows = run_drt(scene, ref, methods, spp_list, threads, seed=seed, log=log,
+                   denoise=(methods[0],) if denoise else ())
 
     cycles_note = "not requested"
     agreement = None
@@ -297,14 +333,18 @@ def bench(scene_path: str, outdir: str, *, reference: str | None = None, methods
             cycles_note = "skipped: an .npz scene with no .blend beside it (nothing is built for Cycles)"
             log(f"bench: Cycles {cycles_note}")
         else:
-            runs, cref = run_cycles(blend, spp_list, reference_spp, w, h, threads, outdir, seed=seed, log=log)
+            runs, cref = run_cycles(blend, spp_list, reference_spp, w, h, threads, outdir, seed=seed, log=log,
+                                    denoise=denoise)
             for r in runs:
-                row = BenchRow("cycles", r["spp"], r["seconds"], rmse(r["image"], cref), rel_mse(r["image"], cref),
+                name = "cycles" + (DENOISED_SUFFIX if r.get("denoised") else "")
+                row = BenchRow(name, r["spp"], r["seconds"], rmse(r["image"], cref), rel_mse(r["image"], cref),
                                float(r["spp"]), renderer="cycles")
                 rows.append(row)
-                log(f"bench: {'cycles':>12} {row.spp:5d} spp  {row.seconds:8.2f} s  RMSE {row.rmse:.4g}  relMSE {row.relmse:.4g}")
+                log(f"bench: {name:>12} {row.spp:5d} spp  {row.seconds:8.2f} s  RMSE {row.rmse:.4g}  relMSE {row.relmse:.4g}")
             agreement = rel_mse(ref, cref)
-            cycles_note = (f"{blend}, CPU, {threads} threads, no denoising, adaptive off, clamps 0, blur_glossy 0; "
+            cycles_note = (f"{blend}, CPU, {threads} threads, adaptive off, clamps 0, blur_glossy 0"
+                           + (", without and with OpenImageDenoise (albedo+normal, ACCURATE, HIGH); " if denoise else
+                              ", no denoising; ") +
                            f"measured against its own {reference_spp}-spp reference (times include Cycles's scene sync)")
 
     summary = summarize(rows)
@@ -314,6 +354,10 @@ def bench(scene_path: str, outdir: str, *, reference: str | None = None, methods
     for m, t in summary["time_to_relmse_0.01"].items():
         sec, extra = t["seconds"], t["extrapolated"]
         log(f"bench: time to relMSE {TARGET_RELMSE}: {m:>12} " + ("never" if sec is None else f"{sec:.2f} s" + (" (extrapolated)" if extra else "")))
+    for m, t in summary.get("time_to_cycles_oidn_16spp", {}).get("seconds", {}).items():
+        log(f"bench: time to Cycles+OIDN's {summary['time_to_cycles_oidn_16spp']['spp']}-spp relMSE "
+            f"{summary['time_to_cycles_oidn_16spp']['relmse']:.3g}: {m:>12} "
+            + ("never" if t["seconds"] is None else f"{t['seconds']:.2f} s" + (" (extrapolated)" if t["extrapolated"] else "")))
     if summary.get("drt_over_cycles") is not None:
         log(f"bench: DRT ({summary['drt_method_for_ratio']}) / Cycles time to relMSE {TARGET_RELMSE}: {summary['drt_over_cycles']:.2f}")
     return summary
@@ -328,7 +372,16 @@ def summarize(rows: list[BenchRow]) -> dict:
         sec, extra = time_to_reach([r.seconds for r in rs], [r.relmse for r in rs])
         reach[m] = {"seconds": sec, "extrapolated": extra}
     out = {"rows": [asdict(r) for r in rows], "time_to_relmse_0.01": reach}
-    drt = {m: v["seconds"] for m, v in reach.items() if m != "cycles" and v["seconds"] is not None}
+    oidn16 = [r for r in by.get("cycles" + DENOISED_SUFFIX, [])]
+    if oidn16:
+        # the bar: Cycles + its denoiser at 16 spp (the nearest measured count if 16 was not run)
+        anchor = min(oidn16, key=lambda r: (abs(math.log(r.spp / 16)), r.spp))
+        out["time_to_cycles_oidn_16spp"] = {"spp": anchor.spp, "relmse": anchor.relmse, "seconds": {
+            m: dict(zip(("seconds", "extrapolated"), time_to_reach([r.seconds for r in rs], [r.relmse for r in rs],
+                                                                   anchor.relmse)))
+            for m, rs in by.items()}}
+    drt = {m: v["seconds"] for m, v in reach.items()
+           if m != "cycles" and not m.endswith(DENOISED_SUFFIX) and v["seconds"] is not None}
     cyc = reach.get("cycles", {}).get("seconds")
     if drt and cyc:
         pick = "mis_power" if "mis_power" in drt else min(drt, key=drt.get)
@@ -372,6 +425,8 @@ def plot(rows, path, title=""):
     for m, rs in by.items():
         rs = sorted(rs, key=lambda r: r.seconds)
         style = dict(color="black", linestyle="--", linewidth=2) if m == "cycles" else {}
+        if m.endswith(DENOISED_SUFFIX):  # denoised curves: dash-dot, Cycles's in black
+            style = dict(linestyle="-.", linewidth=2, **({"color": "black"} if m.startswith("cycles") else {}))
         ax.loglog([r.seconds for r in rs], [r.relmse for r in rs], marker="o", markersize=3, label=m, **style)
     ax.axhline(TARGET_RELMSE, color="grey", linewidth=0.8, linestyle=":")
     ax.set_xlabel("render time (s)")

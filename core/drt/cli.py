@@ -107,10 +107,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sample-count", type=_positive, help="number of samples to render from --sample-offset")
     r.add_argument("--frame", type=int, help="frame to render (.blend only)")
     r.add_argument("--png", help="also write an 8-bit sRGB PNG preview here")
+    _add_denoise_args(r, "denoise the image with Open Image Denoise (albedo + normal guides); the noisy "
+                         "image is kept as the EXR layer Noisy (needs the denoise extra)")
 
     m = sub.add_parser("merge", help="merge EXRs of disjoint sample ranges into one image")
     m.add_argument("inputs", nargs="+", help="EXR files written by `drt render --sample-offset/--sample-count`")
     m.add_argument("-o", "--output", required=True)
+    _add_denoise_args(m, "denoise the merged image once (the noisy one is kept as the layer Noisy)")
 
     e = sub.add_parser("export", help="export a .blend to a DRT scene file (needs the bpy module)")
     e.add_argument("scene", help=".blend file")
@@ -131,7 +134,48 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--point", action="store_true", help="compare the direct-light estimators at the one "
                    "surface point the image centre sees, instead of whole renders")
     b.add_argument("--no-chart", action="store_true", help="skip the PNG chart")
+    b.add_argument("--denoise", action="store_true", help="add denoised curves: the first method + OIDN "
+                   "(needs the denoise extra) and, with --cycles, Cycles + its OpenImageDenoise")
     return p
+
+
+def _add_denoise_args(p, help_text):
+    p.add_argument("--denoise", action="store_true", help=help_text)
+    p.add_argument("--denoise-quality", **_choice("HIGH", "BALANCED", "FAST"),
+                   help="denoiser quality (default high, as in Cycles)")
+    p.add_argument("--denoise-prefilter", **_choice("ACCURATE", "FAST", "NONE"),
+                   help="how the albedo/normal guides are cleaned first (default accurate, as in Cycles)")
+
+
+# ------------------------------------------------------------------------- denoising hooks
+
+
+def _check_denoise(args) -> None:
+    """Before any work: the denoise options are consistent and OIDN loads (exit 2 otherwise)."""
+    if not args.denoise:
+        if args.denoise_quality or args.denoise_prefilter:
+            raise CliError("--denoise-quality and --denoise-prefilter need --denoise")
+        return
+    from .denoise import DenoiserUnavailable, require_backend
+
+    try:
+        require_backend()
+    except DenoiserUnavailable as e:
+        raise CliError(str(e)) from None
+
+
+def _denoise(args, film):
+    """(denoised RGB or None, summary note, EXR metadata) for a finished film."""
+    if not args.denoise:
+        return None, "", {}
+    from .denoise import DEFAULT_PREFILTER, DEFAULT_QUALITY, denoise_film
+
+    img, info = denoise_film(film, quality=args.denoise_quality or DEFAULT_QUALITY,
+                             prefilter=args.denoise_prefilter or DEFAULT_PREFILTER,
+                             threads=getattr(args, "threads", None))
+    fixed = f", {info.replaced_pixels} non-finite pixels filled" if info.replaced_pixels else ""
+    note = f", denoised ({info.quality.lower()}, prefilter {info.prefilter.lower()}) in {info.seconds:.2f}s{fixed}"
+    return img, note, {"denoised": f"{info.backend}; quality {info.quality}; prefilter {info.prefilter}"}
 
 
 # ------------------------------------------------------------------------- progress display
@@ -224,6 +268,7 @@ def cmd_render(args) -> int:
     _check_output(args.output)
     if args.png:
         _check_output(args.png, ".png")
+    _check_denoise(args)
     if args.adaptive_threshold is not None and not (0 <= args.adaptive_threshold <= 1):
         raise CliError(f"--adaptive-threshold must be within [0, 1], got {args.adaptive_threshold}")
     scene = _load(args)
@@ -236,6 +281,10 @@ def cmd_render(args) -> int:
     count = args.sample_count if args.sample_count is not None else spp - args.sample_offset
     if args.sample_offset + count > spp:
         raise CliError(f"--sample-offset + --sample-count ({args.sample_offset + count}) exceeds --spp {spp}")
+    if args.denoise and count < spp:
+        # a denoiser is not linear: denoising each range and averaging is not denoising the image
+        raise CliError("--denoise renders the whole image only: render the sample ranges without it, "
+                       "then `drt merge ... --denoise` denoises the merged image once")
 
     stop = threading.Event()
     previous = signal.getsignal(signal.SIGINT)
@@ -263,19 +312,20 @@ def cmd_render(args) -> int:
     finally:
         signal.signal(signal.SIGINT, previous)
         bar.done()
-    write_exr(args.output, film)
+    st = film.stats
+    denoised, dn_note, dn_meta = _denoise(args, film) if not st.cancelled else (None, ", not denoised", {})
+    write_exr(args.output, film, dn_meta, denoised=denoised)
     if args.png:
         from .preview import write_png
 
-        write_png(args.png, film.combined)
-    st = film.stats
+        write_png(args.png, film.combined if denoised is None else denoised)
     w, h = scene.render.width, scene.render.height
     nan_note = f", {st.nan_samples} NaN/Inf samples dropped" if st.nan_samples else ""
     state = "cancelled after" if st.cancelled else "rendered"
     print(
         f"drt: {state} {w}x{h} at {spp_summary(st)} in {st.seconds:.2f}s: "
         f"{st.camera_paths / max(st.seconds, 1e-9) / 1e3:.1f} k samples/s, {st.rays_per_second / 1e6:.2f} Mrays/s, "
-        f"{100 * st.embree_seconds / max(st.seconds * st.threads, 1e-9):.0f}% of thread time in Embree{nan_note} -> {args.output}"
+        f"{100 * st.embree_seconds / max(st.seconds * st.threads, 1e-9):.0f}% of thread time in Embree{nan_note}{dn_note} -> {args.output}"
     )
     return EXIT_INTERRUPTED if st.cancelled else EXIT_OK
 
@@ -305,6 +355,7 @@ def cmd_merge(args) -> int:
     from .render import merge_films
 
     _check_output(args.output)
+    _check_denoise(args)
     films = []
     for path in args.inputs:
         if not os.path.exists(path):
@@ -321,8 +372,9 @@ def cmd_merge(args) -> int:
         merged = merge_films(films)
     except ValueError as e:
         raise CliError(str(e)) from None
-    write_exr(args.output, merged)
-    print(f"drt: merged {len(films)} renders ({merged.meta['sample_count']} samples per pixel) -> {args.output}")
+    denoised, dn_note, dn_meta = _denoise(args, merged)
+    write_exr(args.output, merged, dn_meta, denoised=denoised)
+    print(f"drt: merged {len(films)} renders ({merged.meta['sample_count']} samples per pixel){dn_note} -> {args.output}")
     return EXIT_OK
 
 
@@ -363,6 +415,10 @@ def cmd_bench(args) -> int:
     parent = os.path.dirname(os.path.abspath(args.output))
     if not os.path.isdir(parent):
         raise CliError(f"output directory's parent does not exist: {parent}")
+    if args.denoise:
+        if args.point:
+            raise CliError("--denoise has no meaning with --point (no image to denoise)")
+        _check_denoise(args)
     try:
         for m in args.methods or ():
             if not args.point:
@@ -374,7 +430,7 @@ def cmd_bench(args) -> int:
             bench.bench(args.scene, args.output, reference=args.reference,
                         methods=args.methods or bench.DEFAULT_METHODS, spp_list=args.spp_list or bench.DEFAULT_SPP,
                         reference_spp=args.reference_spp, cycles=args.cycles, threads=args.threads,
-                        resolution=args.resolution, seed=args.seed, chart=not args.no_chart)
+                        resolution=args.resolution, seed=args.seed, chart=not args.no_chart, denoise=args.denoise)
     except ValueError as e:  # bad method names, sizes, invalid scenes (SceneError)
         raise CliError(str(e)) from None
     except RuntimeError as e:  # a failed Cycles render

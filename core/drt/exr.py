@@ -5,6 +5,12 @@ hit, Cycles's convention); Normal.X/Y/Z (world-space shading normal); Albedo.R/G
 each pixel); Variance.Y (variance of the pixel mean's luminance). The header carries
 ``drt:sample_offset``, ``drt:sample_count``, ``drt:seed`` and ``drt:version`` so that renders of
 disjoint sample ranges can be merged exactly (``python -m drt merge``).
+
+A denoised render (``--denoise``) stores the denoised image in R, G, B (A stays the film's
+coverage) and the film's own mean in the layer ``Noisy.R/G/B/A``, bit-identical to the same
+render without denoising; the header then also has ``drt:denoised`` (backend and settings).
+``film_from_exr`` rebuilds the film from ``Noisy`` when it is there, so merging or re-denoising
+a denoised file works on the Monte Carlo estimate, never on a denoised image.
 """
 
 from __future__ import annotations
@@ -17,9 +23,18 @@ import OpenEXR
 from .film import Film
 
 
-def film_channels(film: Film) -> dict[str, np.ndarray]:
+def film_channels(film: Film, denoised: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """EXR channels of ``film``; with ``denoised`` ((H, W, 3) RGB, top row first) the combined
+    pass is the denoised image and the film's mean goes to the ``Noisy`` layer."""
     rgba = film.combined
     ch = {"R": rgba[..., 0], "G": rgba[..., 1], "B": rgba[..., 2], "A": rgba[..., 3], "Z": film.depth}
+    if denoised is not None:
+        if denoised.shape[:2] != rgba.shape[:2]:
+            raise ValueError(f"denoised image {denoised.shape[:2]} does not match the film {rgba.shape[:2]}")
+        for i, c in enumerate("RGBA"):
+            ch[f"Noisy.{c}"] = rgba[..., i]
+        for i, c in enumerate("RGB"):
+            ch[c] = denoised[..., i]
     for i, axis in enumerate("XYZ"):
         ch[f"Normal.{axis}"] = film.normal[..., i]
     for i, c in enumerate("RGB"):
@@ -29,13 +44,15 @@ def film_channels(film: Film) -> dict[str, np.ndarray]:
     return {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in ch.items()}
 
 
-def write_exr(path: str | os.PathLike, film: Film, metadata: dict | None = None) -> None:
-    """Write ``film`` to ``path`` (ZIP-compressed scanline EXR). Metadata values become strings."""
+def write_exr(path: str | os.PathLike, film: Film, metadata: dict | None = None,
+              denoised: np.ndarray | None = None) -> None:
+    """Write ``film`` to ``path`` (ZIP-compressed scanline EXR). Metadata values become strings.
+    ``denoised``: see ``film_channels``."""
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for k, v in {**film.meta, **(metadata or {})}.items():
         header[f"drt:{k}"] = str(v)
     tmp = f"{os.fspath(path)}.tmp.exr"
-    with OpenEXR.File(header, film_channels(film)) as f:
+    with OpenEXR.File(header, film_channels(film, denoised)) as f:
         f.write(tmp)
     os.replace(tmp, path)  # a reader never sees half a file
 
@@ -49,12 +66,15 @@ def read_exr(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict]:
 
 
 def film_from_exr(path: str | os.PathLike) -> Film:
-    """Rebuild a ``Film`` (its sums) from a DRT EXR, for merging sample ranges."""
+    """Rebuild a ``Film`` (its sums) from a DRT EXR, for merging sample ranges. A denoised
+    file's sums come from its ``Noisy`` layer (the Monte Carlo mean); ``denoised`` is dropped
+    from the metadata."""
     ch, meta = read_exr(path)
     h, w = ch["R"].shape
     count = ch["SampleCount.Y"].astype(np.float64).reshape(-1)
     film = Film(w, h)
-    rgba = np.stack([ch[c] for c in "RGBA"], axis=-1).reshape(-1, 4).astype(np.float64)
+    layer = "Noisy." if "Noisy.R" in ch else ""
+    rgba = np.stack([ch[layer + c] for c in "RGBA"], axis=-1).reshape(-1, 4).astype(np.float64)
     film.sum_rgba = rgba * count[:, None]
     film.sum_normal = np.stack([ch[f"Normal.{a}"] for a in "XYZ"], -1).reshape(-1, 3) * count[:, None]
     film.sum_albedo = np.stack([ch[f"Albedo.{c}"] for c in "RGB"], -1).reshape(-1, 3) * count[:, None]
@@ -64,5 +84,5 @@ def film_from_exr(path: str | os.PathLike) -> Film:
     lum = rgba[:, :3] @ np.array([0.2126, 0.7152, 0.0722])
     var = ch["Variance.Y"].astype(np.float64).reshape(-1)
     film.sum_lum2 = (var * np.maximum(count - 1, 0) + lum**2) * count
-    film.meta = dict(meta)
+    film.meta = {k: v for k, v in meta.items() if k != "denoised"}
     return film
