@@ -74,8 +74,17 @@ def cmd_render(args, *, load, error_cls, progress_cls) -> int:
             raise error_cls(f"--frames needs a .blend scene (an .npz holds one frame): {args.scene}", 2)
         if not os.path.exists(args.scene):
             raise error_cls(f"scene file not found: {args.scene}", 2)
-    if address and args.threads:
-        raise error_cls("--threads does not apply to --cluster (each worker runs one task per thread)", 2)
+    sec = None
+    if address:
+        if args.threads:
+            raise error_cls("--threads does not apply to --cluster (each worker runs one task per thread)", 2)
+        from .client import FarmError, check_address, security
+
+        try:
+            address = check_address(address)
+            sec = security(address, args.tls_ca_file, args.tls_cert, args.tls_key)
+        except FarmError as e:
+            raise error_cls(str(e), e.code) from None
 
     def out_path(pattern, frame):
         return pattern if frame is None else frame_path(pattern, frame)
@@ -113,10 +122,10 @@ def cmd_render(args, *, load, error_cls, progress_cls) -> int:
         stop.set()
 
     signal.signal(signal.SIGINT, on_sigint)
-    bar = progress_cls()
+    bar = progress_cls(sys.stderr)
     try:
         if address:
-            stats, first = _render_cluster(args, address, frames, load_frame, write, bar, stop, error_cls)
+            stats, first = _render_cluster(args, address, sec, frames, load_frame, write, bar, stop, error_cls)
         else:
             stats, first = _render_local(args, frames, load_frame, write, bar, stop)
     except SceneError as e:
@@ -186,8 +195,8 @@ class _Elapsed:
         self.rays_per_second = rays_per_second
 
 
-def _render_cluster(args, address, frames, load_frame, write, bar, stop, error_cls):
-    from .client import FarmError, check_address, connect, quiet_dask_logs, render_frames, security
+def _render_cluster(args, address, sec, frames, load_frame, write, bar, stop, error_cls):
+    from .client import FarmError, connect, quiet_dask_logs, render_frames
 
     first = []
 
@@ -201,8 +210,6 @@ def _render_cluster(args, address, frames, load_frame, write, bar, stop, error_c
                     indirect=args.indirect, adaptive_threshold=args.adaptive_threshold,
                     adaptive_min_samples=args.adaptive_min_samples)
     try:
-        address = check_address(address)
-        sec = security(address, args.tls_ca_file, args.tls_cert, args.tls_key)
         client = connect(address, timeout=args.cluster_timeout, sec=sec)
         try:
             with quiet_dask_logs():
