@@ -264,8 +264,7 @@ def render_frames(
 
     t0 = time.perf_counter()
     stats = FarmStats()
-    info = client.scheduler_info(n_workers=0)
-    stats.workers, stats.threads = int(info.get("n_workers", 0)), int(info.get("total_threads", 0))
+    stats.workers, stats.threads = _cluster_size(client)
     run_id = uuid.uuid4().hex[:8]
     pending_frames = list(frames)
     active: dict[int, _Frame] = {}
@@ -342,8 +341,7 @@ def render_frames(
                                 f"({stats.tasks_done} of {stats.tasks_total} tasks done)")
             return
         lost_since = None
-        info = client.scheduler_info(n_workers=0)
-        stats.workers, stats.threads = int(info.get("n_workers", 0)), int(info.get("total_threads", 0))
+        stats.workers, stats.threads = _cluster_size(client)
         if stats.workers == 0:
             no_workers_since = no_workers_since or now
             if now - no_workers_since > timeout:
@@ -404,6 +402,18 @@ def render_frames(
             finish_frame(fr, partial=True)
     stats.seconds = time.perf_counter() - t0
     return stats
+
+
+def _cluster_size(client) -> tuple[int, int]:
+    """(workers, threads) the scheduler has now (one round trip)."""
+    try:
+        info = client.scheduler_info(n_workers=0)  # totals only (distributed >= 2025)
+    except TypeError:
+        info = client.scheduler_info()
+    if "n_workers" in info:
+        return int(info["n_workers"]), int(info.get("total_threads", 0))
+    workers = info.get("workers", {})
+    return len(workers), sum(int(w.get("nthreads", 0)) for w in workers.values())
 
 
 def _task_error(future) -> FarmError:
