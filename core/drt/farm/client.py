@@ -165,6 +165,7 @@ class FarmStats:
     threads: int = 0
     nan_samples: int = 0
     cancelled: bool = False
+    resubmitted: int = 0  # tasks sent again after the scene was lost with its workers
     samples_done: int = 0  # of the last frame (per pixel)
     embree_seconds: float = 0.0
 
@@ -183,6 +184,9 @@ class _Frame:
     scene_future: object
     sample_offset: int
     sample_count: int
+    payload: object = None  # kept to send again if every worker holding the scene is lost
+    settings: dict = field(default_factory=dict)
+    attempts: int = 0
     futures: dict = field(default_factory=dict)  # unfinished task's key -> task index
     handles: dict = field(default_factory=dict)  # unfinished task's key -> its Future
     parts: dict = field(default_factory=dict)  # task index -> result dict
@@ -291,28 +295,56 @@ def render_frames(
         ad = scene.render.adaptive_threshold if adaptive is None else adaptive
         specs = plan_frame(pixel_bounds(scene), sample_offset, count, min_tasks=2 * max(stats.threads, 1),
                            task_seconds=task_seconds, split_samples=not (ad and ad > 0))
-        # hash=False: a fresh key per frame; broadcast: one copy per worker now, not per task
-        try:
-            (fut,) = client.scatter([payload], broadcast=True, hash=False, timeout=timeout)
-        except TimeoutError:
-            raise FarmError(f"could not send the scene to the workers within {timeout:g} s") from None
-        fr = _Frame(next_index, number, scene.render.width, scene.render.height, specs, fut,
-                    sample_offset, count)
+        fr = _Frame(next_index, number, scene.render.width, scene.render.height, specs, None,
+                    sample_offset, count, payload, dict(settings, spp=spp))
+        fr.scene_future = scatter(fr)
         fr.preview = Film(fr.width, fr.height) if preview is not None else None
-        s = dict(settings, spp=spp)
-        call = _remote_call()
-        for i, sp in enumerate(specs):
-            f = client.submit(call, TASK_FUNCTION, fut, fut.key, s, sp.tile, sp.sample_offset, sp.sample_count,
-                              key=f"drt-render-{run_id}-{next_index}-{i}", priority=-next_index, pure=False)
-            fr.futures[f.key] = i
-            fr.handles[f.key] = f
-            by_key[f.key] = fr
-            ac.add(f)
+        for i in range(len(specs)):
+            submit_task(fr, i)
         active[fr.index] = fr
         outstanding += len(specs)
         stats.tasks_total += len(specs)
         paths_known += fr.paths
         next_index += 1
+
+    def scatter(fr: _Frame):
+        """Send the frame's scene to every worker (hash=False: a fresh key per frame;
+        broadcast: one copy per worker now, not one per task)."""
+        try:
+            (fut,) = client.scatter([fr.payload], broadcast=True, hash=False, timeout=timeout)
+        except TimeoutError:
+            if client.status == "running" and _cluster_size(client)[0] == 0:
+                raise FarmError(_no_workers_message()) from None
+            raise FarmError(f"could not send the scene to the workers within {timeout:g} s") from None
+        return fut
+
+    def submit_task(fr: _Frame, i: int):
+        sp = fr.specs[i]
+        fut = fr.scene_future
+        f = client.submit(_remote_call(), TASK_FUNCTION, fut, fut.key, fr.settings, sp.tile, sp.sample_offset,
+                          sp.sample_count, key=f"drt-render-{run_id}-{fr.index}-{i}-{fr.attempts}",
+                          priority=-fr.index, pure=False)
+        fr.futures[f.key] = i
+        fr.handles[f.key] = f
+        by_key[f.key] = fr
+        ac.add(f)
+
+    def resubmit(fr: _Frame, lost: list[int]):
+        """Dask cancels tasks whose input is gone: every worker holding the frame's scene
+        died. Send the scene again and submit those tasks again (same inputs, same pixels)."""
+        fr.attempts += 1
+        if fr.attempts > 10:
+            raise FarmError("the workers holding the scene kept dying; giving up")
+        if fr.scene_future.status != "finished":
+            fr.scene_future.release()
+            fr.scene_future = scatter(fr)
+        for i in lost:
+            submit_task(fr, i)
+        stats.resubmitted += len(lost)
+
+    def _no_workers_message():
+        return (f"all workers left the cluster and none came back within {timeout:g} s "
+                f"({stats.tasks_done} of {stats.tasks_total} tasks done)")
 
     def fill():
         while pending_frames and (not active or outstanding < 2 * max(stats.threads, 1)):
@@ -327,11 +359,11 @@ def render_frames(
             on_frame(fr.number, film)
         stats.frames_done += 0 if partial else 1
 
-    def health():
+    def health(force: bool = False):
         """Raise FarmError when the scheduler or every worker has been gone ``timeout`` s."""
         nonlocal last_health, no_workers_since, lost_since
         now = time.perf_counter()
-        if now - last_health < HEALTH_SECONDS:
+        if now - last_health < (POLL_SECONDS * 4 if force else HEALTH_SECONDS):
             return
         last_health = now
         if client.status != "running":
@@ -345,8 +377,7 @@ def render_frames(
         if stats.workers == 0:
             no_workers_since = no_workers_since or now
             if now - no_workers_since > timeout:
-                raise FarmError(f"all workers left the cluster and none came back within {timeout:g} s "
-                                f"({stats.tasks_done} of {stats.tasks_total} tasks done)")
+                raise FarmError(_no_workers_message())
         else:
             no_workers_since = None
 
@@ -361,8 +392,16 @@ def render_frames(
                 time.sleep(POLL_SECONDS)
                 health()
                 continue
+            lost: dict[int, list[int]] = {}
             for f in done:
+                if f.status in ("pending", "lost"):  # its worker died: Dask computes it again
+                    ac.add(f)
+                    continue
                 fr = by_key.pop(f.key)
+                if f.status == "cancelled" and not (cancel is not None and cancel()):
+                    lost.setdefault(fr.index, []).append(fr.futures.pop(f.key))
+                    fr.handles.pop(f.key)
+                    continue
                 if f.status != "finished":
                     raise _task_error(f)
                 try:  # fetched from the worker; Dask recomputes it if that worker just died
@@ -386,6 +425,13 @@ def render_frames(
                 if not fr.futures:
                     stats.samples_done = fr.sample_count
                     finish_frame(fr)
+            for index, tasks in lost.items():
+                if client.status == "running":
+                    stats.workers, stats.threads = _cluster_size(client)
+                while stats.workers == 0 or client.status != "running":  # wait (time-out) for workers
+                    time.sleep(POLL_SECONDS)
+                    health(force=True)
+                resubmit(active[index], tasks)
             fill()
             stats.seconds = time.perf_counter() - t0
             if progress is not None:
