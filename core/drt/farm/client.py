@@ -393,12 +393,15 @@ def render_frames(
                 health()
                 continue
             lost: dict[int, list[int]] = {}
+            if all(f.status in ("pending", "lost") for f in done):
+                time.sleep(POLL_SECONDS)  # only recomputations under way: do not spin
+                health()
             for f in done:
                 if f.status in ("pending", "lost"):  # its worker died: Dask computes it again
                     ac.add(f)
                     continue
                 fr = by_key.pop(f.key)
-                if f.status == "cancelled" and not (cancel is not None and cancel()):
+                if f.status == "cancelled":  # by the scheduler (we cancel only on leaving)
                     lost.setdefault(fr.index, []).append(fr.futures.pop(f.key))
                     fr.handles.pop(f.key)
                     continue
