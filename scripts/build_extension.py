@@ -54,8 +54,9 @@ PYTHON_TAGS = ("cp311", "cp313")
 PLATFORM_TAGS = {
     "linux-x64": lambda tag: tag.startswith("manylinux") and tag.endswith("_x86_64"),
     "windows-x64": lambda tag: tag == "win_amd64",
-    "macos-arm64": lambda tag: tag.startswith("macosx_") and tag.endswith("_arm64"),
-    "macos-x64": lambda tag: tag.startswith("macosx_") and tag.endswith("_x86_64"),
+    # universal2 wheels hold both architectures (Blender's builder maps them to both, too)
+    "macos-arm64": lambda tag: tag.startswith("macosx_") and tag.endswith(("_arm64", "_universal2")),
+    "macos-x64": lambda tag: tag.startswith("macosx_") and tag.endswith(("_x86_64", "_universal2")),
 }
 
 

@@ -153,7 +153,7 @@ def test_a_dead_address_is_a_one_line_error_within_the_time_out(tmp_path):
     (["--cluster", "localhost:8786"], "a cluster address is tcp://"),
     (["--cluster", "tcp://127.0.0.1:1", "--threads", "2"], "--threads does not apply"),
     (["--cluster", "tcp://127.0.0.1:1", "--tls-ca-file", "ca.pem"], "need a tls:// scheduler"),
-    (["--frames", "1-3"], "--frames needs a .blend"),
+    (["--frames", "1-3"], "--frames needs an animated scene file"),
     (["--cluster-timeout", "0"], "must be within"),
 ])
 def test_bad_cluster_options_are_one_line_errors(args, message, tmp_path, capsys):

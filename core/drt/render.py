@@ -348,7 +348,8 @@ def render(
     stats.seconds = time.perf_counter() - t0
     stats.rays, stats.embree_seconds = workers.counters()
     stats.nan_samples = film.nan_samples
-    held = film.count[ys_all * film.width + xs_all]
+    ox, oy = (0, 0) if to_film is None else (to_film[1], to_film[2])
+    held = film.count[(ys_all - oy) * film.width + (xs_all - ox)]
     if len(held):
         stats.spp_min, stats.spp_mean, stats.spp_max = int(held.min()), float(held.mean()), int(held.max())
     film.meta.update(

@@ -56,9 +56,12 @@ def cluster_address(args) -> str | None:
 
 def cmd_render(args, *, load, error_cls, progress_cls) -> int:
     """``render`` with --frames and/or a cluster. load(args) -> Scene is the CLI's loader;
-    error_cls(message, code) its one-line error; progress_cls() its progress bar."""
+    error_cls(message, code) its one-line error; progress_cls(stream) its progress bar.
+    Denoising (--denoise) runs here on the client, on each whole frame."""
+    from ..cli import _check_film_memory, _denoise
     from ..exr import write_exr
     from ..frames import frame_path, parse_frames
+    from ..loaders import is_plugin_format
     from ..scene import SceneError
 
     address = cluster_address(args)
@@ -70,10 +73,11 @@ def cmd_render(args, *, load, error_cls, progress_cls) -> int:
             raise error_cls(f"--frames: {e}", 2) from None
         if args.frame is not None:
             raise error_cls("give --frame or --frames, not both", 2)
-        if not args.scene.lower().endswith(".blend"):
-            raise error_cls(f"--frames needs a .blend scene (an .npz holds one frame): {args.scene}", 2)
         if not os.path.exists(args.scene):
             raise error_cls(f"scene file not found: {args.scene}", 2)
+        if not is_plugin_format(args.scene):
+            raise error_cls(f"--frames needs an animated scene file (.blend); {args.scene} holds one "
+                            "exported frame", 2)
     sec = None
     if address:
         if args.threads:
@@ -100,17 +104,22 @@ def cmd_render(args, *, load, error_cls, progress_cls) -> int:
         count = args.sample_count if args.sample_count is not None else spp - args.sample_offset
         if args.sample_offset + count > spp:
             raise error_cls(f"--sample-offset + --sample-count ({args.sample_offset + count}) exceeds --spp {spp}", 2)
+        if args.denoise and count < spp:  # a denoiser is not linear: denoise the merged image once
+            raise error_cls("--denoise renders the whole image only: render the sample ranges without it, "
+                            "then `drt merge ... --denoise` denoises the merged image once", 2)
+        _check_film_memory(scene.render.width, scene.render.height)  # the client holds whole frames
         return scene
 
     written = []
 
     def write(frame, film):
         path = out_path(args.output, frame)
-        write_exr(path, film)
+        denoised, _note, meta = _denoise(args, film) if not stop.is_set() else (None, "", {})
+        write_exr(path, film, meta, denoised=denoised)
         if args.png:
             from ..preview import write_png
 
-            write_png(out_path(args.png, frame), film.combined)
+            write_png(out_path(args.png, frame), film.combined if denoised is None else denoised)
         written.append(path)
 
     stop = threading.Event()
