@@ -65,7 +65,8 @@ def build_linux_extension(tmp, wheels) -> str:
     text = re.sub(r"platforms = \[[^\]]*\]", 'platforms = ["linux-x64"]', text)
     listed = ", ".join(f'"./wheels/{os.path.basename(w)}"' for w in wheels)
     text = re.sub(r"wheels = \[[^\]]*\]", f"wheels = [{listed}]", text)
-    open(manifest, "w", encoding="utf-8").write(text)
+    with open(manifest, "w", encoding="utf-8") as f:
+        f.write(text)
     out = os.path.join(tmp, "dist")
     os.makedirs(out)
     subprocess.run([sys.executable, b.blender_ext_cli(), "build", "--source-dir", stage,
