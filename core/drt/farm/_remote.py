@@ -1,4 +1,4 @@
-"""The one function the client sends to Dask workers: call a ``drt`` function by its name.
+"""The one function the client sends to Dask workers: call a ``drt.farm.tasks`` function by name.
 
 Sent *by value* (its code, not a module reference): inside Blender the bundled core is a
 sub-package of the extension (``bl_ext.user_default.drt.drt``), a name no worker can import,
@@ -9,15 +9,15 @@ the scene travels as a ``Scene`` (CLI) or as the exporter's plain ``(header, arr
 
 
 def call(name, *args):
-    """Import ``name`` ("drt.farm.tasks.render_task") on the worker and call it with ``args``.
+    """Call ``drt.farm.tasks.<name>`` ("render_task", "fingerprint") on the worker with ``args``.
 
+    The import names the worker's installed ``drt`` (this code runs only on workers).
     Exceptions come back as ``RuntimeError("ClassName: message")``: a DRT exception class
     could not be unpickled by a client that imports the core under another name.
     """
-    import importlib
+    import drt.farm.tasks
 
-    module, _, attr = name.rpartition(".")
-    fn = getattr(importlib.import_module(module), attr)
+    fn = getattr(drt.farm.tasks, name)
     try:
         return fn(*args)
     except Exception as e:  # noqa: BLE001 -- re-raised as a plain, portable exception

@@ -31,8 +31,8 @@ from .plan import TASK_SECONDS, TaskSpec, plan_frame
 DEFAULT_TIMEOUT = 30.0  # seconds
 POLL_SECONDS = 0.05  # how often the client looks at finished tasks, cancel and the cluster
 HEALTH_SECONDS = 1.0  # how often it asks the scheduler how many workers it has
-TASK_FUNCTION = "drt.farm.tasks.render_task"
-FINGERPRINT_FUNCTION = "drt.farm.tasks.fingerprint"
+TASK_FUNCTION = "render_task"  # in drt.farm.tasks, called through _remote.call
+FINGERPRINT_FUNCTION = "fingerprint"
 
 
 class FarmError(Exception):
