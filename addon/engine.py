@@ -12,7 +12,7 @@ import traceback
 import bpy
 import numpy as np
 
-from . import compat, denoising
+from . import cluster, compat, denoising
 from .export import ExportError, export_depsgraph
 
 # Film arrays are top row first; Blender's render result wants bottom row first.
@@ -75,7 +75,7 @@ class DRTRenderEngine(bpy.types.RenderEngine):
             traceback.print_exc()
             msg = str(exc) or exc.__class__.__name__
             if not isinstance(exc, ExportError) and \
-                    exc.__class__.__name__ not in ("SceneError", "DenoiserUnavailable"):
+                    exc.__class__.__name__ not in ("SceneError", "DenoiserUnavailable", "FarmError"):
                 msg = f"{exc.__class__.__name__}: {msg}"
             self.report({"ERROR"}, f"DRT: {msg}")
 
@@ -106,6 +106,21 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         layer_name = depsgraph.view_layer.name
         flags = compat.view_layer_pass_flags(depsgraph.view_layer)
         wanted = [p for p in PASSES if flags[p[5]]]
+        if cluster.cluster_address(scene):  # render on a Dask cluster (docs/farm.md)
+            client = cluster.connect(self, scene)  # before begin_result: a failure leaves no image
+            crop = border_crop(scene, width, height)
+            rh, rw = crop[0].stop - crop[0].start, crop[1].stop - crop[1].start
+            result = self.begin_result(0, 0, rw, rh, layer=layer_name)
+            try:
+                film = cluster.render_on_cluster(self, client, scene, exported, drt_scene, spp, offset, count,
+                                                 result, crop, wanted, t_start)
+                if film is not None:
+                    self._finish_film(film, result, scene, crop, wanted, dn_passes, denoise_mod, dn_lib,
+                                      drt_scene)
+            finally:
+                self.end_result(result)
+                cluster.close(client, scene)
+            return
 
         kernels = compat.core_module("kernels")
         if not kernels.kernels_compiled():  # the first render of an install compiles (~30 s)
@@ -141,22 +156,27 @@ class DRTRenderEngine(bpy.types.RenderEngine):
                                      sample_count=count, progress=progress,
                                      cancel=self.cancel_requested, context=context,
                                      threads=render_threads(scene))
-            fill_layer(result.layers[0], film, crop, wanted)
-            cancelled = getattr(getattr(film, "stats", None), "cancelled", False)
-            denoised = None
-            if denoise_mod is not None and not cancelled:
-                self.update_stats("", "DRT | Denoising")
-                denoised, info = denoising.denoise(film, scene, denoise_mod, dn_lib, render_threads(scene))
-                if info.replaced_pixels:
-                    self.report({"WARNING"}, f"DRT: {info.replaced_pixels} non-finite pixels filled before denoising")
-            denoising.fill_passes(result.layers[0], _set_pass, film, crop, dn_passes, denoised,
-                                  drt_scene.camera.matrix)
+            self._finish_film(film, result, scene, crop, wanted, dn_passes, denoise_mod, dn_lib, drt_scene)
         finally:
             self.end_result(result)
         stats = getattr(film, "stats", None)
         done = getattr(stats, "samples_done", count or spp)
         self.update_stats("", f"DRT | {done} samples in "
                               f"{_format_seconds(time.perf_counter() - t_start)}")
+
+
+    def _finish_film(self, film, result, scene, crop, wanted, dn_passes, denoise_mod, dn_lib, drt_scene):
+        """The finished film into the result's passes, denoised when asked (not when cancelled)."""
+        fill_layer(result.layers[0], film, crop, wanted)
+        cancelled = getattr(getattr(film, "stats", None), "cancelled", False)
+        denoised = None
+        if denoise_mod is not None and not cancelled:
+            self.update_stats("", "DRT | Denoising")
+            denoised, info = denoising.denoise(film, scene, denoise_mod, dn_lib, render_threads(scene))
+            if info.replaced_pixels:
+                self.report({"WARNING"}, f"DRT: {info.replaced_pixels} non-finite pixels filled before denoising")
+        denoising.fill_passes(result.layers[0], _set_pass, film, crop, dn_passes, denoised,
+                              drt_scene.camera.matrix)
 
 
 def render_threads(scene) -> int | None:

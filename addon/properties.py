@@ -6,7 +6,7 @@ Blender's own properties (``camera.data.dof``, ``scene.render.motion_blur_*``), 
 """
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 SAMPLER_ITEMS = (
     ("SOBOL", "Sobol", "Owen-scrambled Sobol sequence (like Cycles's tabulated Sobol)", 0),
@@ -111,6 +111,25 @@ class DRTSceneSettings(bpy.types.PropertyGroup):
     denoising_input_passes: EnumProperty(
         name="Passes", description="Passes used by the denoiser to distinguish noise from shader "
         "and geometry detail", items=DENOISING_INPUT_ITEMS, default="RGB_ALBEDO_NORMAL")
+
+    # render on a Dask cluster (docs/farm.md); empty address: this machine
+    cluster_address: StringProperty(
+        name="Scheduler",
+        description="Dask scheduler to render on, tcp://HOST:PORT or tls://HOST:PORT (empty: this "
+                    "machine). The cluster runs code sent by this Blender: use only clusters you trust",
+        default="")
+    cluster_timeout: FloatProperty(
+        name="Time-out (s)", description="Give up when the scheduler does not answer, or the cluster "
+                                         "has no worker, for this many seconds",
+        default=30.0, min=1.0, max=86400.0)
+    cluster_tls_ca_file: StringProperty(
+        name="CA Certificate", description="Certificate of the authority that signed the scheduler's (tls://)",
+        default="", subtype="FILE_PATH")
+    cluster_tls_cert: StringProperty(
+        name="Certificate", description="This client's certificate (tls://)", default="", subtype="FILE_PATH")
+    cluster_tls_key: StringProperty(
+        name="Key", description="This client's private key, if not in the certificate file (tls://)",
+        default="", subtype="FILE_PATH")
 
     @classmethod
     def register(cls):

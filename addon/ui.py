@@ -177,6 +177,29 @@ class DRT_RENDER_PT_film(DRTRenderPanel, bpy.types.Panel):
         col.prop(rd, "film_transparent", text="Transparent")
 
 
+class DRT_RENDER_PT_cluster(DRTRenderPanel, bpy.types.Panel):
+    """Render on a Dask cluster (docs/farm.md)."""
+
+    bl_label = "Cluster"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        d = context.scene.drt
+        col = layout.column()
+        col.prop(d, "cluster_address")
+        sub = col.column()
+        sub.active = bool(d.cluster_address.strip())
+        sub.prop(d, "cluster_timeout")
+        tls = col.column()
+        tls.active = d.cluster_address.strip().startswith("tls://")
+        tls.prop(d, "cluster_tls_ca_file")
+        tls.prop(d, "cluster_tls_cert")
+        tls.prop(d, "cluster_tls_key")
+
+
 classes = (
     DRT_RENDER_PT_sampling,
     DRT_RENDER_PT_sampling_subset,
@@ -185,6 +208,7 @@ classes = (
     DRT_RENDER_PT_motion_blur,
     DRT_RENDER_PT_film,
     DRT_VIEWLAYER_PT_passes_data,
+    DRT_RENDER_PT_cluster,
 )
 
 

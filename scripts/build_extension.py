@@ -54,8 +54,9 @@ PYTHON_TAGS = ("cp311", "cp313")
 PLATFORM_TAGS = {
     "linux-x64": lambda tag: tag.startswith("manylinux") and tag.endswith("_x86_64"),
     "windows-x64": lambda tag: tag == "win_amd64",
-    "macos-arm64": lambda tag: tag.startswith("macosx_") and tag.endswith("_arm64"),
-    "macos-x64": lambda tag: tag.startswith("macosx_") and tag.endswith("_x86_64"),
+    # universal2 wheels hold both architectures (Blender's builder maps them to both, too)
+    "macos-arm64": lambda tag: tag.startswith("macosx_") and tag.endswith(("_arm64", "_universal2")),
+    "macos-x64": lambda tag: tag.startswith("macosx_") and tag.endswith(("_x86_64", "_universal2")),
 }
 
 
@@ -115,12 +116,14 @@ def download_wheels(names: list[str], dest: str = WHEEL_CACHE) -> list[str]:
     for name in names:
         path = os.path.join(dest, name)
         if not os.path.exists(path):
-            dist, version, py, _abi, plat = name[:-4].split("-", 4)
-            platform = plat.split(".")[-1]
-            python = f"{py[2]}.{py[3:]}"  # cp311 -> 3.11, cp313 -> 3.13
+            dist, version, py, abi, plat = name[:-4].split("-", 4)
+            target = []
+            if plat != "any":  # binary: this wheel's platform and Python (abi3: its minimum)
+                platform = plat.split(".")[-1]
+                python = f"{py[2]}.{py[3:]}"  # cp311 -> 3.11, cp313 -> 3.13
+                target = ["--python-version", python, "--platform", platform]
             subprocess.run([sys.executable, "-m", "pip", "download", f"{dist}=={version}",
-                            "--no-deps", "--only-binary=:all:", "--python-version", python,
-                            "--platform", platform, "-d", dest], check=True)
+                            "--no-deps", "--only-binary=:all:", *target, "-d", dest], check=True)
         if not os.path.exists(path):
             raise SystemExit(f"wheel {name} was not downloaded")
         paths.append(path)
@@ -165,8 +168,14 @@ def build_extension(out: str, wheels: list[str]) -> list[str]:
 
 
 def legacy_wheels(wheels: list[str]) -> list[str]:
-    """The wheels the legacy add-on vendors: Linux x86-64 for Python 3.11 (Blender 3.4 - 4.1)."""
-    return [w for w in wheels if "manylinux" in w and "-cp311-" in os.path.basename(w)]
+    """The wheels the legacy add-on vendors: Linux x86-64 for Python 3.11 (Blender 3.4 - 4.1):
+    cp311 and abi3 manylinux wheels, and the pure-Python ones (Dask)."""
+    def fits(name):
+        _dist, _version, py, abi, plat = name[:-4].split("-", 4)
+        if plat == "any":
+            return True
+        return "manylinux" in plat and (py == "cp311" or (abi == "abi3" and int(py[3:]) <= 11))
+    return [w for w in wheels if fits(os.path.basename(w))]
 
 
 def build_legacy(out: str, linux_wheels: list[str]) -> str:

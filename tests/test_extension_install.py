@@ -45,10 +45,11 @@ print("CORE", sorted(m for m in sys.modules if m.endswith("drt.integrator")), fl
 
 
 def linux_wheels() -> list[str]:
-    """The manifest's linux-x64 wheels for this Python (embreex, numba, llvmlite)."""
+    """The manifest's linux-x64 wheels for this Python (embreex, numba, llvmlite; Dask and its
+    dependencies: pure-Python, cp311 and abi3 wheels)."""
     import build_extension as b
-    tag = f"-cp{sys.version_info[0]}{sys.version_info[1]}-"
-    return b.download_wheels([w for w in b.manifest_wheels() if "manylinux" in w and tag in w])
+    assert sys.version_info[:2] == (3, 11)  # the bpy 5.0 module's Python, as legacy_wheels picks
+    return b.download_wheels(b.legacy_wheels(b.manifest_wheels()))
 
 
 def build_linux_extension(tmp, wheels) -> str:
@@ -64,7 +65,8 @@ def build_linux_extension(tmp, wheels) -> str:
     text = re.sub(r"platforms = \[[^\]]*\]", 'platforms = ["linux-x64"]', text)
     listed = ", ".join(f'"./wheels/{os.path.basename(w)}"' for w in wheels)
     text = re.sub(r"wheels = \[[^\]]*\]", f"wheels = [{listed}]", text)
-    open(manifest, "w", encoding="utf-8").write(text)
+    with open(manifest, "w", encoding="utf-8") as f:
+        f.write(text)
     out = os.path.join(tmp, "dist")
     os.makedirs(out)
     subprocess.run([sys.executable, b.blender_ext_cli(), "build", "--source-dir", stage,
@@ -78,7 +80,8 @@ def test_extension_zip_installs_enables_and_renders(tmp_path):
         wheels = linux_wheels()
     except (subprocess.CalledProcessError, SystemExit) as e:
         pytest.skip(f"could not fetch the wheels: {e}")
-    assert {os.path.basename(w).split("-")[0] for w in wheels} == {"embreex", "numba", "llvmlite"}
+    names = {os.path.basename(w).split("-")[0] for w in wheels}
+    assert {"embreex", "numba", "llvmlite", "distributed", "dask", "tornado", "msgpack", "psutil"} <= names
     zip_path = build_linux_extension(str(tmp_path), wheels)
     user = tmp_path / "user"
     user.mkdir()
@@ -98,6 +101,10 @@ def test_extension_zip_installs_enables_and_renders(tmp_path):
     # the engine that rendered is the installed copy, with embreex from the bundled wheel
     installed = user / "extensions" / "user_default" / "drt"
     assert (installed / "drt" / "integrator.py").exists()
+    # Dask's wheels (the cluster client) were installed into the extensions' site-packages
+    site = list((user / "extensions").glob(".local/lib/python3.*/site-packages"))
+    for package in ("distributed", "dask", "tornado", "msgpack", "yaml", "psutil"):
+        assert site and (site[0] / package / "__init__.py").exists(), (package, site)
     import OpenEXR
     with OpenEXR.File(str(out)) as f:
         rgba = np.array(f.parts[0].channels["RGBA"].pixels)

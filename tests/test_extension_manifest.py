@@ -17,6 +17,8 @@ def test_manifest_wheels_cover_every_platform_and_python():
     assert b.check_wheel_matrix() == []
     dists = {w.split("-")[0].lower() for w in b.manifest_wheels()}
     assert {"embreex", "numba", "llvmlite"} <= dists
+    # Dask for cluster rendering, with its binary dependencies (docs/farm.md)
+    assert {"distributed", "dask", "tornado", "msgpack", "psutil", "pyyaml", "markupsafe"} <= dists
 
 
 def test_the_matrix_check_finds_gaps_and_strays():
@@ -31,3 +33,5 @@ def test_the_matrix_check_finds_gaps_and_strays():
             "psutil-7.0.0-cp37-abi3-win_amd64.whl", "psutil-7.0.0-cp36-abi3-macosx_11_0_arm64.whl"]
     assert b.check_wheel_matrix(abi3) == []
     assert b.check_wheel_matrix(["pure-1.0-py3-none-any.whl"]) == []
+    universal2 = ["tornado-6.6.1-cp311-abi3-macosx_10_9_universal2.whl"]  # both Mac architectures
+    assert b.check_wheel_matrix(universal2, ["macos-arm64"]) == []

@@ -109,6 +109,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--png", help="also write an 8-bit sRGB PNG preview here")
     _add_denoise_args(r, "denoise the image with Open Image Denoise (albedo + normal guides); the noisy "
                          "image is kept as the EXR layer Noisy (needs the denoise extra)")
+    from .farm.cli import add_arguments as add_farm_arguments  # --frames, --cluster (no Dask import)
+
+    add_farm_arguments(r)
 
     m = sub.add_parser("merge", help="merge EXRs of disjoint sample ranges into one image")
     m.add_argument("inputs", nargs="+", help="EXR files written by `drt render --sample-offset/--sample-count`")
@@ -271,6 +274,10 @@ def cmd_render(args) -> int:
     _check_denoise(args)
     if args.adaptive_threshold is not None and not (0 <= args.adaptive_threshold <= 1):
         raise CliError(f"--adaptive-threshold must be within [0, 1], got {args.adaptive_threshold}")
+    from .farm import cli as farm_cli
+
+    if farm_cli.wants_farm_path(args):  # animations and Dask clusters (docs/farm.md)
+        return farm_cli.cmd_render(args, load=_load, error_cls=CliError, progress_cls=Progress)
     scene = _load(args)
     if args.resolution:
         scene.render = replace(scene.render, width=args.resolution[0], height=args.resolution[1])

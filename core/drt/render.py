@@ -160,8 +160,9 @@ class _ThreadWorkers:
         self.pool.shutdown(wait=True)
 
 
-def _pixel_region(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Columns (from the left) and rows (from the top) of the pixels to render (border aware)."""
+def pixel_bounds(scene: Scene) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1): the pixels to render, columns [x0, x1) from the left and rows [y0, y1)
+    from the top (the border region, or the whole frame)."""
     w, h = scene.render.width, scene.render.height
     x0, y0, x1, y1 = 0, 0, w, h
     if scene.render.border is not None:
@@ -169,7 +170,16 @@ def _pixel_region(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
         x0, x1 = int(np.floor(bx0 * w)), max(int(np.ceil(bx1 * w)), int(np.floor(bx0 * w)) + 1)
         r0, r1 = int(np.floor((1 - by1) * h)), max(int(np.ceil((1 - by0) * h)), int(np.floor((1 - by1) * h)) + 1)
         y0, y1 = r0, r1
-    xs, ys = np.meshgrid(np.arange(x0, x1), np.arange(y0, y1))
+    return x0, y0, x1, y1
+
+
+def _pixel_region(scene: Scene, tile: tuple[int, int, int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Columns (from the left) and rows (from the top) of the pixels to render (border aware),
+    within ``tile`` (x0, y0, x1, y1; rows from the top) when one is given."""
+    x0, y0, x1, y1 = pixel_bounds(scene)
+    if tile is not None:
+        x0, y0, x1, y1 = max(x0, tile[0]), max(y0, tile[1]), min(x1, tile[2]), min(y1, tile[3])
+    xs, ys = np.meshgrid(np.arange(x0, max(x0, x1)), np.arange(y0, max(y0, y1)))
     return xs.reshape(-1).astype(np.int64), ys.reshape(-1).astype(np.int64)
 
 
@@ -203,6 +213,7 @@ def render(
     cancel: Callable[[], bool] | None = None,
     context: RenderContext | None = None,
     parallel: str = "auto",
+    tile: tuple[int, int, int, int] | None = None,
 ) -> Film:
     """Render ``scene`` and return its ``Film`` (``film.stats`` holds a ``RenderStats``).
 
@@ -221,6 +232,13 @@ def render(
     process; the compiled kernels and Embree release the GIL, so threads use every core (the
     ``drt.worker`` subprocess pool they replaced is gone, see docs/decisions.md). The image is
     bit-identical for any thread count: batches are added to the film in a fixed order.
+
+    tile: (x0, y0, x1, y1) in pixels, columns from the left and rows from the top, end
+    exclusive: render only those pixels (within the border region) and return a film of just
+    that rectangle (``film.meta["tile"]``; the frame's size in ``meta["width"/"height"]``).
+    Every pixel gets exactly the samples, in the same order, that the whole-frame render
+    gives it, so tiles placed side by side are bit-identical to the whole frame (the cluster
+    renderer, ``drt.farm``, relies on this).
     """
     t0 = time.perf_counter()
     ctx = context or prepare(scene, seed=seed, sampler=sampler, direct=direct, indirect=indirect)
@@ -234,10 +252,18 @@ def render(
     # stratified sampling needs the total sample count, whatever range this render covers
     integ.sampler = Sampler(integ.sampler.kind, integ.s.seed, spp) if integ.sampler.spp != spp else integ.sampler
     threads = max(1, int(threads or os.cpu_count() or 1))
-    film = Film(scene.render.width, scene.render.height)
-    stats = RenderStats(samples_total=count, threads=threads)
-    xs_all, ys_all = _pixel_region(scene)
+    xs_all, ys_all = _pixel_region(scene, tile)
     xs, ys = xs_all, ys_all
+    if tile is None:
+        film = Film(scene.render.width, scene.render.height)
+        to_film = None
+    else:  # a film of the tile only: a 4K frame's full film is ~0.8 GB per task
+        fx0, fy0 = (int(xs.min()), int(ys.min())) if len(xs) else (tile[0], tile[1])
+        fx1, fy1 = (int(xs.max()) + 1, int(ys.max()) + 1) if len(xs) else (tile[0], tile[1])
+        film = Film(fx1 - fx0, fy1 - fy0)
+        film.meta["tile"] = [fx0, fy0, fx1, fy1]
+        to_film = (scene.render.width, fx0, fy0, fx1 - fx0)
+    stats = RenderStats(samples_total=count, threads=threads)
     threshold = scene.render.adaptive_threshold if adaptive_threshold is None else float(adaptive_threshold)
     min_samples = scene.render.adaptive_min_samples if adaptive_min_samples is None else int(adaptive_min_samples)
     if min_samples <= 0:
@@ -276,7 +302,7 @@ def render(
             except FutureTimeout:
                 if cancel is not None and cancel():
                     raise _Cancelled from None
-        _collect(batch, film, stats, tick, total_paths, workers, t0)
+        _collect(batch, film, stats, tick, total_paths, workers, t0, to_film)
 
     aborted = False
     try:
@@ -299,7 +325,8 @@ def render(
             done += k
             stats.samples_done = done - sample_offset
             if threshold > 0 and stats.samples_done >= min_samples:
-                keep = adaptive_active(film, xs, ys, threshold)
+                fx, fy = (xs, ys) if to_film is None else (xs - to_film[1], ys - to_film[2])
+                keep = adaptive_active(film, fx, fy, threshold)
                 xs, ys = xs[keep], ys[keep]
                 stats.active_pixels = int(len(xs))
                 if len(xs) == 0:
@@ -321,7 +348,8 @@ def render(
     stats.seconds = time.perf_counter() - t0
     stats.rays, stats.embree_seconds = workers.counters()
     stats.nan_samples = film.nan_samples
-    held = film.count[ys_all * film.width + xs_all]
+    ox, oy = (0, 0) if to_film is None else (to_film[1], to_film[2])
+    held = film.count[(ys_all - oy) * film.width + (xs_all - ox)]
     if len(held):
         stats.spp_min, stats.spp_mean, stats.spp_max = int(held.min()), float(held.mean()), int(held.max())
     film.meta.update(
@@ -351,7 +379,11 @@ def adaptive_active(film: Film, xs: np.ndarray, ys: np.ndarray, threshold: float
     return np.sqrt(var_mean) > threshold * np.maximum(mean, 1e-3)
 
 
-def _collect(batch, film, stats, tick, total_paths, workers, t0):
+def _collect(batch, film, stats, tick, total_paths, workers, t0, to_film=None):
+    if to_film is not None:  # frame pixel ids -> ids in the tile's film
+        width, fx0, fy0, fw = to_film
+        row, col = np.divmod(batch.pixel, width)
+        batch = replace(batch, pixel=(row - fy0) * fw + (col - fx0))
     film.add(batch)
     stats.camera_paths += len(batch.pixel) + batch.nan_count
     if tick is not None:

@@ -54,7 +54,15 @@ def cache_dir() -> str:
 #: top-level modules of ``drt`` that hold no kernel code and that no kernel module imports, so
 #: editing them does not invalidate the compiled-kernel cache (checked by tests/test_kernels.py)
 FRONT_END_MODULES = frozenset({"__main__", "bench", "cli", "denoise", "estimators", "exr", "loaders",
-                               "integrator", "preview", "render", "scene_file"})
+                               "integrator", "preview", "render", "scene_file", "frames",
+                               "farm", "farm._remote", "farm.cli", "farm.client", "farm.plan",
+                               "farm.tasks"})
+
+
+def _module_name(root: str, path: str) -> str:
+    """Dotted module name of a file under the ``drt`` folder ``root`` ("farm.client", "farm")."""
+    parts = os.path.relpath(path, root)[:-3].split(os.sep)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
 def source_key() -> str:
@@ -74,8 +82,8 @@ def source_key() -> str:
     for folder, dirs, files in sorted(os.walk(root)):
         dirs.sort()
         for name in sorted(files):
-            if name.endswith(".py") and not (folder == root and name[:-3] in FRONT_END_MODULES):
-                path = os.path.join(folder, name)
+            path = os.path.join(folder, name)
+            if name.endswith(".py") and _module_name(root, path) not in FRONT_END_MODULES:
                 h.update(os.path.relpath(path, root).encode())
                 try:
                     with open(path, "rb") as f:
