@@ -340,3 +340,23 @@ def test_the_only_worker_killed_and_restarted_changes_nothing():
     assert state["killed"] and stats.tasks_done == stats.tasks_total and stats.resubmitted > 0
     local = render(scene, spp=64)
     assert np.array_equal(films[None].sum_rgba, local.sum_rgba)
+
+
+def test_denoise_on_the_cluster_runs_once_on_the_merged_frame(cluster, tmp_path):
+    """Issue 15's farm rule: the cluster's tiles are merged on the client and denoised once, so
+    the result equals the local render with --denoise (same noisy image, same denoiser input)."""
+    pytest.importorskip("pyoidn")
+    common = [BOX, "--spp", "4", "--resolution", "40x32", "--denoise", "--denoise-quality", "fast"]
+    local = run_cli(*common, "-o", str(tmp_path / "local.exr"))
+    assert local.returncode == 0, local.stderr
+    farm = run_cli(*common, "-o", str(tmp_path / "farm.exr"), "--cluster", cluster.scheduler_address,
+                   "--task-seconds", "0.01")
+    assert farm.returncode == 0, farm.stderr
+    assert "denoised" in farm.stdout
+    a, _ = read_exr(tmp_path / "local.exr")
+    b, meta = read_exr(tmp_path / "farm.exr")
+    assert "Noisy.R" in b and np.array_equal(a["Noisy.R"], b["Noisy.R"])
+    for c in "RGB":
+        assert np.array_equal(a[c], b[c]), c  # one denoise of the same merged image
+    assert not np.array_equal(b["R"], b["Noisy.R"])
+    assert "denoised" in meta

@@ -110,11 +110,12 @@ def cmd_render(args, *, load, error_cls, progress_cls) -> int:
         _check_film_memory(scene.render.width, scene.render.height)  # the client holds whole frames
         return scene
 
-    written = []
+    written, notes = [], []
 
     def write(frame, film):
         path = out_path(args.output, frame)
-        denoised, _note, meta = _denoise(args, film) if not stop.is_set() else (None, "", {})
+        denoised, note, meta = _denoise(args, film) if not stop.is_set() else (None, "", {})
+        notes.append(note)
         write_exr(path, film, meta, denoised=denoised)
         if args.png:
             from ..preview import write_png
@@ -150,8 +151,9 @@ def cmd_render(args, *, load, error_cls, progress_cls) -> int:
     what = f"{len(written)} frames" if args.frames else f"{w}x{h}"
     state = "cancelled after" if stop.is_set() else "rendered"
     target = args.output if not args.frames else f"{written[0]} .. {written[-1]}" if written else "nothing"
+    note = notes[-1] if len(notes) == 1 else (f", {len(notes)} frames denoised" if args.denoise and notes else "")
     print(f"drt: {state} {what} {where} in {stats.seconds:.2f}s: "
-          f"{stats.camera_paths / max(stats.seconds, 1e-9) / 1e3:.1f} k samples/s -> {target}")
+          f"{stats.camera_paths / max(stats.seconds, 1e-9) / 1e3:.1f} k samples/s{note} -> {target}")
     return 130 if stop.is_set() else 0
 
 
