@@ -110,6 +110,11 @@ def _vector(d, key, path, n, default=..., lo=None):
     return a
 
 
+#: largest absolute entry of a transform matrix: Blender scenes stay far below (float32 geometry
+#: is meaningless past ~1e15 anyway), and squaring 1e308 overflows float64 (fuzzing found it)
+MAX_TRANSFORM_ENTRY = 1e15
+
+
 def _matrix(d, key, path, default=...):
     p = _join(path, key)
     v = _get(d, key, path, default)
@@ -121,6 +126,9 @@ def _matrix(d, key, path, default=...):
         raise SceneError(p, f"must be a 4x4 matrix, got shape {m.shape}")
     if not np.all(np.isfinite(m)):
         raise SceneError(p, "must contain only finite numbers")
+    if np.any(np.abs(m) > MAX_TRANSFORM_ENTRY):
+        raise SceneError(p, f"entries must be within ±{MAX_TRANSFORM_ENTRY:g} (beyond it a transform "
+                            "overflows when composed, and float32 geometry cannot hold the result)")
     if not np.allclose(m[3], [0, 0, 0, 1], atol=1e-6):
         raise SceneError(p, "last row must be [0, 0, 0, 1] (an affine transform)")
     return m
