@@ -12,7 +12,7 @@ import traceback
 import bpy
 import numpy as np
 
-from . import cluster, compat, denoising
+from . import cluster, compat, denoising, viewport
 from .export import ExportError, export_depsgraph
 
 # Film arrays are top row first; Blender's render result wants bottom row first.
@@ -47,6 +47,18 @@ class DRTRenderEngine(bpy.types.RenderEngine):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
+        self._drt_viewport = None  # the Rendered viewport's session (addon/viewport.py)
+
+    def __del__(self):
+        viewport.engine_free(self)
+
+    # --- Rendered viewport (addon/viewport.py) --------------------------------------------
+
+    def view_update(self, context, depsgraph):
+        viewport.engine_view_update(self, context, depsgraph)
+
+    def view_draw(self, context, depsgraph):
+        viewport.engine_view_draw(self, context, depsgraph)
 
     # --- passes -----------------------------------------------------------------------------
 

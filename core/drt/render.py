@@ -214,6 +214,7 @@ def render(
     context: RenderContext | None = None,
     parallel: str = "auto",
     tile: tuple[int, int, int, int] | None = None,
+    max_batch_paths: int | None = None,
 ) -> Film:
     """Render ``scene`` and return its ``Film`` (``film.stats`` holds a ``RenderStats``).
 
@@ -239,6 +240,9 @@ def render(
     Every pixel gets exactly the samples, in the same order, that the whole-frame render
     gives it, so tiles placed side by side are bit-identical to the whole frame (the cluster
     renderer, ``drt.farm``, relies on this).
+
+    max_batch_paths: camera paths per batch (default ``BATCH_PATHS``); the viewport uses
+    smaller batches so that cancelling (an edit) waits less for the batches in flight.
     """
     t0 = time.perf_counter()
     ctx = context or prepare(scene, seed=seed, sampler=sampler, direct=direct, indirect=indirect)
@@ -270,6 +274,7 @@ def render(
         min_samples = max(16, spp // 16)
     npix = len(xs)
     total_paths = max(npix * count, 1)
+    batch_paths = int(max_batch_paths or BATCH_PATHS)
 
     def batches(first: int, k: int):
         """(x, row, sample index) arrays of one pass, cut into batches: at most BATCH_PATHS
@@ -280,7 +285,7 @@ def render(
         npix = len(xs)
         k = max(k, 1)
         spread = max(MIN_BATCH_PATHS // k, -(-npix // (2 * threads)))
-        per = max(1, min(BATCH_PATHS // k, spread))
+        per = max(1, min(batch_paths // k, spread))
         for start in range(0, npix, per):
             sl = slice(start, start + per)
             bx, by = xs[sl], ys[sl]

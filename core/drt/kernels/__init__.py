@@ -53,8 +53,9 @@ def cache_dir() -> str:
 
 #: top-level modules of ``drt`` that hold no kernel code and that no kernel module imports, so
 #: editing them does not invalidate the compiled-kernel cache (checked by tests/test_kernels.py)
-FRONT_END_MODULES = frozenset({"__main__", "bench", "cli", "denoise", "estimators", "exr", "loaders",
-                               "integrator", "preview", "render", "scene_file", "frames",
+FRONT_END_MODULES = frozenset({"__main__", "bench", "cli", "denoise", "estimators", "exr",
+                               "interactive", "loaders", "integrator", "preview", "render",
+                               "scene_file", "frames",
                                "farm", "farm._remote", "farm.cli", "farm.client", "farm.plan",
                                "farm.tasks"})
 

@@ -1,0 +1,385 @@
+"""The Rendered viewport: Blender's depsgraph and 3D view → the core's interactive session.
+
+``ViewportSync`` runs on Blender's main thread (``view_update`` / ``view_draw``). It exports the
+scene once, then reads ``depsgraph.updates`` and sends the core's ``ProgressiveSession`` only
+what changed, as edits of its ``LiveScene`` (``drt/interactive.py``):
+
+* an object transform → a new matrix (no mesh export; no BVH rebuild for large objects);
+* ``is_updated_geometry`` on a mesh object → that object's mesh is exported again;
+* a material (or its node tree) → that material converted again; the material list replaced;
+* a light, the world, render settings → re-read and sent only if they differ;
+* objects added, removed, hidden or instanced → found by comparing the object instances with
+  what the session holds (a transform-only update reads only matrices).
+
+``view_camera`` turns the 3D view (camera view, free perspective, orthographic) into a core
+camera; ``draw_frame`` is the thin GPU layer (not testable without a display).
+
+The session thread never touches bpy: everything it needs is copied here first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import compat
+from .export import _instance_key, _instance_name, _is_rendered
+from .export.materials import MaterialExporter
+from .export.mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays
+from .export.scene_parts import camera_dict, light_dict, matrix_list, render_settings, world_dict
+
+_IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+
+
+def _validated(scene, materials: list, lights: list, world: dict):
+    """Render settings, materials, lights and world validated by the core like a scene file's
+    (the camera is a placeholder: the view supplies the real one)."""
+    scene_mod = compat.core_module("scene")
+    header = {"format": "drt-scene", "version": 1, "render": render_settings(scene, preview=True),
+              "camera": {"type": "PERSP", "matrix_world": _IDENTITY}, "world": world,
+              "materials": materials, "lights": lights, "meshes": [], "objects": []}
+    return scene_mod.scene_from_dict(header, {})
+
+
+class ViewportSync:
+    """Keeps a ``ProgressiveSession`` in step with a Blender depsgraph (main thread only).
+
+    ``exports`` counts what was exported from Blender and sent to the session: "meshes" (one
+    per mesh export), "materials" (one per material converted), "lights", "world", "settings"
+    (one per changed list / value sent); tests use it to check that an edit re-exports only
+    what it touched.
+    """
+
+    def __init__(self, threads: int | None = None, on_frame=None):
+        interactive = compat.core_module("interactive")
+        self.session = interactive.ProgressiveSession(threads=threads, on_frame=on_frame)
+        self.exports = {"meshes": 0, "materials": 0, "lights": 0, "world": 0, "settings": 0}
+        self.warnings: list[str] = []
+        self._materials = MaterialExporter()
+        self._objects: dict = {}  # instance key -> (matrix (4,4) array, mesh key)
+        self._mesh_keys: set = set()
+        self._lights: list = []
+        self._world: dict | None = None
+        self._settings = None
+        self._view = None
+        self.synced = False
+
+    # ------------------------------------------------------------------ depsgraph
+    def sync(self, depsgraph) -> None:
+        """The first full export, or the incremental one from ``depsgraph.updates``."""
+        if not self.synced:
+            self._full(depsgraph)
+            self.synced = True
+            return
+        geometry, materials, lights, world, settings, objects = set(), [], False, False, False, False
+        for u in depsgraph.updates:
+            idt = u.id
+            kind = type(idt).__name__
+            if kind == "Object":
+                if idt.type == "LIGHT":
+                    lights = True
+                elif u.is_updated_geometry:
+                    geometry.add(idt.original.name)
+                    objects = True
+                elif u.is_updated_transform:
+                    objects = True
+                if idt.instance_type != "NONE" or idt.type == "EMPTY":
+                    objects = True  # an instancer or a parent: its instances may move
+            elif kind == "Material":
+                materials.append(idt.original)
+            elif kind == "ShaderNodeTree":
+                materials += [m for m in self._materials_using(idt)]
+                world = world or self._is_world_tree(depsgraph, idt)
+            elif kind in ("World",):
+                world = True
+            elif kind == "Scene":
+                settings = True
+                objects = True  # visibility, frame, view-layer changes
+            elif kind == "Collection":
+                objects = True
+            elif kind in ("PointLight", "SpotLight", "SunLight", "AreaLight", "Light"):
+                lights = True
+        if materials:
+            self._update_materials(depsgraph.scene, materials)
+        if objects or geometry:
+            self._reconcile(depsgraph, geometry)
+        if lights or objects:
+            self._sync_lights(depsgraph)
+        if world or settings:
+            self._sync_world_and_settings(depsgraph.scene)
+
+    def _full(self, depsgraph) -> None:
+        self._reconcile(depsgraph, set())
+        self._sync_lights(depsgraph, force=True)
+        self._sync_world_and_settings(depsgraph.scene, force=True)
+
+    def _materials_using(self, tree):
+        for idx_key, idx in list(self._materials._index.items()):
+            mat = self._find_material(idx_key)
+            if mat is not None and mat.node_tree is not None and \
+                    mat.node_tree.as_pointer() in (tree.as_pointer(), tree.original.as_pointer()):
+                yield mat
+
+    @staticmethod
+    def _is_world_tree(depsgraph, tree) -> bool:
+        w = depsgraph.scene.world
+        return w is not None and w.node_tree is not None and \
+            w.node_tree.as_pointer() in (tree.as_pointer(), tree.original.as_pointer())
+
+    @staticmethod
+    def _find_material(pointer):
+        import bpy
+        if pointer is None:
+            return None
+        for m in bpy.data.materials:
+            if m.as_pointer() == pointer:
+                return m
+        return None
+
+    def _update_materials(self, scene, materials) -> None:
+        seen = set()
+        for mat in materials:
+            key = mat.original.as_pointer()
+            if key in seen:
+                continue
+            seen.add(key)
+            idx = self._materials._index.get(key)
+            if idx is None:
+                continue  # not used by any exported object yet: exported when it is
+            self._materials.materials[idx] = self._materials.convert(mat)
+            self.exports["materials"] += 1
+        self._send_materials(scene)
+
+    def _send_materials(self, scene) -> None:
+        materials = _validated(scene, self._materials.materials, [], {"color": [0, 0, 0]}).materials
+        self.session.edit(lambda live, m=materials: live.set_materials(m))
+
+    def _reconcile(self, depsgraph, geometry: set) -> None:
+        """Compare the object instances with what the session holds; send the differences.
+        ``geometry``: original names of objects whose geometry changed (exported again)."""
+        seen = set()
+        exported: dict = {}  # mesh key -> MeshData, shared by instances of one object
+        n_materials = len(self._materials.materials)
+        edits = []
+        for inst in depsgraph.object_instances:
+            obj = inst.object
+            if obj.type not in MESH_LIKE_TYPES or not _is_rendered(inst):
+                continue
+            key = _instance_key(inst)
+            matrix = np.array(matrix_list(inst.matrix_world), dtype=np.float64)
+            slots = [s.material for s in obj.material_slots] or [None]
+            slot_mats = tuple(self._materials.index_of(m) for m in slots)
+            mesh_key = (obj.original.name, slot_mats)
+            old = self._objects.get(key)
+            seen.add(key)
+            if old is not None and old[1] == mesh_key and obj.original.name not in geometry:
+                if not np.array_equal(old[0], matrix):
+                    self._objects[key] = (matrix, mesh_key)
+                    edits.append(lambda live, k=key, m=matrix: live.set_matrix(k, m))
+                continue
+            mesh = exported.get(mesh_key)
+            if mesh is None:
+                data = evaluated_mesh_arrays(obj, np.array(slot_mats, dtype=np.int32))
+                self.exports["meshes"] += 1
+                mesh = interactive_mesh(obj.name, data)
+                exported[mesh_key] = mesh
+            if mesh is False:
+                if old is not None:
+                    edits.append(lambda live, k=key: live.remove_object(k))
+                    del self._objects[key]
+                continue
+            self._objects[key] = (matrix, mesh_key)
+            edits.append(lambda live, k=key, n=_instance_name(inst, key), me=mesh, m=matrix:
+                         live.set_object(k, n, me, m))
+        for key in [k for k in self._objects if k not in seen]:
+            del self._objects[key]
+            edits.append(lambda live, k=key: live.remove_object(k))
+        if len(self._materials.materials) != n_materials or not self.synced:
+            self._send_materials(depsgraph.scene)  # before the objects: their meshes index them
+        if edits:
+            self.session.edit(lambda live, es=edits: [e(live) for e in es])
+
+    def _sync_lights(self, depsgraph, force: bool = False) -> None:
+        lights = []
+        for inst in depsgraph.object_instances:
+            if inst.object.type == "LIGHT" and _is_rendered(inst):
+                ld = light_dict(inst.object, inst.matrix_world.copy(), [])
+                if ld is not None:
+                    lights.append(ld)
+        if force or lights != self._lights:
+            self.exports["lights"] += 1
+            self._lights = lights
+            valid = _validated(depsgraph.scene, [], lights, {"color": [0, 0, 0]}).lights
+            self.session.edit(lambda live, li=valid: live.set_lights(li))
+
+    def _sync_world_and_settings(self, scene, force: bool = False) -> None:
+        world = world_dict(scene.world, [])
+        checked = _validated(scene, [], [], world)
+        if force or world != self._world:
+            self.exports["world"] += 1
+            self._world = world
+            self.session.edit(lambda live, c=checked.world_color: live.set_world(c))
+        if force or checked.render != self._settings:
+            self.exports["settings"] += 1
+            self._settings = checked.render
+            self.session.edit(lambda live, s=checked.render: live.set_settings(s))
+
+    # ------------------------------------------------------------------ view
+    def set_view(self, camera, width: int, height: int, spp: int) -> bool:
+        """Render ``camera`` (a core CameraSpec) at width × height; True when that restarts."""
+        return self.session.set_view(camera, width, height, spp)
+
+    def stop(self, timeout: float = 5.0) -> bool:
+        self.session.on_frame = None
+        return self.session.stop(timeout)
+
+
+def interactive_mesh(name: str, data: dict | None):
+    """Exported mesh arrays → a core ``MeshData`` (False when the object has no triangles)."""
+    if data is None:
+        return False
+    scene_mod = compat.core_module("scene")
+    return scene_mod.MeshData(
+        name, np.ascontiguousarray(data["positions"], dtype=np.float64),
+        np.ascontiguousarray(data["triangles"], dtype=np.int64),
+        np.ascontiguousarray(data["material_index"], dtype=np.int64),
+        data.get("normals"), data.get("uvs"), None)
+
+
+# ---------------------------------------------------------------------------- view → camera
+
+
+def view_camera(depsgraph, space, region_data, width: int, height: int):
+    """The core camera (CameraSpec) that shows what the 3D view shows, at width × height.
+
+    Camera view: the scene's (or the view's local) camera with its lens, clipping and depth of
+    field; the framing (zoom, pan, lens shift, sensor fit) comes from the view's projection,
+    so the render lines up with the camera frame Blender draws. Free perspective: the view's
+    lens and clip range, no depth of field (as Cycles). Orthographic: clip range
+    [−clip_end/2, clip_end/2] around the view centre, as Blender's own ortho view uses.
+    """
+    interactive = compat.core_module("interactive")
+    view_to_world = np.array(matrix_list(region_data.view_matrix.inverted()), dtype=np.float64)
+    projection = np.array(matrix_list(region_data.window_matrix), dtype=np.float64)
+    kind = region_data.view_perspective
+    if kind == "CAMERA":
+        cam_obj = space.camera if getattr(space, "use_local_camera", False) and space.camera \
+            else depsgraph.scene.camera
+        if cam_obj is not None and cam_obj.type == "CAMERA":
+            cam_eval = cam_obj.evaluated_get(depsgraph)
+            d = camera_dict(cam_eval, cam_eval.matrix_world.copy())
+            return interactive.camera_from_projection(
+                np.array(d["matrix_world"], dtype=np.float64), projection, lens=d["lens"],
+                clip_start=d["clip_start"], clip_end=d["clip_end"], dof=d["dof"])
+    if kind == "ORTHO" or not region_data.is_perspective:
+        half = float(space.clip_end) * 0.5
+        return interactive.camera_from_projection(view_to_world, projection, lens=float(space.lens),
+                                                  clip_start=-half, clip_end=half)
+    return interactive.camera_from_projection(view_to_world, projection, lens=float(space.lens),
+                                              clip_start=float(space.clip_start),
+                                              clip_end=float(space.clip_end))
+
+
+def render_size(region_width: int, region_height: int, pixel_size: int) -> tuple[int, int]:
+    """Render resolution for a region: Blender's viewport pixel size divides it (retina/UI
+    scale or the scene's Viewport > Pixel Size setting)."""
+    p = max(1, int(pixel_size))
+    return max(1, region_width // p), max(1, region_height // p)
+
+
+# ---------------------------------------------------------------------------- drawing
+
+
+class FrameTexture:
+    """A GPU texture of the session's latest frame, remade only when a new frame arrives."""
+
+    def __init__(self):
+        self.key = None
+        self.texture = None
+
+    def update(self, frame) -> None:
+        import gpu
+        key = (frame.generation, frame.samples, frame.divider, frame.width, frame.height)
+        if key == self.key:
+            return
+        n = frame.width * frame.height * 4
+        buf = gpu.types.Buffer("FLOAT", n, frame.rgba.reshape(-1))
+        self.texture = gpu.types.GPUTexture((frame.width, frame.height), format="RGBA16F", data=buf)
+        self.key = key
+
+
+def draw_frame(engine, scene, tex: FrameTexture, frame, region_width: int, region_height: int) -> None:
+    """Draw the frame over the whole region through the scene's display transform."""
+    import gpu
+    from gpu_extras.presets import draw_texture_2d
+
+    tex.update(frame)
+    gpu.state.blend_set("ALPHA_PREMULT")
+    engine.bind_display_space_shader(scene)
+    draw_texture_2d(tex.texture, (0, 0), region_width, region_height)
+    engine.unbind_display_space_shader()
+    gpu.state.blend_set("NONE")
+
+
+def status_text(frame, target: int, error: str | None) -> str:
+    if error:
+        return f"DRT | Error: {error}"
+    if frame is None:
+        return "DRT | Preparing"
+    if frame.divider > 1:
+        return f"DRT | Preview 1/{frame.divider}"
+    if target and frame.samples >= target:
+        return f"DRT | Sample {frame.samples}/{target} | Done"
+    return f"DRT | Sample {frame.samples}/{target}" if target else f"DRT | Sample {frame.samples}"
+
+
+
+# ---------------------------------------------------------------------------- engine hooks
+# RenderEngine.view_update / view_draw / __del__ delegate here (engine.py stays thin).
+
+
+def engine_view_update(engine, context, depsgraph) -> None:
+    """Start the session on the first call; then send what the depsgraph says changed."""
+    vp = getattr(engine, "_drt_viewport", None)
+    try:
+        if vp is None:
+            from .engine import render_threads
+            vp = ViewportSync(threads=render_threads(depsgraph.scene), on_frame=engine.tag_redraw)
+            engine._drt_viewport = vp
+        vp.sync(depsgraph)
+    except Exception as exc:  # noqa: BLE001 -- never a traceback dialog in the viewport
+        import traceback
+        traceback.print_exc()
+        if vp is not None:
+            vp.session.error = str(exc) or exc.__class__.__name__
+        engine.update_stats("", f"DRT | Error: {exc}")
+
+
+def engine_view_draw(engine, context, depsgraph) -> None:
+    """Follow the view (a new view restarts the session) and draw the latest frame."""
+    vp = getattr(engine, "_drt_viewport", None)
+    if vp is None:
+        return
+    scene = depsgraph.scene
+    region = context.region
+    try:
+        pixel = engine.get_preview_pixel_size(scene) if hasattr(engine, "get_preview_pixel_size") else 1
+        width, height = render_size(region.width, region.height, pixel)
+        camera = view_camera(depsgraph, context.space_data, context.region_data, width, height)
+        vp.set_view(camera, width, height, int(scene.drt.preview_samples))
+    except Exception as exc:  # noqa: BLE001 -- e.g. a panoramic camera: say so, draw nothing new
+        vp.session.error = str(exc) or exc.__class__.__name__
+    frame = vp.session.latest()
+    engine.update_stats("", status_text(frame, int(scene.drt.preview_samples), vp.session.error))
+    if frame is None:
+        return
+    if not hasattr(engine, "_drt_texture"):
+        engine._drt_texture = FrameTexture()
+    draw_frame(engine, scene, engine._drt_texture, frame, region.width, region.height)
+
+
+def engine_free(engine) -> None:
+    """Stop the viewport session (the engine is being freed: Solid mode, closed view)."""
+    vp = getattr(engine, "_drt_viewport", None)
+    if vp is not None:
+        engine._drt_viewport = None
+        vp.stop(timeout=5.0)

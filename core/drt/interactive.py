@@ -1,0 +1,767 @@
+"""Interactive rendering: a scene that takes edits, and a restartable progressive session.
+
+This is the core side of the Blender viewport (``addon/viewport.py``); nothing here knows
+Blender. Two pieces:
+
+``LiveScene`` holds the scene as *objects* (a local-space ``MeshData`` and a 4×4 matrix each),
+materials, lights, world and render settings, and turns them into a ``RenderContext`` for any
+camera, rebuilding only what an edit touched:
+
+* Large objects (``INSTANCE_MIN_TRIANGLES`` and up) and objects that are being moved while the
+  rest of the static set is large get their own Embree scene in local space, traced through a
+  transform (the tracer's rigid-motion path, ``drt.trace``, with the same matrix at shutter open
+  and close). Moving such an object changes one matrix and one culling box: no BVH is rebuilt.
+* Every other object is flattened into one world-space static set (the tracer's fast path);
+  moving, adding or removing one of them rebuilds that set, which is small by construction.
+* Emissive objects stay static: only static emissive triangles are sampled as lights.
+* A material edit rebuilds the material table (and the light set when emission changed); a
+  light or world edit rebuilds the light set; a camera change builds a new ``Camera``. None of
+  these touches a BVH.
+
+The world is translated by a fixed ``origin_shift`` (the first view's position, as the final
+render shifts by the camera's position, for float32 precision): it does not follow the view,
+so looking around never rebuilds geometry.
+
+``ProgressiveSession`` renders a ``LiveScene`` on one background thread (which drives the
+render loop's own worker threads). Edits are queued as functions of the ``LiveScene`` and
+applied *by the session thread* between renders, so the caller (Blender's main thread) never
+waits and no structure is changed while a render reads it. Every edit or view change cancels
+the render in flight (the render loop polls ``cancel`` between batches) and restarts
+accumulation: first a coarse image (the resolution divided by a power of two so that it has at
+most ``COARSE_PIXELS`` pixels), then each finer divider for one sample, then full resolution
+accumulating up to the sample count in chunks of about ``CHUNK_SECONDS``.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+import traceback
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from .camera import Camera
+from .geometry import MovingMesh, SceneGeometry, _points_to_world, _transform_normals
+from .integrator import Integrator
+from .lights import LightSet
+from .materials import MaterialTable
+from .motion import RigidMotion
+from .render import RenderContext, _emissive_triangles, render
+from .sampling.pixel_filter import PixelFilter
+from .sampling.sequences import Sampler
+from .scene import CameraSpec, MeshData, RenderSettings, Scene, SceneError
+# The tracer's per-object pieces: a moving object's Embree scene + transform, and its culling
+# box. LiveScene keeps them across edits (a moved object is one new transform), so it builds
+# the Tracer from parts instead of from a SceneGeometry.
+from .trace import Tracer, _MovingObject
+
+#: objects with at least this many triangles get their own BVH (moving them costs a matrix)
+INSTANCE_MIN_TRIANGLES = 1 << 15
+#: at most this many objects are traced through transforms: each costs a pass over the rays
+MAX_INSTANCES = 16
+#: the first image after an edit has at most this many pixels (640 × 360 starts at 80 × 45)
+COARSE_PIXELS = 1 << 13
+#: camera paths per batch in the viewport: small batches make cancel (and so edits) prompt
+VIEWPORT_BATCH_PATHS = 1 << 13
+#: full-resolution samples are rendered in chunks of about this many seconds (a redraw each)
+CHUNK_SECONDS = 0.5
+
+
+@dataclass
+class LiveObject:
+    """One object: ``mesh`` in its local space, ``matrix`` (4, 4) float64 local → Blender world;
+    ``instance``: traced through its transform (own BVH) rather than flattened."""
+
+    name: str
+    mesh: MeshData
+    matrix: np.ndarray
+    instance: bool = False
+
+
+@dataclass
+class BuildCounters:
+    """What LiveScene rebuilt so far (tests and benchmarks read these)."""
+
+    static_builds: int = 0  # world-space static set: triangles transformed + Embree BVH
+    static_triangles: int = 0  # triangles put through those builds, in total
+    instance_builds: int = 0  # per-object BVHs (local space)
+    instance_triangles: int = 0
+    matrix_updates: int = 0  # instances moved without any BVH work
+    material_builds: int = 0
+    light_builds: int = 0
+
+
+def _matrix(m) -> np.ndarray:
+    a = np.array(m, dtype=np.float64).reshape(4, 4)
+    if not np.all(np.isfinite(a)):
+        raise SceneError("matrix", "contains NaN or infinite values")
+    return a
+
+
+def _is_rigid(m: np.ndarray) -> bool:
+    """Can the tracer's rigid transform (translation · rotation · scale, no shear) represent m?"""
+    rm = RigidMotion(m, m)
+    linear, translation = rm.at(np.zeros(1))
+    scale = max(float(np.abs(m[:3, :3]).max()), 1e-30)
+    return bool(np.allclose(linear[0], m[:3, :3], rtol=0, atol=1e-6 * scale)
+                and np.allclose(translation[0], m[:3, 3], rtol=0, atol=1e-6 * (1 + np.abs(m[:3, 3]).max())))
+
+
+class _LiveTracer(Tracer):
+    """A ``Tracer`` assembled from parts LiveScene keeps between edits."""
+
+    def __init__(self, geom: SceneGeometry, static_scene, static_ng, moving: list):
+        # deliberately not Tracer.__init__: that would rebuild every BVH
+        self.geom = geom
+        self.static = static_scene
+        self._static_ng = static_ng
+        self.moving = moving
+        self.embree_seconds = 0.0
+        self.rays_traced = 0
+
+
+class LiveScene:
+    """A scene kept for interactive edits (see the module docstring).
+
+    Objects are keyed by any hashable key (the add-on uses Blender's instance key). Materials
+    are a list indexed by ``MeshData.material_index``; lights are header dicts as in
+    ``docs/scene-format.md`` (validated here like a scene file's); ``world_color`` is the
+    background radiance (3,). Not thread-safe: one thread edits and builds (the session's).
+    """
+
+    def __init__(self, settings: RenderSettings | None = None, materials: list | None = None,
+                 lights: list | None = None, world_color=(0.0, 0.0, 0.0),
+                 origin_shift=None):
+        self.settings = settings or RenderSettings(width=64, height=64)
+        self.objects: dict = {}
+        self.materials = list(materials or [])
+        self.lights: list = []
+        self.world_color = np.zeros(3)
+        self.origin_shift = None if origin_shift is None else np.asarray(origin_shift, np.float64).reshape(3).copy()
+        self.counters = BuildCounters()
+        self.warnings: list[str] = []
+        self._static = None  # (positions, triangles, tables, embree scene, face normals)
+        self._static_dirty = True
+        self._instances: dict = {}  # key -> (_MovingObject, MovingMesh) of instance objects
+        self._tables = None  # per-triangle tables of static set + instances, global ids
+        self._tables_dirty = True
+        self._tables_layout = None
+        self._material_table = None
+        self._light_set = None
+        self._lights_dirty = True
+        self._filter = None
+        self.set_lights(lights or [])
+        self.set_world(world_color)
+
+    # ------------------------------------------------------------------ edits
+    def set_object(self, key, name: str, mesh: MeshData, matrix) -> None:
+        """Add or replace an object (new geometry: its BVH is rebuilt)."""
+        m = _matrix(matrix)
+        old = self.objects.get(key)
+        if old is not None:
+            self.remove_object(key)
+        obj = LiveObject(str(name), mesh, m)
+        obj.instance = self._wants_instance(obj, moving=False)
+        self.objects[key] = obj
+        if obj.instance:
+            self._tables_dirty = True
+        else:
+            self._static_dirty = True
+
+    def set_matrix(self, key, matrix) -> None:
+        """Move an object: an instance costs a matrix; a static one rebuilds the static set,
+        unless it is promoted to an instance (the static set is large and it is being moved)."""
+        obj = self.objects[key]
+        m = _matrix(matrix)
+        if np.array_equal(m, obj.matrix):
+            return
+        obj.matrix = m
+        if not obj.instance and self._wants_instance(obj, moving=True):
+            obj.instance = True
+            self._static_dirty = True
+            self._tables_dirty = True
+            return
+        if obj.instance and key in self._instances:
+            if not _is_rigid(m):  # a sheared transform: the tracer's rigid path cannot hold it
+                obj.instance = False
+                self._drop_instance(key)
+                self._static_dirty = True
+                return
+            mo, mm = self._instances[key]
+            mm.motion = RigidMotion(self._shifted(m), self._shifted(m))
+            self._instances[key] = (self._moved(mo, mm), mm)
+            self.counters.matrix_updates += 1
+        elif not obj.instance:
+            self._static_dirty = True
+
+    def remove_object(self, key) -> None:
+        obj = self.objects.pop(key, None)
+        if obj is None:
+            return
+        if obj.instance:
+            self._drop_instance(key)
+        else:
+            self._static_dirty = True
+            if self._has_emission(obj):
+                self._lights_dirty = True
+
+    def set_materials(self, materials: list) -> None:
+        """Replace the material list (same indices; appended ones are new)."""
+        emission_before = self._emission_signature()
+        self.materials = list(materials)
+        self._material_table = None
+        if self._emission_signature() != emission_before:
+            self._lights_dirty = True
+            # an object that became emissive must be static (only static triangles are lights)
+            for key, obj in self.objects.items():
+                if obj.instance and self._has_emission(obj):
+                    obj.instance = False
+                    self._drop_instance(key)
+                    self._static_dirty = True
+
+    def set_lights(self, lights: list) -> None:
+        """Lights as header dicts (validated like a scene file's ``lights``)."""
+        from .scene import _lights
+        self.lights = _lights({"lights": list(lights)})
+        self._lights_dirty = True
+
+    def set_world(self, color) -> None:
+        c = np.asarray(color, dtype=np.float64).reshape(3)
+        if not np.all(np.isfinite(c)) or np.any(c < 0):
+            raise SceneError("world.color", f"must be finite and >= 0, got {c.tolist()}")
+        if not np.array_equal(c, self.world_color):
+            self.world_color = c.copy()
+            self._lights_dirty = True
+
+    def set_settings(self, settings: RenderSettings) -> None:
+        if settings != self.settings:
+            if (settings.filter_type, settings.filter_width) != (self.settings.filter_type,
+                                                                 self.settings.filter_width):
+                self._filter = None
+            self.settings = settings
+
+    # ------------------------------------------------------------------ build
+    def context(self, camera: CameraSpec, width: int, height: int,
+                spp: int | None = None) -> tuple[Scene, RenderContext]:
+        """A scene and render context for ``camera`` at width × height pixels, building what
+        edits made stale. The scene carries only render settings and camera: the geometry is
+        in the context."""
+        if self.origin_shift is None:
+            self.origin_shift = np.asarray(camera.matrix, dtype=np.float64)[:3, 3].copy()
+        settings = replace(self.settings, width=int(width), height=int(height), border=None,
+                           shutter=None, spp=int(spp or self.settings.spp),
+                           adaptive_threshold=0.0)
+        geom, tracer = self._geometry()
+        if self._material_table is None:
+            try:
+                self._material_table = MaterialTable.from_scene(self._materials_or_default())
+            except ValueError as e:
+                raise SceneError("materials", str(e)) from None
+            self.counters.material_builds += 1
+        if self._lights_dirty or self._light_set is None:
+            emissive = _emissive_triangles(None, geom, self._material_table)
+            try:
+                self._light_set = LightSet(self.lights, self.world_color, emissive,
+                                           origin_shift=geom.origin_shift,
+                                           scene_radius=geom.scene_radius, world_nee=False)
+            except ValueError as e:
+                raise SceneError("lights", str(e)) from None
+            self._lights_dirty = False
+            self.counters.light_builds += 1
+        if self._filter is None:
+            self._filter = PixelFilter(settings.filter_type, settings.filter_width)
+        cam = Camera(camera, settings, geom.origin_shift)
+        integ = Integrator(settings, geom, tracer, self._material_table, self._light_set, cam,
+                           Sampler(settings.sampler, settings.seed, settings.spp), self._filter,
+                           direct=settings.direct, indirect=settings.indirect)
+        scene = Scene(settings, camera, self.world_color, self.materials, self.lights, [], [])
+        return scene, RenderContext(scene, integ, tracer)
+
+    @property
+    def triangle_count(self) -> int:
+        return int(sum(len(o.mesh.triangles) for o in self.objects.values()))
+
+    @property
+    def instance_count(self) -> int:
+        return sum(1 for o in self.objects.values() if o.instance)
+
+    # ------------------------------------------------------------------ internals
+    def _materials_or_default(self) -> list:
+        if self.materials:
+            return self.materials
+        return [{"name": "default", "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}],
+                 "emission": [0, 0, 0]}]
+
+    def _emission_signature(self) -> tuple:
+        return tuple(bool(np.any(np.asarray(m.get("emission", (0, 0, 0))) > 0)) for m in self.materials)
+
+    def _has_emission(self, obj: LiveObject) -> bool:
+        emissive = np.array(self._emission_signature() or (False,), dtype=bool)
+        mi = obj.mesh.material_index
+        if len(mi) == 0:
+            return False
+        return bool(np.any(emissive[np.clip(mi, 0, len(emissive) - 1)]))
+
+    def _wants_instance(self, obj: LiveObject, moving: bool) -> bool:
+        n = len(obj.mesh.triangles)
+        if n == 0 or obj.mesh.positions_close is not None or self._has_emission(obj):
+            return False
+        if self.instance_count >= MAX_INSTANCES or not _is_rigid(obj.matrix):
+            return False
+        if n >= INSTANCE_MIN_TRIANGLES:
+            return True
+        if moving:  # dragging it would rebuild a large static set at every step
+            static = sum(len(o.mesh.triangles) for o in self.objects.values() if not o.instance)
+            return static - n >= INSTANCE_MIN_TRIANGLES
+        return False
+
+    def _drop_instance(self, key) -> None:
+        if self._instances.pop(key, None) is not None:
+            self._tables_dirty = True
+
+    def _shifted(self, m: np.ndarray) -> np.ndarray:
+        out = np.array(m, dtype=np.float64)
+        out[:3, 3] -= self.origin_shift
+        return out
+
+    def _moved(self, old: _MovingObject, mm: MovingMesh) -> _MovingObject:
+        """A copy of ``old`` with mm's new transform and culling box, sharing its Embree scene
+        (the old object stays as it was for whoever still holds it)."""
+        mo = _MovingObject.__new__(_MovingObject)
+        mo.__dict__.update(old.__dict__)
+        mo.mesh = mm
+        mo.motion = mm.motion.data
+        mo.box_lo, mo.box_hi = _culling_box(old.local_radius, mm.motion)
+        return mo
+
+    def _geometry(self) -> tuple[SceneGeometry, Tracer]:
+        from embreex import rtcore_scene as rtcs
+        from embreex.mesh_construction import TriangleMesh
+
+        from .trace import _unit_face_normals
+
+        static_changed = False
+        if self._static_dirty or self._static is None:
+            pos, tri, tables = self._flatten_static()
+            scene = ng = None
+            if len(tri):
+                scene = rtcs.EmbreeScene()
+                TriangleMesh(scene, pos, tri)
+                ng = _unit_face_normals(pos, tri)
+            self._static = (pos, tri, tables, scene, ng)
+            self._static_dirty = False
+            static_changed = True
+            self.counters.static_builds += 1
+            self.counters.static_triangles += len(tri)
+            self._lights_dirty = True  # emissive triangles come from the static set
+        pos, tri, static_tables, static_scene, static_ng = self._static
+
+        # instances: build new ones, drop gone ones; ids follow the static set
+        for key, obj in self.objects.items():
+            if obj.instance and key not in self._instances:
+                mm = MovingMesh(obj.name, 0, np.ascontiguousarray(obj.mesh.positions, np.float64), None,
+                                np.ascontiguousarray(obj.mesh.triangles, np.int64),
+                                RigidMotion(self._shifted(obj.matrix), self._shifted(obj.matrix)))
+                mo = _MovingObject(mm)
+                # the local bounding radius, kept so that a move need not visit the vertices
+                mo.local_radius = float(np.sqrt((mm.positions ** 2).sum(axis=1).max()))
+                self._instances[key] = (mo, mm)
+                self.counters.instance_builds += 1
+                self.counters.instance_triangles += len(obj.mesh.triangles)
+                self._tables_dirty = True
+        for key in [k for k in self._instances if k not in self.objects or not self.objects[k].instance]:
+            self._drop_instance(key)
+        keys = [k for k in self.objects if k in self._instances]
+        offset = len(tri)
+        moving_objects, moving_meshes = [], []
+        for key in keys:
+            mo, mm = self._instances[key]
+            if mo.prim_offset != offset:
+                mm.prim_offset = offset
+                mo = self._moved(mo, mm)
+                mo.prim_offset = offset
+                self._instances[key] = (mo, mm)
+            moving_objects.append(mo)
+            moving_meshes.append(mm)
+            offset += len(mm.triangles)
+
+        layout = (len(tri), tuple((k, len(self._instances[k][1].triangles)) for k in keys))
+        if self._tables_dirty or self._tables is None or layout != self._tables_layout:
+            parts = [static_tables] + [self._mesh_tables(self.objects[k].mesh, None) for k in keys]
+            self._tables = tuple(np.concatenate([p[i] for p in parts]) for i in range(4))
+            self._tables_dirty = False
+            self._tables_layout = layout
+        elif static_changed:
+            # same layout: overwrite the static rows only, instead of copying every instance's
+            # tables again (no render runs now: the session thread builds between renders)
+            for table, rows in zip(self._tables, static_tables):
+                table[: len(tri)] = rows
+        material, normals, has_normals, uvs = self._tables
+
+        geom = SceneGeometry(origin_shift=self.origin_shift, static_positions=pos, static_triangles=tri,
+                             moving=moving_meshes, material=material,
+                             normals=normals if has_normals.any() else None,
+                             has_normals=has_normals, uvs=uvs, triangle_count=offset)
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        if len(pos):
+            lo, hi = pos.min(axis=0).astype(np.float64), pos.max(axis=0).astype(np.float64)
+        for mo in moving_objects:
+            lo, hi = np.minimum(lo, mo.box_lo), np.maximum(hi, mo.box_hi)
+        if np.all(np.isfinite(lo)):
+            geom.scene_radius = float(max(np.linalg.norm(hi - 0.5 * (lo + hi)), 1e-3))
+        return geom, _LiveTracer(geom, static_scene, static_ng, moving_objects)
+
+    @staticmethod
+    def _mesh_tables(mesh: MeshData, normals_world) -> tuple:
+        """Per-triangle (material, normals, has_normals, uvs) of one mesh."""
+        t = len(mesh.triangles)
+        nrm = normals_world if normals_world is not None else (
+            mesh.normals if mesh.normals is not None else np.zeros((t, 3, 3), np.float32))
+        uv = mesh.uvs if mesh.uvs is not None else np.zeros((t, 3, 2), np.float32)
+        return (np.asarray(mesh.material_index, dtype=np.int32), np.asarray(nrm, dtype=np.float32),
+                np.full(t, mesh.normals is not None), np.asarray(uv, dtype=np.float32))
+
+    def _flatten_static(self):
+        """World-space (shifted) positions and triangles of the static objects, and their
+        per-triangle tables."""
+        pos_parts, tri_parts, tables = [], [], []
+        v_offset = 0
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for obj in self.objects.values():
+            mesh = obj.mesh
+            if obj.instance or len(mesh.triangles) == 0:
+                continue
+            m = self._shifted(obj.matrix)
+            world = np.empty((len(mesh.positions), 3), dtype=np.float32)
+            _points_to_world(np.ascontiguousarray(mesh.positions, dtype=np.float64),
+                             np.ascontiguousarray(m), world, lo, hi)
+            pos_parts.append(world)
+            tri_parts.append((np.asarray(mesh.triangles) + v_offset).astype(np.int32))
+            v_offset += len(world)
+            nw = _transform_normals(mesh.normals, m) if mesh.normals is not None else None
+            tables.append(self._mesh_tables(mesh, nw))
+        pos = np.concatenate(pos_parts) if pos_parts else np.zeros((0, 3), np.float32)
+        tri = np.concatenate(tri_parts) if tri_parts else np.zeros((0, 3), np.int32)
+        empty = (np.zeros(0, np.int32), np.zeros((0, 3, 3), np.float32), np.zeros(0, bool),
+                 np.zeros((0, 3, 2), np.float32))
+        static_tables = tuple(np.concatenate([t[i] for t in tables]) if tables else empty[i]
+                              for i in range(4))
+        return pos, tri, static_tables
+
+
+def _culling_box(radius: float, motion: RigidMotion) -> tuple[np.ndarray, np.ndarray]:
+    """World box (tracer space) of an object whose local points lie within ``radius`` of its
+    origin, under a static ``motion``: the tracer's swept box (``trace._swept_box``) for
+    open = close, from a cached radius instead of the vertices."""
+    rho = radius * float(np.abs(motion.open.scale).max())
+    t = motion.open.translation
+    lo, hi = t - rho, t + rho
+    pad = 1e-6 * (np.abs(lo) + np.abs(hi) + rho) + 1e-9
+    return (np.ascontiguousarray(lo - pad, dtype=np.float64).copy(),
+            np.ascontiguousarray(hi + pad, dtype=np.float64).copy())
+
+
+# ---------------------------------------------------------------------------- session
+
+
+@dataclass
+class Frame:
+    """The latest image of a session: ``rgba`` (height, width, 4) float32 scene-linear,
+    **bottom row first** (what a GPU texture and Blender want); ``samples`` per pixel;
+    ``divider``: 1 at full resolution, k when rendered at 1/k of it (drawn scaled up);
+    ``generation``: which edit/view state it shows; ``seconds``: from that state's request."""
+
+    rgba: np.ndarray
+    width: int
+    height: int
+    samples: int
+    divider: int
+    generation: int
+    seconds: float
+
+
+def coarse_dividers(width: int, height: int, coarse_pixels: int = COARSE_PIXELS) -> list[int]:
+    """Resolution dividers after an edit, coarsest first, ending with 1: the first is the
+    smallest power of two that brings width·height down to ``coarse_pixels``."""
+    div = 1
+    while (width // div) * (height // div) > coarse_pixels and div < 64:
+        div *= 2
+    out = []
+    while div >= 1:
+        out.append(div)
+        div //= 2
+    return out
+
+
+class ProgressiveSession:
+    """Progressive rendering of a ``LiveScene`` on a background thread, restarted by edits.
+
+    ``edit(fn)`` queues ``fn(live_scene)``; ``set_view(camera, width, height, spp)`` sets what
+    to render (spp: samples per pixel to accumulate; 0 = keep going). Either restarts the
+    accumulation. ``latest()`` is the newest ``Frame`` (or None); ``on_frame()`` is called
+    from the session thread after each new frame (Blender: ``tag_redraw``). ``stop()`` ends the
+    thread (and with it every render thread) and returns within about one batch (< 0.5 s).
+    ``error`` holds the message of the first failed edit (skipped; the rest renders) or failed
+    build/render (the session then waits for the next edit) of the current state.
+    """
+
+    def __init__(self, live: LiveScene | None = None, *, threads: int | None = None,
+                 on_frame: Callable[[], None] | None = None,
+                 coarse_pixels: int = COARSE_PIXELS):
+        self.live = live or LiveScene()
+        self.threads = max(1, int(threads or os.cpu_count() or 1))
+        self.on_frame = on_frame
+        self.coarse_pixels = coarse_pixels
+        self.error: str | None = None
+        self.restarts = 0
+        #: where the time to the first frame of the latest generation went (seconds): "wait"
+        #: (the render in flight draining), "edits" (applying them), "build" (BVHs, tables,
+        #: camera), "render" (the coarse pass); for benchmarks
+        self.timings: dict = {}
+        self._cond = threading.Condition()
+        self._edits: list = []
+        self._view = None  # (CameraSpec, width, height, spp)
+        self._generation = 0
+        self._requested_at = time.perf_counter()
+        self._pending = False
+        self._busy = False
+        self._stopped = False
+        self._frame: Frame | None = None
+        self._timing: dict | None = None
+        self._done = False  # the current generation reached its sample count
+        self._thread = threading.Thread(target=self._run, name="drt-viewport", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------------ caller side
+    def edit(self, fn: Callable[[LiveScene], None]) -> None:
+        with self._cond:
+            self._edits.append(fn)
+            self._restart()
+
+    def set_view(self, camera: CameraSpec, width: int, height: int, spp: int = 0) -> bool:
+        """Set the view; returns True when it differs from the current one (a restart)."""
+        view = (camera, int(width), int(height), int(spp))
+        with self._cond:
+            if self._view is not None and _same_view(self._view, view):
+                return False
+            self._view = view
+            self._restart()
+            return True
+
+    def latest(self) -> Frame | None:
+        return self._frame
+
+    @property
+    def generation(self) -> int:
+        return self._generation
+
+    @property
+    def converged(self) -> bool:
+        """The current view has all its samples (the thread idles until the next edit)."""
+        return self._done
+
+    def wait(self, predicate: Callable[[Frame], bool], timeout: float = 10.0) -> Frame | None:
+        """Block until ``latest()`` satisfies ``predicate`` (or an error / timeout); for
+        tests and benchmarks."""
+        end = time.perf_counter() + timeout
+        while time.perf_counter() < end:
+            f = self._frame
+            if f is not None and f.generation == self._generation and predicate(f):
+                return f
+            if self.error is not None and not self._pending and not self._busy \
+                    and (f is None or f.generation != self._generation):
+                return None
+            time.sleep(0.002)
+        return None
+
+    def stop(self, timeout: float = 5.0) -> bool:
+        """Stop rendering and end the session thread; True when it ended within ``timeout``."""
+        with self._cond:
+            self._stopped = True
+            self._generation += 1  # cancels the render in flight
+            self._cond.notify_all()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout)
+        return not self._thread.is_alive()
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def _restart(self) -> None:
+        """(lock held) Cancel the render in flight and schedule a new one."""
+        self._generation += 1
+        self._requested_at = time.perf_counter()
+        self._pending = True
+        self._done = False
+        self.restarts += 1
+        self._cond.notify_all()
+
+    # ------------------------------------------------------------------ session thread
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not (self._pending and self._view is not None) and not self._stopped:
+                    self._cond.wait()
+                if self._stopped:
+                    return
+                edits, self._edits = self._edits, []
+                view, gen, t0 = self._view, self._generation, self._requested_at
+                self._pending = False
+                self._busy = True
+            try:
+                t1 = time.perf_counter()
+                self.error = None
+                for fn in edits:
+                    try:
+                        fn(self.live)
+                    except Exception as exc:  # noqa: BLE001 -- a bad edit is reported and skipped
+                        self._fail(exc)
+                self._timing = {"wait": t1 - t0, "edits": time.perf_counter() - t1}
+                self._render(view, gen, t0)
+            except Exception as exc:  # noqa: BLE001 -- reported to the caller, never fatal
+                self._fail(exc)
+            finally:
+                with self._cond:
+                    self._busy = False
+                    self._cond.notify_all()
+
+    def _fail(self, exc: Exception) -> None:
+        if not isinstance(exc, SceneError):
+            traceback.print_exc()
+        msg = str(exc) if isinstance(exc, SceneError) else f"{exc.__class__.__name__}: {exc}"
+        self.error = self.error or msg  # the first problem of this state
+
+    def _render(self, view, gen: int, t0: float) -> None:
+        camera, width, height, spp = view
+
+        def cancelled() -> bool:
+            return self._generation != gen
+
+        for div in coarse_dividers(width, height, self.coarse_pixels)[:-1]:
+            if cancelled():
+                return
+            w, h = max(1, width // div), max(1, height // div)
+            t1 = time.perf_counter()
+            scene, ctx = self.live.context(camera, w, h, spp=1)
+            t2 = time.perf_counter()
+            film = render(scene, spp=1, context=ctx, cancel=cancelled, threads=self.threads,
+                          max_batch_paths=VIEWPORT_BATCH_PATHS)
+            if film.stats.samples_done and not cancelled():
+                if self._timing is not None:
+                    self._timing.update(build=t2 - t1, render=time.perf_counter() - t2)
+                    self.timings, self._timing = self._timing, None
+                self._publish(film, 1, div, gen, t0)
+        if cancelled():
+            return
+        total = spp if spp > 0 else 1 << 20
+        t1 = time.perf_counter()
+        scene, ctx = self.live.context(camera, width, height, spp=total)
+        t_build = time.perf_counter() - t1
+        # Full resolution in chunks of samples sized to take about CHUNK_SECONDS each, so the
+        # image refreshes at a steady rate (the render loop's own passes double up to 64 spp,
+        # minutes apart on a large view). Sample numbers continue from chunk to chunk, so the
+        # sum equals one render of `total` samples.
+        film, done, chunk = None, 0, 1
+        while done < total and not cancelled():
+            k = min(chunk, total - done)
+            t_chunk = time.perf_counter()
+            part = render(scene, spp=total, sample_offset=done, sample_count=k, context=ctx,
+                          cancel=cancelled, threads=self.threads,
+                          max_batch_paths=VIEWPORT_BATCH_PATHS)
+            if cancelled() or part.stats.cancelled:
+                return
+            if film is None:
+                film = part
+            else:
+                film.merge(part)
+            done += k
+            if self._timing is not None:  # no coarse pass (a small view)
+                self._timing.update(build=t_build, render=time.perf_counter() - t_chunk)
+                self.timings, self._timing = self._timing, None
+            self._publish(film, done, 1, gen, t0)
+            rate = k / max(time.perf_counter() - t_chunk, 1e-3)  # samples per second
+            chunk = int(min(max(1, rate * CHUNK_SECONDS), 2 * k, 64))
+        if not cancelled():
+            self._done = True
+
+    def _publish(self, film, samples: int, divider: int, gen: int, t0: float) -> None:
+        rgba = np.ascontiguousarray(np.nan_to_num(film.combined[::-1], nan=0.0, posinf=0.0),
+                                    dtype=np.float32)
+        self._frame = Frame(rgba, film.width, film.height, int(samples), divider, gen,
+                            time.perf_counter() - t0)
+        if self.on_frame is not None:
+            try:
+                self.on_frame()
+            except Exception:  # noqa: BLE001 -- e.g. the Blender engine is gone: just stop drawing
+                self.on_frame = None
+
+
+def _same_view(a, b) -> bool:
+    ca, cb = a[0], b[0]
+    if a[1:] != b[1:]:
+        return False
+    for f in ca.__dataclass_fields__:
+        x, y = getattr(ca, f), getattr(cb, f)
+        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+            if x is None or y is None or not np.array_equal(np.asarray(x), np.asarray(y)):
+                return False
+        elif x != y:
+            return False
+    return True
+
+
+# ---------------------------------------------------------------------------- view → camera
+
+
+def camera_from_projection(view_to_world, projection, *, lens: float, clip_start: float,
+                           clip_end: float, dof: dict | None = None) -> CameraSpec:
+    """A ``CameraSpec`` that renders exactly what an OpenGL-style projection shows.
+
+    view_to_world: (4, 4) camera → world (the inverse of a viewport's view matrix; looks along
+    −Z, +Y up). projection: (4, 4) the viewport's window matrix (perspective or orthographic,
+    possibly off-centre: camera-view zoom and offset, lens shift). The image-plane extent and
+    centre are read from it: perspective, at distance 1: width 2/P[0,0], centre P[0,2]/P[0,0];
+    orthographic, in scene units: width 2/P[0,0], centre −P[0,3]/P[0,0] (y alike). The result
+    uses a horizontal sensor fit with ``sensor_width = lens · width`` (so the aperture radius,
+    lens/(2·fstop), uses the real ``lens`` in mm) and shift in units of the width. Clip
+    distances are taken as given (the float32 matrix loses the far plane's precision).
+    dof: {"use", "focus_distance", "fstop", "blades", "rotation", "ratio"} or None (pinhole).
+    """
+    p = np.asarray(projection, dtype=np.float64).reshape(4, 4)
+    m = np.asarray(view_to_world, dtype=np.float64).reshape(4, 4)
+    ortho = abs(p[3, 3] - 1.0) < 1e-6 and abs(p[3, 2]) < 1e-6
+    if not (p[0, 0] > 0 and p[1, 1] > 0):
+        raise SceneError("view", "the projection matrix is degenerate")
+    plane_w = 2.0 / p[0, 0]
+    if ortho:
+        cx, cy = -p[0, 3] / p[0, 0], -p[1, 3] / p[1, 1]
+    else:
+        cx, cy = p[0, 2] / p[0, 0], p[1, 2] / p[1, 1]
+    lens = float(lens) if lens > 0 else 50.0
+    d = dof or {}
+    return CameraSpec(
+        type="ORTHO" if ortho else "PERSP", matrix=m,
+        lens=lens, sensor_width=plane_w * lens, sensor_height=plane_w * lens,
+        sensor_fit="HORIZONTAL", shift_x=cx / plane_w, shift_y=cy / plane_w,
+        clip_start=float(clip_start), clip_end=float(max(clip_end, clip_start + 1e-6)),
+        ortho_scale=plane_w,
+        dof_use=bool(d.get("use", False)), focus_distance=float(d.get("focus_distance", 10.0)),
+        fstop=float(d.get("fstop", 2.8)), blades=int(d.get("blades", 0)),
+        rotation=float(d.get("rotation", 0.0)), ratio=float(d.get("ratio", 1.0)))
+
+
+def projection_plane(spec: CameraSpec, width: int, height: int) -> tuple[float, float, float, float]:
+    """(plane width, plane height, centre x, centre y) of ``spec`` at width × height pixels:
+    at distance 1 (perspective) or in scene units (orthographic), as ``Camera`` computes them.
+    The inverse of ``camera_from_projection``, for tests."""
+    cam = Camera(spec, RenderSettings(width=int(width), height=int(height)), np.zeros(3))
+    return float(cam.plane_w), float(cam.plane_h), float(cam.shift[0]), float(cam.shift[1])
+
+
+__all__ = ["LiveScene", "LiveObject", "BuildCounters", "ProgressiveSession", "Frame",
+           "coarse_dividers", "camera_from_projection", "projection_plane",
+           "INSTANCE_MIN_TRIANGLES", "MAX_INSTANCES", "COARSE_PIXELS"]
