@@ -243,6 +243,14 @@ def set_engine_flags(cls) -> None:
     cls.bl_use_preview = False
 
 
+def preview_pixel_size(engine, scene) -> int:
+    """Blender's viewport pixel size (Render > Performance > Viewport > Pixel Size; AUTO follows
+    the UI scale / retina factor). ``RenderEngine.get_preview_pixel_size`` exists in 3.4 and
+    5.0; 1 when a build lacks it."""
+    fn = getattr(engine, "get_preview_pixel_size", None)
+    return max(1, int(fn(scene))) if fn is not None else 1
+
+
 def set_pass_pixels(render_pass, img: np.ndarray) -> None:
     """Write an (h, w, c) float32 bottom-row-first image into a RenderPass.
 

@@ -324,6 +324,8 @@ def status_text(frame, target: int, error: str | None) -> str:
     if error:
         return f"DRT | Error: {error}"
     if frame is None:
+        if not compat.core_module("kernels").kernels_compiled():
+            return "DRT | Compiling render kernels (first render only, about half a minute)"
         return "DRT | Preparing"
     if frame.divider > 1:
         return f"DRT | Preview 1/{frame.divider}"
@@ -362,8 +364,8 @@ def engine_view_draw(engine, context, depsgraph) -> None:
     scene = depsgraph.scene
     region = context.region
     try:
-        pixel = engine.get_preview_pixel_size(scene) if hasattr(engine, "get_preview_pixel_size") else 1
-        width, height = render_size(region.width, region.height, pixel)
+        width, height = render_size(region.width, region.height,
+                                    compat.preview_pixel_size(engine, scene))
         camera = view_camera(depsgraph, context.space_data, context.region_data, width, height)
         vp.set_view(camera, width, height, int(scene.drt.preview_samples))
     except Exception as exc:  # noqa: BLE001 -- e.g. a panoramic camera: say so, draw nothing new

@@ -38,6 +38,9 @@ from .trace import Tracer
 
 BATCH_PATHS = 1 << 16
 MIN_BATCH_PATHS = 1 << 12
+#: how often cancel() is polled while a batch runs: a viewport edit waits at most this long
+#: (plus the batches in flight) before its new image starts; 100 wake-ups/s cost nothing
+CANCEL_POLL_SECONDS = 0.01
 
 
 #: bytes per pixel a render holds at its peak: the film's float64 accumulators (RGBA, luminance²,
@@ -299,10 +302,11 @@ def render(
     workers = _ThreadWorkers(ctx, threads)
 
     def collect(future):
-        """Wait for a batch, polling cancel meanwhile (so Esc/Ctrl-C is seen within ~0.05 s)."""
+        """Wait for a batch, polling cancel meanwhile (so Esc/Ctrl-C, or a viewport edit, is
+        seen within CANCEL_POLL_SECONDS)."""
         while True:
             try:
-                batch = future.result(timeout=0.05)
+                batch = future.result(timeout=CANCEL_POLL_SECONDS)
                 break
             except FutureTimeout:
                 if cancel is not None and cancel():
