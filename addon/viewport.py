@@ -374,9 +374,15 @@ def engine_view_draw(engine, context, depsgraph) -> None:
     engine.update_stats("", status_text(frame, int(scene.drt.preview_samples), vp.session.error))
     if frame is None:
         return
-    if not hasattr(engine, "_drt_texture"):
+    if getattr(engine, "_drt_texture", None) is None:
         engine._drt_texture = FrameTexture()
-    draw_frame(engine, scene, engine._drt_texture, frame, region.width, region.height)
+    try:
+        draw_frame(engine, scene, engine._drt_texture, frame, region.width, region.height)
+    except Exception as exc:  # noqa: BLE001 -- a drawing failure is shown once, not every redraw
+        if vp.session.error is None:
+            import traceback
+            traceback.print_exc()
+            vp.session.error = f"drawing failed: {exc}"
 
 
 def engine_free(engine) -> None:

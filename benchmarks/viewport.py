@@ -219,12 +219,16 @@ def bench_memory(n: int) -> None:
     gc.collect()
     rss0, threads0, objs0 = rss_mb(), threading.active_count(), len(gc.get_objects())
     t0 = time.perf_counter()
+    series = []
     for i in range(warm, n):
         d.edit(lambda i=i: one(i), settle=0.0)
+        if (i + 1) % 100 == 0:
+            series.append(f"{rss_mb():.1f}")
     gc.collect()
     rss1, threads1, objs1 = rss_mb(), threading.active_count(), len(gc.get_objects())
     print(f"memory over {n - warm} edits (after {warm} warm-up; {time.perf_counter() - t0:.0f} s): "
-          f"RSS {rss0:.1f} → {rss1:.1f} MB, threads {threads0} → {threads1}, "
+          f"RSS {rss0:.1f} → {rss1:.1f} MB (every 100 edits: {' '.join(series)}), "
+          f"threads {threads0} → {threads1} (render threads come and go), "
           f"Python objects {objs0} → {objs1}")
     d.close()
 
