@@ -190,6 +190,8 @@ class LiveScene:
                 self._drop_instance(key)
                 self._static_dirty = True
                 return
+            # the light set keeps its scene radius (it only weighs the sun's selection
+            # probability against other lights): no rebuild for a move
             mo, mm = self._instances[key]
             mm.motion = RigidMotion(self._shifted(m), self._shifted(m))
             self._instances[key] = (self._moved(mo, mm), mm)
