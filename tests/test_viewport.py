@@ -135,6 +135,20 @@ def test_material_edit_rebuilds_no_geometry():
     assert b[..., 1].mean() < 0.5 * a[..., 1].mean()  # green dropped from 0.8 to 0.1
 
 
+def test_sheared_object_stays_static():
+    big = grid_mesh(int(np.ceil(np.sqrt(INSTANCE_MIN_TRIANGLES / 2))), 1.0)
+    shear = np.eye(4)
+    shear[0, 1] = 0.5  # x += 0.5·y: not translation · rotation · scale
+    live = live_scene()
+    live.set_object("big", "big", big, shear)
+    assert not live.objects["big"].instance
+    live.set_object("big2", "big2", big, translate(1, 0, 0))
+    assert live.objects["big2"].instance
+    live.set_matrix("big2", shear @ translate(1, 0, 0))
+    render_live(live, top_camera())
+    assert not live.objects["big2"].instance and live.instance_count == 0
+
+
 def test_emissive_object_stays_static():
     big = grid_mesh(int(np.ceil(np.sqrt(INSTANCE_MIN_TRIANGLES / 2))), 1.0)
     big.material_index[:] = 1
@@ -473,3 +487,18 @@ def test_blender_view_camera_reads_the_3d_view():
     spec = viewport.view_camera(dg, space, rv3d, 1057, 667)
     assert (spec.type, spec.clip_start, spec.clip_end) == ("ORTHO", -500.0, 500.0)
     assert spec.ortho_scale == pytest.approx(8.64, rel=1e-6) and not spec.dof_use
+    # camera view: the camera's lens, clipping and depth of field, not the view's
+    import addon
+    if not hasattr(bpy.types.Scene, "drt"):
+        addon.register()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(REPO, "blend_scenes", "dof.blend"))
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = bpy.context.scene.camera
+    assert cam.data.dof.use_dof
+    rv3d.view_perspective, rv3d.is_perspective = "CAMERA", True
+    rv3d.view_matrix = cam.matrix_world.inverted()
+    rv3d.window_matrix = cam.calc_matrix_camera(depsgraph, x=160, y=90)
+    spec = viewport.view_camera(depsgraph, space, rv3d, 160, 90)
+    assert spec.dof_use and spec.lens == pytest.approx(cam.data.lens)
+    assert spec.fstop == pytest.approx(cam.data.dof.aperture_fstop)
+    assert (spec.clip_start, spec.clip_end) == pytest.approx((cam.data.clip_start, cam.data.clip_end))

@@ -179,25 +179,23 @@ class LiveScene:
         if np.array_equal(m, obj.matrix):
             return
         obj.matrix = m
-        if not obj.instance and self._wants_instance(obj, moving=True):
-            obj.instance = True
-            self._static_dirty = True
-            self._tables_dirty = True
-            return
-        if obj.instance and key in self._instances:
+        if obj.instance:
             if not _is_rigid(m):  # a sheared transform: the tracer's rigid path cannot hold it
                 obj.instance = False
                 self._drop_instance(key)
                 self._static_dirty = True
-                return
-            # the light set keeps its scene radius (it only weighs the sun's selection
-            # probability against other lights): no rebuild for a move
-            mo, mm = self._instances[key]
-            mm.motion = RigidMotion(self._shifted(m), self._shifted(m))
-            self._instances[key] = (self._moved(mo, mm), mm)
-            self.counters.matrix_updates += 1
-        elif not obj.instance:
-            self._static_dirty = True
+            elif key in self._instances:  # (not built yet: it is built with this matrix)
+                # the light set keeps its scene radius (it only weighs the sun's selection
+                # probability against other lights): no rebuild for a move
+                mo, mm = self._instances[key]
+                mm.motion = RigidMotion(self._shifted(m), self._shifted(m))
+                self._instances[key] = (self._moved(mo, mm), mm)
+                self.counters.matrix_updates += 1
+            return
+        if self._wants_instance(obj, moving=True):
+            obj.instance = True
+            self._tables_dirty = True
+        self._static_dirty = True
 
     def remove_object(self, key) -> None:
         obj = self.objects.pop(key, None)
