@@ -335,6 +335,78 @@ def status_text(frame, target: int, error: str | None) -> str:
 
 
 
+# ---------------------------------------------------------------------------- kernel warm-up
+
+# Compiling the kernels (first use of an install) inside Blender's UI process while the viewport
+# runs crashed Debian's Blender 3.4.1 (segfaults in the compiling thread, twice in two tries;
+# F12, which blocks the UI meanwhile, compiled fine). So in an interactive Blender the first
+# viewport compiles them in a background Blender process (``blender -b``) into the shared kernel
+# cache and renders once that has finished; if that process fails, the session compiles them
+# itself as before.
+WARMUP_SCRIPT = """
+import sys
+sys.path[:0] = {paths!r}
+import importlib
+import numpy as np
+compat = importlib.import_module({package!r} + ".compat")
+interactive = compat.core_module("interactive")
+scene_mod = compat.core_module("scene")
+render = compat.core_module("render")
+n = 128  # a grid of 2·128² triangles: large enough to get its own BVH (the instance path)
+u = np.linspace(-1.0, 1.0, n + 1)
+x, y = np.meshgrid(u, u)
+pos = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+i = (np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]).ravel()
+tri = np.concatenate([np.stack([i, i + 1, i + n + 2], 1), np.stack([i, i + n + 2, i + n + 1], 1)])
+normals = np.tile(np.array([0.0, 0.0, 1.0], np.float32), (len(tri), 3, 1))
+mesh = scene_mod.MeshData("grid", pos, tri.astype(np.int64), np.zeros(len(tri), np.int64), normals)
+small = scene_mod.MeshData("tri", pos[:3], np.array([[0, 1, 2]]), np.zeros(1, np.int64), normals[:1])
+small.material_index[:] = 1  # emissive: the mesh-light path
+mats = [{{"name": "m", "lobes": [{{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}},
+                              {{"type": "GLOSSY", "color": [0.2, 0.2, 0.2], "roughness": 0.3}}],
+         "emission": [0, 0, 0]}},
+        {{"name": "e", "lobes": [{{"type": "GLASS", "color": [1, 1, 1], "roughness": 0.0, "ior": 1.45}}],
+         "emission": [2, 2, 2]}}]
+eye = np.eye(4).tolist()
+lights = [{{"name": t, "type": t, "matrix_world": eye}} for t in ("SUN", "POINT", "SPOT", "AREA")]
+live = interactive.LiveScene(scene_mod.RenderSettings(width=8, height=8), mats, lights, (0.1, 0.1, 0.1))
+live.set_object("grid", "grid", mesh, np.eye(4))
+live.set_object("tri", "tri", small, np.eye(4))
+m = np.eye(4)
+m[:3, 3] = (0.0, 0.0, 5.0)
+scene, ctx = live.context(scene_mod.CameraSpec(type="PERSP", matrix=m), 8, 8, spp=1)
+render.render(scene, spp=1, context=ctx, threads=1)
+"""
+
+_warmup = None  # the warm-up process (one per Blender session)
+
+
+def start_kernel_warmup():
+    """In an interactive Blender whose kernels are not compiled yet, start compiling them in a
+    background Blender; returns a gate for ``ProgressiveSession.gate`` (None: nothing to wait
+    for). Main thread only; the gate itself only polls the process (safe from any thread)."""
+    import subprocess
+    import sys
+
+    import bpy
+
+    global _warmup
+    kernels = compat.core_module("kernels")
+    if bpy.app.background or kernels.kernels_compiled():
+        return None
+    if _warmup is None:
+        package = __name__.rsplit(".", 1)[0]
+        code = WARMUP_SCRIPT.format(paths=list(sys.path), package=package)
+        try:
+            _warmup = subprocess.Popen([bpy.app.binary_path, "-b", "--python-expr", code],
+                                       stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                       stderr=subprocess.DEVNULL)
+        except OSError:
+            return None
+    proc = _warmup
+    return lambda: proc.poll() is not None
+
+
 # ---------------------------------------------------------------------------- engine hooks
 # RenderEngine.view_update / view_draw / __del__ delegate here (engine.py stays thin).
 
@@ -346,6 +418,7 @@ def engine_view_update(engine, context, depsgraph) -> None:
         if vp is None:
             from .engine import render_threads
             vp = ViewportSync(threads=render_threads(depsgraph.scene), on_frame=engine.tag_redraw)
+            vp.session.gate = start_kernel_warmup()
             engine._drt_viewport = vp
         vp.sync(depsgraph)
     except Exception as exc:  # noqa: BLE001 -- never a traceback dialog in the viewport

@@ -217,6 +217,20 @@ def test_edit_restarts_accumulation():
         assert s.stop()
 
 
+def test_gate_holds_rendering_until_open():
+    live = live_scene()
+    s = ProgressiveSession(live, threads=1, coarse_pixels=256)
+    is_open = threading.Event()
+    s.gate = is_open.is_set
+    try:
+        s.set_view(top_camera(), 16, 16, spp=1)
+        assert s.wait(lambda f: True, 0.5) is None  # held: no frame
+        is_open.set()
+        assert s.wait(lambda f: True, 30) is not None
+    finally:
+        assert s.stop()
+
+
 def test_stop_ends_every_thread():
     before = {t.ident for t in threading.enumerate()}
     live = live_scene()

@@ -521,6 +521,9 @@ class ProgressiveSession:
         #: (the render in flight draining), "edits" (applying them), "build" (BVHs, tables,
         #: camera), "render" (the coarse pass); for benchmarks
         self.timings: dict = {}
+        #: gate() -> bool: while it returns False the session waits before rendering (polled
+        #: every 0.1 s, from the session thread; the add-on waits for a kernel compilation)
+        self.gate: Callable[[], bool] | None = None
         self._cond = threading.Condition()
         self._edits: list = []
         self._view = None  # (CameraSpec, width, height, spp)
@@ -606,6 +609,14 @@ class ProgressiveSession:
             with self._cond:
                 while not (self._pending and self._view is not None) and not self._stopped:
                     self._cond.wait()
+                if self._stopped:
+                    return
+            gate = self.gate
+            if gate is not None and not gate():
+                with self._cond:  # not yet (e.g. kernels compiling elsewhere): stoppable wait
+                    self._cond.wait(0.1)
+                continue
+            with self._cond:
                 if self._stopped:
                     return
                 edits, self._edits = self._edits, []
