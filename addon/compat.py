@@ -43,31 +43,6 @@ def _load_embree_isolated() -> None:
         sys.setdlopenflags(old)
 
 
-def _load_llvmlite_isolated() -> None:
-    """Load llvmlite's LLVM (numba's compiler) so that it binds to its own symbols.
-
-    Mesa's OpenGL drivers (llvmpipe, radeonsi) load the system's libLLVM into Blender; without
-    RTLD_DEEPBIND, libllvmlite's LLVM calls resolve partly to that other LLVM version and
-    compiling the kernels segfaults (seen: Debian's Blender 3.4.1 with software OpenGL, the
-    first viewport or F12 render of a fresh install). llvmlite opens the library with ctypes;
-    a library already loaded keeps the flags of its first load. Linux only.
-    """
-    deepbind = getattr(os, "RTLD_DEEPBIND", 0)
-    if "llvmlite.binding" in sys.modules or not deepbind or not sys.platform.startswith("linux"):
-        return
-    import ctypes
-    import importlib.util
-    spec = importlib.util.find_spec("llvmlite")
-    if spec is None or spec.origin is None:
-        return
-    path = os.path.join(os.path.dirname(spec.origin), "binding", "libllvmlite.so")
-    if os.path.exists(path):
-        try:
-            ctypes.CDLL(path, mode=os.RTLD_NOW | deepbind)
-        except OSError:
-            pass  # llvmlite's own import reports it
-
-
 def core_module(name: str = ""):
     """Import the core (``drt``) or one of its modules (``core_module("render")``).
 
@@ -75,7 +50,6 @@ def core_module(name: str = ""):
     ``<addon>.drt``; in a development checkout the pip-installed ``drt`` is used.
     """
     _load_embree_isolated()
-    _load_llvmlite_isolated()
     try:
         from . import drt as drt_core  # bundled sub-package
     except ImportError:

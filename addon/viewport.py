@@ -381,6 +381,19 @@ render.render(scene, spp=1, context=ctx, threads=1)
 _warmup = None  # the warm-up process (one per Blender session)
 
 
+def kernels_cached() -> bool:
+    """Are the main render kernels of *this copy* of the core in numba's cache? numba keys its
+    cache by source path, so a second copy of the same version (a development checkout and an
+    installed add-on) compiles again although ``kernels_compiled()`` (per version) says done."""
+    import os
+    try:
+        stages = compat.core_module("path_stages")
+        return all(os.path.exists(k._cache._cache_file._index_path)  # numba internals
+                   for k in (stages.shade, stages.camera_stage))
+    except Exception:  # noqa: BLE001 -- another numba: fall back to the version marker
+        return compat.core_module("kernels").kernels_compiled()
+
+
 def start_kernel_warmup():
     """In an interactive Blender whose kernels are not compiled yet, start compiling them in a
     background Blender; returns a gate for ``ProgressiveSession.gate`` (None: nothing to wait
@@ -391,8 +404,7 @@ def start_kernel_warmup():
     import bpy
 
     global _warmup
-    kernels = compat.core_module("kernels")
-    if bpy.app.background or kernels.kernels_compiled():
+    if bpy.app.background or kernels_cached():
         return None
     if _warmup is None:
         package = __name__.rsplit(".", 1)[0]

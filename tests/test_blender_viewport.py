@@ -101,8 +101,7 @@ def wait_threads():
 
 def kernels_ready():
     import importlib
-    compat = importlib.import_module(ADDON + ".compat")
-    return compat.core_module("kernels").kernels_compiled()
+    return importlib.import_module(ADDON + ".viewport").kernels_cached()
 
 plan = [(1.0, setup), (10.0, first), (0.5, move), (8.0, second), (0.5, solid)]
 started = time.perf_counter()
