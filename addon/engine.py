@@ -47,8 +47,6 @@ class DRTRenderEngine(bpy.types.RenderEngine):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self._drt_viewport = None  # the Rendered viewport's session (addon/viewport.py)
-        self._drt_texture = None  # its latest frame on the GPU
 
     def __del__(self):
         viewport.engine_free(self)

@@ -62,6 +62,7 @@ class ViewportSync:
         self._settings = None
         self._view = None
         self.synced = False
+        self.texture = None  # FrameTexture: the latest frame on the GPU (main thread only)
 
     # ------------------------------------------------------------------ depsgraph
     def sync(self, depsgraph) -> None:
@@ -422,16 +423,20 @@ def start_kernel_warmup():
 # ---------------------------------------------------------------------------- engine hooks
 # RenderEngine.view_update / view_draw / __del__ delegate here (engine.py stays thin).
 
+# Viewport sessions by id() of their engine: __del__ may run after Blender removed the engine's
+# RNA struct, when even reading an attribute of it raises ReferenceError; id() still works.
+_sessions: dict = {}
+
 
 def engine_view_update(engine, context, depsgraph) -> None:
     """Start the session on the first call; then send what the depsgraph says changed."""
-    vp = getattr(engine, "_drt_viewport", None)
+    vp = _sessions.get(id(engine))
     try:
         if vp is None:
             from .engine import render_threads
             vp = ViewportSync(threads=render_threads(depsgraph.scene), on_frame=engine.tag_redraw)
             vp.session.gate = start_kernel_warmup()
-            engine._drt_viewport = vp
+            _sessions[id(engine)] = vp
         vp.sync(depsgraph)
     except Exception as exc:  # noqa: BLE001 -- never a traceback dialog in the viewport
         import traceback
@@ -443,7 +448,7 @@ def engine_view_update(engine, context, depsgraph) -> None:
 
 def engine_view_draw(engine, context, depsgraph) -> None:
     """Follow the view (a new view restarts the session) and draw the latest frame."""
-    vp = getattr(engine, "_drt_viewport", None)
+    vp = _sessions.get(id(engine))
     if vp is None:
         return
     scene = depsgraph.scene
@@ -459,10 +464,10 @@ def engine_view_draw(engine, context, depsgraph) -> None:
     engine.update_stats("", status_text(frame, int(scene.drt.preview_samples), vp.session.error))
     if frame is None:
         return
-    if getattr(engine, "_drt_texture", None) is None:
-        engine._drt_texture = FrameTexture()
+    if vp.texture is None:
+        vp.texture = FrameTexture()
     try:
-        draw_frame(engine, scene, engine._drt_texture, frame, region.width, region.height)
+        draw_frame(engine, scene, vp.texture, frame, region.width, region.height)
     except Exception as exc:  # noqa: BLE001 -- a drawing failure is shown once, not every redraw
         if vp.session.error is None:
             import traceback
@@ -472,7 +477,6 @@ def engine_view_draw(engine, context, depsgraph) -> None:
 
 def engine_free(engine) -> None:
     """Stop the viewport session (the engine is being freed: Solid mode, closed view)."""
-    vp = getattr(engine, "_drt_viewport", None)
+    vp = _sessions.pop(id(engine), None)
     if vp is not None:
-        engine._drt_viewport = None
         vp.stop(timeout=5.0)

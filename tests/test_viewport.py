@@ -439,9 +439,10 @@ def test_blender_accumulation_restarts_after_an_edit(blender_viewport):
 def test_blender_engine_free_stops_the_threads(blender_viewport):
     from addon import viewport
     vp = blender_viewport
-    engine = types.SimpleNamespace(_drt_viewport=vp)
+    engine = types.SimpleNamespace()
+    viewport._sessions[id(engine)] = vp
     viewport.engine_free(engine)
-    assert engine._drt_viewport is None and not vp.session.alive
+    assert id(engine) not in viewport._sessions and not vp.session.alive
     assert not [t for t in threading.enumerate() if t.name == "drt-viewport"]
 
 
