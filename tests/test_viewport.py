@@ -252,6 +252,8 @@ def test_session_reports_a_bad_edit_and_renders_the_rest():
         assert s.wait(lambda f: True, 30) is not None
         assert "NaN" in s.error and "bad" not in live.objects
         np.testing.assert_array_equal(live.world_color, [0.2, 0.2, 0.2])
+        s.edit(lambda lv: lv.set_matrix("floor", np.diag([1e300, 1.0, 1.0, 1.0])))
+        assert s.wait(lambda f: True, 30) is not None and "±1e+15" in s.error
         s.edit(lambda lv: lv.set_world((0.3, 0.3, 0.3)))
         assert s.wait(lambda f: True, 30) is not None and s.error is None
     finally:

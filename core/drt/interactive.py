@@ -52,7 +52,7 @@ from .motion import RigidMotion
 from .render import RenderContext, _emissive_triangles, render
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
-from .scene import CameraSpec, MeshData, RenderSettings, Scene, SceneError
+from .scene import MAX_TRANSFORM_ENTRY, CameraSpec, MeshData, RenderSettings, Scene, SceneError
 # The tracer's per-object pieces: a moving object's Embree scene + transform, and its culling
 # box. LiveScene keeps them across edits (a moved object is one new transform), so it builds
 # the Tracer from parts instead of from a SceneGeometry.
@@ -95,9 +95,12 @@ class BuildCounters:
 
 
 def _matrix(m) -> np.ndarray:
+    """A 4×4 transform validated like a scene file's (finite, entries within ±1e15)."""
     a = np.array(m, dtype=np.float64).reshape(4, 4)
     if not np.all(np.isfinite(a)):
         raise SceneError("matrix", "contains NaN or infinite values")
+    if np.any(np.abs(a) > MAX_TRANSFORM_ENTRY):
+        raise SceneError("matrix", f"entries must be within ±{MAX_TRANSFORM_ENTRY:g}")
     return a
 
 
