@@ -40,6 +40,14 @@ DENOISING_INPUT_ITEMS = (
 )
 
 
+def _tag_scene(self, context):
+    """A Python property's change does not reach the depsgraph by itself: tag the scene so the
+    Rendered viewport (``view_update``) sees it, as it sees Cycles's settings."""
+    scene = getattr(self, "id_data", None)
+    if scene is not None:
+        scene.update_tag()
+
+
 def _update_render_passes(self, context):
     """The Noisy Image pass follows the switch (as Cycles's does)."""
     vl = getattr(context, "view_layer", None)
@@ -111,6 +119,24 @@ class DRTSceneSettings(bpy.types.PropertyGroup):
     denoising_input_passes: EnumProperty(
         name="Passes", description="Passes used by the denoiser to distinguish noise from shader "
         "and geometry detail", items=DENOISING_INPUT_ITEMS, default="RGB_ALBEDO_NORMAL")
+
+    # viewport denoising: Cycles's Sampling > Viewport > Denoise (same ids and defaults except
+    # the switch, off as for final renders)
+    use_preview_denoising: BoolProperty(
+        name="Viewport Denoise", description="Denoise the Rendered viewport with Open Image Denoise",
+        default=False, update=_tag_scene)
+    preview_denoising_start_sample: IntProperty(
+        name="Start Sample", description="Sample to start denoising the viewport at",
+        default=1, min=0, soft_max=1 << 12, update=_tag_scene)
+    preview_denoising_prefilter: EnumProperty(
+        name="Prefilter", description="Prefilter noisy guiding (albedo and normal) passes to "
+        "improve denoising quality", items=DENOISING_PREFILTER_ITEMS, default="FAST", update=_tag_scene)
+    preview_denoising_quality: EnumProperty(
+        name="Quality", description="Overall denoising quality",
+        items=DENOISING_QUALITY_ITEMS, default="BALANCED", update=_tag_scene)
+    preview_denoising_input_passes: EnumProperty(
+        name="Passes", description="Passes used by the denoiser to distinguish noise from shader "
+        "and geometry detail", items=DENOISING_INPUT_ITEMS, default="RGB_ALBEDO", update=_tag_scene)
 
     # render on a Dask cluster (docs/farm.md); empty address: this machine
     cluster_address: StringProperty(

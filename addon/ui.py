@@ -95,6 +95,30 @@ class DRT_RENDER_PT_sampling_denoise(DRTRenderPanel, bpy.types.Panel):
         col.prop(d, "denoising_quality")
 
 
+class DRT_RENDER_PT_sampling_viewport_denoise(DRTRenderPanel, bpy.types.Panel):
+    """Cycles's Sampling > Viewport > Denoise, for DRT's Rendered viewport."""
+    bl_label = "Viewport Denoise"
+    bl_parent_id = "DRT_RENDER_PT_sampling"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.drt, "use_preview_denoising", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        d = context.scene.drt
+        col = layout.column()
+        col.active = d.use_preview_denoising
+        col.prop(d, "preview_denoising_input_passes")
+        sub = col.column()
+        sub.active = d.use_preview_denoising and d.preview_denoising_input_passes != "RGB"
+        sub.prop(d, "preview_denoising_prefilter")
+        col.prop(d, "preview_denoising_quality")
+        col.prop(d, "preview_denoising_start_sample")
+
+
 class DRT_VIEWLAYER_PT_passes_data(bpy.types.Panel):
     """The passes DRT fills, and Cycles's per-layer Denoising / Denoising Data settings."""
     bl_space_type = "PROPERTIES"
@@ -204,6 +228,7 @@ classes = (
     DRT_RENDER_PT_sampling,
     DRT_RENDER_PT_sampling_subset,
     DRT_RENDER_PT_sampling_denoise,
+    DRT_RENDER_PT_sampling_viewport_denoise,
     DRT_RENDER_PT_light_paths,
     DRT_RENDER_PT_motion_blur,
     DRT_RENDER_PT_film,

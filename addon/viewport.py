@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import compat
+from . import compat, denoising
 from .export import _instance_key, _instance_name, _is_rendered
 from .export.materials import MaterialExporter
 from .export.mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays
@@ -60,6 +60,7 @@ class ViewportSync:
         self._lights: list = []
         self._world: dict | None = None
         self._settings = None
+        self._denoise_config = (False,)  # off until the scene says otherwise
         self._view = None
         self.synced = False
         self.texture = None  # FrameTexture: the latest frame on the GPU (main thread only)
@@ -212,7 +213,20 @@ class ViewportSync:
             valid = _validated(depsgraph.scene, [], lights, {"color": [0, 0, 0]}).lights
             self.session.edit(lambda live, li=valid: live.set_lights(li))
 
+    def _sync_denoiser(self, scene, force: bool = False) -> None:
+        """Viewport denoising on/off and its settings (read here, on the main thread: the
+        session thread never touches bpy)."""
+        d = scene.drt
+        config = (bool(d.use_preview_denoising), int(d.preview_denoising_start_sample),
+                  d.preview_denoising_prefilter, d.preview_denoising_quality, d.preview_denoising_input_passes)
+        if not force and config == self._denoise_config:
+            return
+        self._denoise_config = config
+        self.exports["settings"] += 1
+        self.session.set_denoiser(viewport_denoiser(*config[2:]) if config[0] else None, config[1])
+
     def _sync_world_and_settings(self, scene, force: bool = False) -> None:
+        self._sync_denoiser(scene, force)
         world = world_dict(scene.world, [])
         checked = _validated(scene, [], [], world)
         if force or world != self._world:
@@ -232,6 +246,31 @@ class ViewportSync:
     def stop(self, timeout: float = 5.0) -> bool:
         self.session.on_frame = None
         return self.session.stop(timeout)
+
+
+def viewport_denoiser(prefilter: str, quality: str, input_passes: str):
+    """``denoiser(film) -> RGB`` for ``ProgressiveSession`` with the viewport's settings: Open
+    Image Denoise from Blender (or pyoidn), the film's albedo/normal as guides per
+    ``input_passes``. Without a denoiser it raises on first use, which the session reports in
+    the viewport header and then shows the noisy image."""
+    denoise_mod = compat.core_module("denoise")
+    try:
+        library = denoising.backend_library(denoise_mod)
+    except denoise_mod.DenoiserUnavailable as exc:
+        message = str(exc)
+
+        def unavailable(film):
+            raise denoise_mod.DenoiserUnavailable(message)
+
+        return unavailable
+
+    def run(film):
+        albedo = film.albedo if input_passes in ("RGB_ALBEDO", "RGB_ALBEDO_NORMAL") else None
+        normal = film.normal if input_passes == "RGB_ALBEDO_NORMAL" else None
+        return denoise_mod.denoise(film.combined, albedo, normal, prefilter=prefilter, quality=quality,
+                                   library=library)
+
+    return run
 
 
 def interactive_mesh(name: str, data: dict | None):
@@ -330,6 +369,10 @@ def status_text(frame, target: int, error: str | None) -> str:
         return "DRT | Preparing"
     if frame.divider > 1:
         return f"DRT | Preview 1/{frame.divider}"
+    if frame.denoised:
+        done = " | Done" if target and frame.samples >= target else ""
+        return f"DRT | Sample {frame.samples}/{target} | Denoised{done}" if target else \
+            f"DRT | Sample {frame.samples} | Denoised"
     if target and frame.samples >= target:
         return f"DRT | Sample {frame.samples}/{target} | Done"
     return f"DRT | Sample {frame.samples}/{target}" if target else f"DRT | Sample {frame.samples}"
@@ -458,6 +501,7 @@ def engine_view_draw(engine, context, depsgraph) -> None:
                                     compat.preview_pixel_size(engine, scene))
         camera = view_camera(depsgraph, context.space_data, context.region_data, width, height)
         vp.set_view(camera, width, height, int(scene.drt.preview_samples))
+        vp._sync_denoiser(scene)  # also caught here: a setting changed without a depsgraph update
     except Exception as exc:  # noqa: BLE001 -- e.g. a panoramic camera: say so, draw nothing new
         vp.session.error = str(exc) or exc.__class__.__name__
     frame = vp.session.latest()

@@ -106,3 +106,22 @@ def test_summary_with_denoised_curves():
     assert math.isclose(t["seconds"], 10.0) and t["extrapolated"]
     assert s["drt_method_for_ratio"] == "mis_power" and s["best_drt_method"] == "mis_power"
     assert math.isclose(s["drt_over_cycles"], 2.0)
+
+
+def test_missing_matplotlib_hint_names_a_command_that_works(tmp_path, monkeypatch, capsys):
+    """The distribution is drt-renderer (an unrelated `drt` exists on the index): the hint must not
+    say `pip install 'drt[bench]'`."""
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_matplotlib(name, *args, **kwargs):
+        if name == "matplotlib" or name.startswith("matplotlib."):
+            raise ImportError("No module named 'matplotlib'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_matplotlib)
+    bench.plot([], str(tmp_path / "bench.png"))
+    err = capsys.readouterr().err
+    assert "pip install matplotlib" in err and "drt[bench]" not in err
+    assert not (tmp_path / "bench.png").exists()

@@ -519,3 +519,76 @@ def test_blender_view_camera_reads_the_3d_view():
     assert spec.dof_use and spec.lens == pytest.approx(cam.data.lens)
     assert spec.fstop == pytest.approx(cam.data.dof.aperture_fstop)
     assert (spec.clip_start, spec.clip_end) == pytest.approx((cam.data.clip_start, cam.data.clip_end))
+
+
+# ---------------------------------------------------------------------------- viewport denoising
+
+
+def test_session_denoises_full_resolution_frames_from_the_start_sample():
+    """Cycles's viewport denoising: full-resolution frames from the start sample on go through
+    the denoiser (alpha kept); coarse previews and earlier samples stay noisy."""
+    live = live_scene()
+    calls = []
+
+    def halve(film):
+        calls.append(film.width)
+        return film.combined[..., :3] * 0.5
+
+    log = FrameLog()
+    s = log.session = ProgressiveSession(live, threads=1, coarse_pixels=256, on_frame=log)
+    try:
+        s.set_denoiser(halve, start_sample=3)
+        s.set_view(top_camera(), 32, 32, spp=4)
+        f = s.wait(lambda f: f.divider == 1 and f.samples == 4, 60)
+        assert f is not None and f.denoised, s.error
+        scene, ctx = live.context(top_camera(), 32, 32, spp=4)
+        ref = render(scene, spp=4, context=ctx, threads=1).combined[::-1]
+        np.testing.assert_allclose(f.rgba[..., :3], 0.5 * ref[..., :3], rtol=1e-6, atol=1e-7)
+        np.testing.assert_array_equal(f.rgba[..., 3], ref[..., 3].astype(np.float32))
+        assert set(calls) == {32}  # never the coarse 16x16 preview
+        s.set_denoiser(None)
+        f = s.wait(lambda f: f.divider == 1 and f.samples == 4 and f.generation == s.generation, 60)
+        assert f is not None and not f.denoised
+    finally:
+        assert s.stop()
+
+
+def test_a_failing_denoiser_is_reported_and_the_noisy_image_shown():
+    live = live_scene()
+    s = ProgressiveSession(live, threads=1, coarse_pixels=256)
+
+    def broken(film):
+        raise RuntimeError("no OIDN here")
+
+    try:
+        s.set_denoiser(broken)
+        s.set_view(top_camera(), 16, 16, spp=2)
+        f = s.wait(lambda f: f.divider == 1 and f.samples == 2, 60)
+        assert f is not None and not f.denoised
+        assert s.error == "viewport denoising failed: no OIDN here" and s.denoiser is None
+    finally:
+        assert s.stop()
+
+
+@blender_only
+def test_blender_viewport_denoise_setting_reaches_the_session(blender_viewport):
+    """Render properties > Sampling > Viewport Denoise: the session gets a denoiser that runs
+    Open Image Denoise (Blender's own) and the frames say so; turning it off removes it."""
+    vp = blender_viewport
+    d = bpy.context.scene.drt
+    assert vp.session.denoiser is None
+    d.preview_denoising_start_sample = 2
+    d.use_preview_denoising = True
+    evaluate()
+    assert vp.session.denoiser is not None and vp.session.denoise_start_sample == 2
+    f = vp.session.wait(lambda f: f.divider == 1 and f.samples >= 4 and f.generation == vp.session.generation, 120)
+    assert f is not None and f.denoised, vp.session.error
+    d.use_preview_denoising = False
+    evaluate()
+    assert vp.session.denoiser is None
+    g = vp.session.wait(lambda f: f.divider == 1 and f.samples >= 4 and f.generation == vp.session.generation, 120)
+    assert g is not None and not g.denoised
+    # the denoised frame is smoother than the noisy one at the same sample count
+    def roughness(img):
+        return float(np.abs(np.diff(img[..., :3], axis=1)).mean())
+    assert roughness(f.rgba) < roughness(g.rgba)

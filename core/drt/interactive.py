@@ -475,7 +475,8 @@ class Frame:
     """The latest image of a session: ``rgba`` (height, width, 4) float32 scene-linear,
     **bottom row first** (what a GPU texture and Blender want); ``samples`` per pixel;
     ``divider``: 1 at full resolution, k when rendered at 1/k of it (drawn scaled up);
-    ``generation``: which edit/view state it shows; ``seconds``: from that state's request."""
+    ``generation``: which edit/view state it shows; ``seconds``: from that state's request;
+    ``denoised``: the RGB went through the session's ``denoiser``."""
 
     rgba: np.ndarray
     width: int
@@ -484,6 +485,7 @@ class Frame:
     divider: int
     generation: int
     seconds: float
+    denoised: bool = False
 
 
 def coarse_dividers(width: int, height: int, coarse_pixels: int = COARSE_PIXELS) -> list[int]:
@@ -527,6 +529,13 @@ class ProgressiveSession:
         #: gate() -> bool: while it returns False the session waits before rendering (polled
         #: every 0.1 s, from the session thread; the add-on waits for a kernel compilation)
         self.gate: Callable[[], bool] | None = None
+        #: denoiser(film) -> (H, W, 3) RGB, top row first (``drt.denoise`` with the viewport's
+        #: settings), applied to full-resolution frames from ``denoise_start_sample`` samples on,
+        #: as Cycles's viewport denoising; None: off. Runs on the session thread, so a slow
+        #: denoiser slows refinement, never Blender's UI. A failure is reported in ``error``
+        #: and turns it off until it is set again.
+        self.denoiser: Callable | None = None
+        self.denoise_start_sample = 1
         self._cond = threading.Condition()
         self._edits: list = []
         self._view = None  # (CameraSpec, width, height, spp)
@@ -556,6 +565,13 @@ class ProgressiveSession:
             self._view = view
             self._restart()
             return True
+
+    def set_denoiser(self, denoiser: Callable | None, start_sample: int = 1) -> None:
+        """Turn viewport denoising on (``denoiser(film) -> RGB``) or off (None); restarts the
+        accumulation so the next frames show the change."""
+        with self._cond:
+            self.denoiser, self.denoise_start_sample = denoiser, max(1, int(start_sample))
+            self._restart()
 
     def latest(self) -> Frame | None:
         return self._frame
@@ -703,10 +719,19 @@ class ProgressiveSession:
             self._done = True
 
     def _publish(self, film, samples: int, divider: int, gen: int, t0: float) -> None:
-        rgba = np.ascontiguousarray(np.nan_to_num(film.combined[::-1], nan=0.0, posinf=0.0),
-                                    dtype=np.float32)
+        combined = np.nan_to_num(film.combined, nan=0.0, posinf=0.0)
+        denoiser, denoised = self.denoiser, False
+        if denoiser is not None and divider == 1 and samples >= max(1, self.denoise_start_sample):
+            try:
+                rgb = np.asarray(denoiser(film), dtype=np.float32)
+                combined = np.concatenate([rgb, combined[..., 3:]], axis=-1)
+                denoised = True
+            except Exception as exc:  # noqa: BLE001 -- show the noisy image and say why
+                self.denoiser = None
+                self.error = self.error or f"viewport denoising failed: {exc}"
+        rgba = np.ascontiguousarray(combined[::-1], dtype=np.float32)
         self._frame = Frame(rgba, film.width, film.height, int(samples), divider, gen,
-                            time.perf_counter() - t0)
+                            time.perf_counter() - t0, denoised)
         if self.on_frame is not None:
             try:
                 self.on_frame()
