@@ -57,7 +57,7 @@ class AreaLight:
         self.area = (np.pi * 0.25 if self.is_ellipse else 1.0) * self.len_x * self.len_y
         self.color = np.asarray(light.get("color", (1.0, 1.0, 1.0)), dtype=np.float64)
         power = float(light.get("power", 0.0))
-        with np.errstate(divide="ignore", invalid="ignore"):  # a zero-size light: inf, never hit
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a zero- or denormal-size light: inf, never hit
             self.radiance = self.color * power / (np.pi * self.area)   # W/(m² sr) on the normal
         spread = float(light.get("spread", np.pi))
         self.plain = spread >= np.pi - 1e-6

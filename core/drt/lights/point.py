@@ -46,8 +46,9 @@ class PointLight:
         self.soft_falloff = bool(light.get("soft_falloff", True))
         self.intensity = self.color * power / (4.0 * np.pi)          # W/sr, RGB
         self.is_delta = self.radius <= 0.0
-        self.radiance = (self.color * power / (4.0 * np.pi ** 2 * self.radius ** 2)
-                         if not self.is_delta else np.zeros(3))       # W/(m² sr), RGB
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # radius² underflows: inf
+            self.radiance = (self.color * power / (4.0 * np.pi ** 2 * self.radius ** 2)
+                             if not self.is_delta else np.zeros(3))   # W/(m² sr), RGB
         self.is_sphere = not self.is_delta and not self.soft_falloff
         self.visible_to_camera = camera_visible(light)
         self.power = float(power * luminance(self.color)) * self._power_fraction()
