@@ -217,6 +217,8 @@ class MeshData:
     normals: np.ndarray | None = None
     uvs: np.ndarray | None = None
     positions_close: np.ndarray | None = None
+    #: per-corner (T, 3, 3) float arrays material programs read: "generated", "object_coords"
+    corner_attrs: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -238,6 +240,8 @@ class Scene:
     objects: list[ObjectSpec]
     header: dict = field(default_factory=dict, repr=False)
     arrays: dict = field(default_factory=dict, repr=False)
+    #: images material programs read: (info dict, (H, W, 4) uint8 or float16 array)
+    images: list = field(default_factory=list, repr=False)
 
     @property
     def has_motion(self) -> bool:
@@ -343,7 +347,9 @@ def _camera(h: dict) -> CameraSpec:
     return cam
 
 
-def _materials(h: dict) -> list[dict]:
+def _materials(h: dict, n_images: int = 0) -> list[dict]:
+    from .materials.program_format import validate_program
+
     mats = _list(h, "materials", "")
     out = []
     for i, m in enumerate(mats):
@@ -360,14 +366,47 @@ def _materials(h: dict) -> list[dict]:
                 entry["roughness"] = _number(lobe, "roughness", lp, 0.5 if t == "GLOSSY" else 0.0, lo=0, hi=1)
             if t == "GLASS":
                 entry["ior"] = _number(lobe, "ior", lp, 1.45, lo=0, lo_open=True, hi=100)
+            for key in ("color_reg", "roughness_reg"):
+                if key in lobe:
+                    entry[key] = _number(lobe, key, lp, integer=True, lo=0)
             clean.append(entry)
-        out.append(
-            {
-                "name": str(_get(m, "name", p, f"material{i}")),
-                "lobes": clean,
-                "emission": _vector(m, "emission", p, 3, default=[0, 0, 0], lo=0.0).tolist(),
-            }
-        )
+        mat = {
+            "name": str(_get(m, "name", p, f"material{i}")),
+            "lobes": clean,
+            "emission": _vector(m, "emission", p, 3, default=[0, 0, 0], lo=0.0).tolist(),
+        }
+        if m.get("program") is not None:
+            try:
+                mat["program"] = validate_program(m["program"], n_images, f"{p}.program")
+            except ValueError as e:
+                raise SceneError(f"{p}.program", str(e).split(": ", 1)[-1]) from None
+            if "emission_reg" in m:
+                mat["emission_reg"] = _number(m, "emission_reg", p, integer=True, lo=0)
+        out.append(mat)
+    return out
+
+
+def _images(h: dict, arrays: dict) -> list:
+    """The header's ``images`` with their pixel arrays ((H, W, 4) uint8 or float16)."""
+    out = []
+    for i, img in enumerate(_list(h, "images", "") if "images" in h else []):
+        p = f"images[{i}]"
+        if not isinstance(img, dict):
+            raise SceneError(p, "must be an object")
+        name = str(_get(img, "array", p))
+        a = arrays.get(name)
+        if not isinstance(a, np.ndarray) or a.dtype not in (np.uint8, np.float16, np.float32) \
+                or a.ndim != 3 or a.shape[2] != 4:
+            raise SceneError(name, "must be an (H, W, 4) uint8 or float16 array")
+        w = _number(img, "width", p, integer=True, lo=1)
+        hgt = _number(img, "height", p, integer=True, lo=1)
+        if a.shape[:2] != (hgt, w):
+            raise SceneError(name, f"has shape {a.shape}, expected ({hgt}, {w}, 4)")
+        if a.dtype != np.uint8 and not np.all(np.isfinite(a)):
+            raise SceneError(name, "contains NaN or infinite values")
+        info = {"name": str(img.get("name", name)), "width": w, "height": hgt,
+                "srgb": _bool(img, "srgb", p, False)}
+        out.append((info, a))
     return out
 
 
@@ -459,7 +498,13 @@ def _meshes(h: dict, arrays: dict, n_materials: int) -> list[MeshData]:
             close = _array(arrays, pre + "positions_close", "f", 2, (3,)).astype(np.float64)
             if close.shape != pos.shape:
                 raise SceneError(pre + "positions_close", f"has shape {close.shape}, expected {pos.shape}")
-        out.append(MeshData(str(m.get("name", f"mesh{k}")), pos, tri, mi, normals, uvs, close))
+        attrs = {}
+        for attr in ("generated", "object_coords"):
+            if pre + attr in arrays:
+                attrs[attr] = _array(arrays, pre + attr, "f", 3, (3, 3))
+                if len(attrs[attr]) != len(tri):
+                    raise SceneError(pre + attr, f"has {len(attrs[attr])} triangles, expected {len(tri)}")
+        out.append(MeshData(str(m.get("name", f"mesh{k}")), pos, tri, mi, normals, uvs, close, attrs))
     return out
 
 
@@ -493,11 +538,12 @@ def scene_from_dict(header: dict, arrays: dict | None = None) -> Scene:
     camera = _camera(header)
     world = _get(header, "world", "", {"color": [0, 0, 0]})
     world_color = _vector(world, "color", "world", 3, default=[0, 0, 0], lo=0.0)
-    materials = _materials(header)
+    images = _images(header, arrays)
+    materials = _materials(header, len(images))
     lights = _lights(header)
     meshes = _meshes(header, arrays, len(materials))
     objects = _objects(header, len(meshes))
     if not materials and any(len(m.triangles) for m in meshes):
         # Geometry without materials renders as a neutral grey diffuse (Blender's default look).
         materials = [{"name": "default", "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}], "emission": [0, 0, 0]}]
-    return Scene(render, camera, world_color, materials, lights, meshes, objects, header, arrays)
+    return Scene(render, camera, world_color, materials, lights, meshes, objects, header, arrays, images)
