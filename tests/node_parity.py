@@ -27,6 +27,8 @@ for p in (REPO, os.path.join(REPO, "blend_scenes")):
     if p not in sys.path:
         sys.path.insert(0, p)
 
+from addon.export.node_programs import socket  # noqa: E402
+
 TILE = 16
 
 
@@ -36,19 +38,12 @@ def node(nt, kind, inputs=None, **props):
     for k, v in props.items():
         setattr(n, k, v)
     for key, v in (inputs or {}).items():
-        sock = n.inputs[key] if isinstance(key, int) else _enabled(n.inputs, key)
+        sock = n.inputs[key] if isinstance(key, int) else socket(n.inputs, key)
         if isinstance(v, bpy.types.NodeSocket):
             nt.links.new(v, sock)
         else:
             sock.default_value = v
     return n
-
-
-def _enabled(sockets, name):
-    for s in sockets:
-        if s.name == name and s.enabled:
-            return s
-    return sockets[name]
 
 
 def squash(nt, sock):

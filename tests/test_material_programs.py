@@ -87,3 +87,236 @@ def test_textures_match_cycles(tmp_path):
     res = _check(cases[:16], 4, tmp_path, "textures", names)
     assert [im["srgb"] for im in res.header["images"]] == [True, False]
     assert res.arrays["image0.pixels"].dtype == np.uint8
+
+
+# --- converters ----------------------------------------------------------------------------
+
+MATH_OPS = ["ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM", "SQRT",
+            "INVERSE_SQRT", "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM", "LESS_THAN",
+            "GREATER_THAN", "SIGN", "COMPARE", "SMOOTH_MIN", "SMOOTH_MAX", "ROUND", "FLOOR", "CEIL",
+            "TRUNC", "FRACT", "MODULO", "FLOORED_MODULO", "WRAP", "SNAP", "PINGPONG", "SINE",
+            "COSINE", "TANGENT", "ARCSINE", "ARCCOSINE", "ARCTANGENT", "ARCTAN2", "SINH", "COSH",
+            "TANH", "RADIANS", "DEGREES"]
+STEPPY = {"LESS_THAN", "GREATER_THAN", "SIGN", "COMPARE", "ROUND", "FLOOR", "CEIL", "TRUNC", "FRACT",
+          "MODULO", "FLOORED_MODULO", "WRAP", "SNAP", "PINGPONG"}
+
+
+def _ab(nt, uv):
+    """Two floats varying over the tile: a = 4u − 2 ∈ (−2, 2), b = 1.5v + 1.2 ∈ (1.2, 2.7) (b
+    away from 0 and 1, where modulo/snap/log are ill-conditioned against the sample jitter)."""
+    sep = node(nt, "ShaderNodeSeparateXYZ", {0: uv})
+    a = node(nt, "ShaderNodeMath", {0: sep.outputs[0], 1: 4.0, 2: -2.0}, operation="MULTIPLY_ADD")
+    b = node(nt, "ShaderNodeMath", {0: sep.outputs[1], 1: 1.5, 2: 1.2}, operation="MULTIPLY_ADD")
+    return a.outputs[0], b.outputs[0]
+
+
+def _math(op, clamp=False):
+    def case(nt, uv):
+        a, b = _ab(nt, uv)
+        return node(nt, "ShaderNodeMath", {0: a, 1: b, 2: 0.3}, operation=op, use_clamp=clamp).outputs[0]
+    return case
+
+
+@pytest.mark.slow
+def test_math_matches_cycles(tmp_path):
+    cases = [_math(op) for op in MATH_OPS] + [_math("MULTIPLY", True), _math("SUBTRACT", True)]
+    names = [op + ("*" if op in STEPPY else "") for op in MATH_OPS] + ["MULTIPLY clamp", "SUBTRACT clamp"]
+    _check(cases, 7, tmp_path, "math", names)
+
+
+VMATH_OPS = ["ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "CROSS_PRODUCT", "PROJECT",
+             "REFLECT", "DOT_PRODUCT", "DISTANCE", "LENGTH", "SCALE", "NORMALIZE", "ABSOLUTE",
+             "MINIMUM", "MAXIMUM", "FLOOR", "CEIL", "FRACTION", "MODULO", "WRAP", "SNAP", "SINE",
+             "COSINE", "TANGENT", "POWER", "SIGN"]
+VSTEPPY = {"FLOOR", "CEIL", "FRACTION", "MODULO", "WRAP", "SNAP", "SIGN"}
+BLENDS = ["MIX", "DARKEN", "MULTIPLY", "BURN", "LIGHTEN", "SCREEN", "DODGE", "ADD", "OVERLAY",
+          "SOFT_LIGHT", "LINEAR_LIGHT", "DIFFERENCE", "EXCLUSION", "SUBTRACT", "DIVIDE", "HUE",
+          "SATURATION", "VALUE", "COLOR"]
+
+
+def _vectors(nt, uv):
+    a = mapping(nt, uv, loc=(-2, -1, -0.5), scale=(4, 3, 2))
+    b = mapping(nt, uv, loc=(1, -2, 0.7), scale=(-2, 3, 1), rot=(0.2, 0.5, -0.3))
+    return a, b
+
+
+def _vmath(op):
+    def case(nt, uv):
+        a, b = _vectors(nt, uv)
+        if op in ("MODULO", "WRAP", "SNAP"):  # divisors well away from 0 (see _ab)
+            b = mapping(nt, uv, loc=(1.3, 1.7, 2.1), scale=(0.5, 0.4, 1))
+        n = node(nt, "ShaderNodeVectorMath", {0: a, 1: b, 2: (0.3, -0.2, 0.5), 3: 1.7}, operation=op)
+        return n.outputs["Value" if op in ("DOT_PRODUCT", "DISTANCE", "LENGTH") else "Vector"]
+    return case
+
+
+def _colors(nt, uv):
+    sep = node(nt, "ShaderNodeSeparateXYZ", {0: uv})
+    c1 = node(nt, "ShaderNodeCombineColor", {0: sep.outputs[0], 1: sep.outputs[1], 2: 0.3}).outputs[0]
+    inv = node(nt, "ShaderNodeMath", {0: 1.0, 1: sep.outputs[0]}, operation="SUBTRACT").outputs[0]
+    c2 = node(nt, "ShaderNodeCombineColor", {0: 0.8, 1: inv, 2: sep.outputs[1]}).outputs[0]
+    return c1, c2, sep
+
+
+def _mix(blend, data_type="RGBA", fac=0.7, legacy=False, clamp=False):
+    def case(nt, uv):
+        c1, c2, sep = _colors(nt, uv)
+        if legacy:
+            n = node(nt, "ShaderNodeMixRGB", {0: fac, 1: c1, 2: c2}, blend_type=blend, use_clamp=clamp)
+            return n.outputs[0]
+        n = node(nt, "ShaderNodeMix", data_type=data_type, blend_type=blend, clamp_result=clamp)
+        socks = [s for s in n.inputs if s.enabled]
+        if data_type == "FLOAT":
+            nt.links.new(sep.outputs[0], socks[1])
+            nt.links.new(sep.outputs[1], socks[2])
+        else:
+            nt.links.new(c1, socks[1])
+            nt.links.new(c2, socks[2])
+        if fac is None:
+            nt.links.new(sep.outputs[1], socks[0])
+        else:
+            socks[0].default_value = fac
+        return [o for o in n.outputs if o.enabled][0]
+    return case
+
+
+@pytest.mark.slow
+def test_vector_math_and_mix_match_cycles(tmp_path):
+    cases, names = [], []
+    for op in VMATH_OPS:
+        cases.append(_vmath(op))
+        names.append("vmath " + op + ("*" if op in VSTEPPY else ""))
+    for blend in BLENDS:
+        cases.append(_mix(blend))
+        names.append("mix " + blend)
+    cases += [_mix("MIX", "FLOAT", None), _mix("MIX", "VECTOR", None), _mix("MULTIPLY", fac=None),
+              _mix("ADD", fac=1.5, clamp=True), _mix("OVERLAY", legacy=True),
+              _mix("LINEAR_LIGHT", fac=0.6, legacy=True, clamp=True)]
+    names += ["mix float", "mix vector", "mix fac linked", "mix clamp", "mixrgb overlay", "mixrgb clamp"]
+    _check(cases, 8, tmp_path, "vmath_mix", names)
+
+
+def _ramp(interp, color_mode="RGB"):
+    def case(nt, uv):
+        sep = node(nt, "ShaderNodeSeparateXYZ", {0: uv})
+        n = node(nt, "ShaderNodeValToRGB", {0: sep.outputs[0]})
+        r = n.color_ramp
+        r.interpolation = interp
+        r.elements[0].position, r.elements[0].color = 0.15, (0.9, 0.1, 0.2, 1.0)
+        r.elements[1].position, r.elements[1].color = 0.8, (0.1, 0.7, 0.9, 0.5)
+        e = r.elements.new(0.45)
+        e.color = (1.0, 0.9, 0.1, 0.8)
+        return n.outputs["Color"]
+    return case
+
+
+def _map_range(kind, clamp):
+    def case(nt, uv):
+        a, _ = _ab(nt, uv)
+        return node(nt, "ShaderNodeMapRange", {"Value": a, "From Min": -1.0, "From Max": 1.5,
+                                               "To Min": 0.2, "To Max": -0.7, "Steps": 4.0},
+                    interpolation_type=kind, clamp=clamp).outputs[0]
+    return case
+
+
+def _color_node(kind, **inputs):
+    def case(nt, uv):
+        c1, _, sep = _colors(nt, uv)
+        ins = {"Color": c1}
+        for k, v in inputs.items():
+            ins[k.replace("_", " ")] = sep.outputs[0] if v == "u" else v
+        return node(nt, kind, ins).outputs[0]
+    return case
+
+
+def _clamp(kind):
+    def case(nt, uv):
+        a, b = _ab(nt, uv)
+        lo, hi = (0.5, -0.3) if kind == "RANGE" else (-0.3, 0.5)
+        return node(nt, "ShaderNodeClamp", {"Value": a, "Min": lo, "Max": hi}, clamp_type=kind).outputs[0]
+    return case
+
+
+def _hsv_roundtrip(nt, uv):
+    c1, _, _ = _colors(nt, uv)
+    sep = node(nt, "ShaderNodeSeparateColor", {0: c1}, mode="HSV")
+    h = node(nt, "ShaderNodeMath", {0: sep.outputs[0], 1: 0.3}, operation="ADD")
+    return node(nt, "ShaderNodeCombineColor", {0: h.outputs[0], 1: sep.outputs[1], 2: sep.outputs[2]},
+                mode="HSV").outputs[0]
+
+
+def _coords(kind):
+    def case(nt, uv):
+        tc = nt.nodes.new("ShaderNodeTexCoord")
+        return mapping(nt, tc.outputs[kind], scale=(3, 3, 3), rot=(0, 0, 0.3))
+    return case
+
+
+def _uv_map_node(nt, uv):
+    return node(nt, "ShaderNodeUVMap").outputs[0]
+
+
+def _group(nt, uv):
+    """A group (with a nested group) that scales its vector input by an unlinked factor 2.5 and
+    adds a default offset; a reroute and a muted node on the way."""
+    inner = bpy.data.node_groups.get("inner") or _make_inner()
+    outer = bpy.data.node_groups.new("outer", "ShaderNodeTree")
+    outer.interface.new_socket("Vec", in_out="INPUT", socket_type="NodeSocketVector")
+    f = outer.interface.new_socket("Fac", in_out="INPUT", socket_type="NodeSocketFloat")
+    f.default_value = 2.5
+    outer.interface.new_socket("Out", in_out="OUTPUT", socket_type="NodeSocketVector")
+    gi = outer.nodes.new("NodeGroupInput")
+    go = outer.nodes.new("NodeGroupOutput")
+    scale = outer.nodes.new("ShaderNodeVectorMath")
+    scale.operation = "SCALE"
+    outer.links.new(gi.outputs[0], scale.inputs[0])
+    outer.links.new(gi.outputs[1], scale.inputs[3])
+    g = outer.nodes.new("ShaderNodeGroup")
+    g.node_tree = inner
+    outer.links.new(scale.outputs[0], g.inputs[0])
+    outer.links.new(g.outputs[0], go.inputs[0])
+    n = nt.nodes.new("ShaderNodeGroup")
+    n.node_tree = outer
+    reroute = nt.nodes.new("NodeReroute")
+    nt.links.new(uv, reroute.inputs[0])
+    muted = node(nt, "ShaderNodeVectorMath", {0: reroute.outputs[0], 1: (5, 5, 5)}, operation="ADD")
+    muted.mute = True
+    nt.links.new(muted.outputs[0], n.inputs[0])
+    return n.outputs[0]
+
+
+def _make_inner():
+    inner = bpy.data.node_groups.new("inner", "ShaderNodeTree")
+    inner.interface.new_socket("V", in_out="INPUT", socket_type="NodeSocketVector")
+    off = inner.interface.new_socket("Offset", in_out="INPUT", socket_type="NodeSocketVector")
+    off.default_value = (-0.5, 0.25, 0.1)
+    inner.interface.new_socket("R", in_out="OUTPUT", socket_type="NodeSocketVector")
+    gi = inner.nodes.new("NodeGroupInput")
+    go = inner.nodes.new("NodeGroupOutput")
+    add = inner.nodes.new("ShaderNodeVectorMath")
+    add.operation = "ADD"
+    inner.links.new(gi.outputs[0], add.inputs[0])
+    inner.links.new(gi.outputs[1], add.inputs[1])
+    inner.links.new(add.outputs[0], go.inputs[0])
+    return inner
+
+
+def test_converters_match_cycles(tmp_path):
+    cases, names = [], []
+    for interp in ("LINEAR", "CONSTANT", "EASE", "B_SPLINE", "CARDINAL"):
+        cases.append(_ramp(interp))
+        names.append("ramp " + interp + ("*" if interp == "CONSTANT" else ""))
+    for kind in ("LINEAR", "STEPPED", "SMOOTHSTEP", "SMOOTHERSTEP"):
+        for clamp in (False, True):
+            cases.append(_map_range(kind, clamp))
+            names.append(f"map range {kind} {clamp}" + ("*" if kind == "STEPPED" else ""))
+    cases += [_clamp("MINMAX"), _clamp("RANGE"),
+              _color_node("ShaderNodeInvert", Fac=0.7),
+              _color_node("ShaderNodeGamma", Gamma=2.2),
+              _color_node("ShaderNodeBrightContrast", Bright=0.1, Contrast=0.4),
+              _color_node("ShaderNodeHueSaturation", Hue=0.3, Saturation=1.4, Value=0.8, Fac="u"),
+              _hsv_roundtrip, _coords("Generated"), _coords("Object"), _uv_map_node, _group]
+    names += ["clamp minmax", "clamp range", "invert", "gamma", "bright contrast", "hue sat",
+              "separate/combine hsv", "generated", "object", "uv map", "group+reroute+muted"]
+    res = _check(cases, 5, tmp_path, "converters", names)
+    assert not res.warnings

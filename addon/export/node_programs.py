@@ -263,9 +263,9 @@ class ProgramBuilder:
             return Value(self, const=float(np.dot(c, LUMINANCE)) if stype == "RGBA" else float(c.mean()))
         return self.emit(OP_TO_GRAY if stype == "RGBA" else OP_AVERAGE, 0, [v])
 
-    def inp(self, node, name, ctx, kind=None, index=None) -> Value:
-        sock = node.inputs[index] if index is not None else node.inputs[name]
-        return self.input(node, sock, ctx, kind)
+    def inp(self, node, key, ctx, kind=None) -> Value:
+        """Input ``key`` (identifier, else name; enabled sockets first) of ``node``."""
+        return self.input(node, socket(node.inputs, key), ctx, kind)
 
     def output(self, out_sock, ctx) -> Value:
         node = out_sock.node
@@ -326,7 +326,7 @@ class ProgramBuilder:
             if op not in VMATH_OPS:
                 raise Unsupported(node)
             ins = [self.input(node, node.inputs[i], ctx) for i in range(3)]
-            ins.append(self.inp(node, "Scale", ctx, "float"))
+            ins.append(self.input(node, node.inputs[3], ctx, "float"))  # Scale
             res = self.emit(OP_VMATH, VMATH_OPS.index(op), ins)
             if oname == "Value" and op not in VMATH_VALUE_OUT:
                 return Value(self, const=0.0)  # Blender: the unused output is 0
@@ -384,7 +384,7 @@ class ProgramBuilder:
         raise Unsupported(node)
 
     def _tex_vector(self, node, ctx, default):
-        sock = node.inputs["Vector"]
+        sock = socket(node.inputs, "Vector")
         src, sctx = resolve(sock, ctx)
         if src is None:
             return self.emit(OP_UV if default == "uv" else OP_GENERATED, 0, [])
@@ -441,6 +441,17 @@ class ProgramBuilder:
         return clamp01(res) if clamp_result else res
 
 
+def socket(sockets, key):
+    """The socket whose identifier (else name) is ``key``, preferring enabled ones: names and
+    identifiers differ ('Factor' / 'Fac') and several sockets may share a name."""
+    for attr in ("identifier", "name"):
+        for want_enabled in (True, False):
+            for s in sockets:
+                if getattr(s, attr) == key and (s.enabled or not want_enabled):
+                    return s
+    raise KeyError(key)
+
+
 def _first(sockets, name, stype):
     for s in sockets:
         if s.name == name and s.enabled:
@@ -448,7 +459,7 @@ def _first(sockets, name, stype):
     for s in sockets:
         if s.name == name and s.type == stype:
             return s
-    return sockets[name]
+    return socket(sockets, name)
 
 
 def _unlinked_socket(sock, ctx):
