@@ -57,11 +57,14 @@ def squash(nt, sock):
     return comb.outputs[0]
 
 
-def _material(name, case):
+def _material(name, case, shader=False):
     mat = bpy.data.materials.new(name)
     nt = mat.node_tree
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
+    if shader:  # the case builds the whole surface shader
+        nt.links.new(case(nt, nt.nodes.new("ShaderNodeTexCoord").outputs["UV"]), out.inputs["Surface"])
+        return mat
     em = nt.nodes.new("ShaderNodeEmission")
     em.inputs["Strength"].default_value = 1.0
     uv = nt.nodes.new("ShaderNodeTexCoord").outputs["UV"]
@@ -105,8 +108,10 @@ def setup_scene(n):
     return sc
 
 
-def render_tiles(cases, n, tmp_path, tag="tiles"):
-    """Cycles and DRT images (H, W, 3), top row first, of the cases on an n×n grid."""
+def render_tiles(cases, n, tmp_path, tag="tiles", shader=False, sun=None):
+    """Cycles and DRT images (H, W, 3), top row first, of the cases on an n×n grid. shader: the
+    cases return surface shader sockets (shown as they are, not squashed); sun: (strength,
+    rotation) of a sun lamp with a zero angle (a delta light: direct light is exact)."""
     from addon.export import export_depsgraph
     from drt.render import render
     from drt.scene import scene_from_dict
@@ -117,7 +122,13 @@ def render_tiles(cases, n, tmp_path, tag="tiles"):
     for k, case in enumerate(cases):
         r, c = divmod(k, n)
         bpy.ops.mesh.primitive_plane_add(size=size, location=(-1 + (c + 0.5) * size, 1 - (r + 0.5) * size, 0))
-        bpy.context.object.data.materials.append(_material(f"case{k}", case))
+        bpy.context.object.data.materials.append(_material(f"case{k}", case, shader))
+    if sun is not None:
+        light = bpy.data.lights.new("sun", "SUN")
+        light.energy, light.angle = sun[0], 0.0
+        obj = bpy.data.objects.new("sun", light)
+        obj.rotation_euler = sun[1]
+        sc.collection.objects.link(obj)
     path = str(tmp_path / f"{tag}.exr")
     sc.render.filepath = path
     bpy.ops.render.render(write_still=True)

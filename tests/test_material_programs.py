@@ -320,3 +320,225 @@ def test_converters_match_cycles(tmp_path):
               "separate/combine hsv", "generated", "object", "uv map", "group+reroute+muted"]
     res = _check(cases, 5, tmp_path, "converters", names)
     assert not res.warnings
+
+
+# --- textured BSDFs under a sun (direct light only: exact, no noise) ---------------------------
+
+
+def _diffuse_image(path):
+    def case(nt, uv):
+        img = bpy.data.images.load(path, check_existing=True)
+        # Closest: magnified Linear texels change by ~1 % over the 0.01-pixel sample jitter
+        # (Linear is compared, squashed, in test_textures_match_cycles)
+        t = node(nt, "ShaderNodeTexImage", {"Vector": mapping(nt, uv, scale=(2, 2, 1))}, image=img,
+                 interpolation="Closest")
+        return node(nt, "ShaderNodeBsdfDiffuse", {"Color": t.outputs["Color"]}).outputs[0]
+    return case
+
+
+def _principled_checker(nt, uv):
+    ck = node(nt, "ShaderNodeTexChecker", {"Scale": 4.0, "Color1": (0.9, 0.5, 0.1, 1),
+                                           "Color2": (0.1, 0.4, 0.9, 1)})
+    p = node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": ck.outputs["Color"],
+                                              "Specular IOR Level": 0.0})
+    return p.outputs[0]
+
+
+def _principled_emission(nt, uv):
+    g = node(nt, "ShaderNodeTexGradient", {"Vector": uv})
+    ramp = node(nt, "ShaderNodeValToRGB", {0: g.outputs["Fac"]})
+    p = node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": (0, 0, 0, 1), "Specular IOR Level": 0.0,
+                                              "Emission Color": ramp.outputs["Color"],
+                                              "Emission Strength": 2.0})
+    return p.outputs[0]
+
+
+def _mix_shader_fac(nt, uv):
+    ck = node(nt, "ShaderNodeTexChecker", {"Scale": 3.0})
+    a = node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.2, 0.2, 1)})
+    b = node(nt, "ShaderNodeEmission", {"Color": (0.2, 0.3, 0.9, 1), "Strength": 1.5})
+    sep = node(nt, "ShaderNodeSeparateXYZ", {0: uv})
+    fac = node(nt, "ShaderNodeMath", {0: ck.outputs["Fac"], 1: sep.outputs[0]}, operation="MULTIPLY")
+    return node(nt, "ShaderNodeMixShader", {0: fac.outputs[0], 1: a.outputs[0], 2: b.outputs[0]}).outputs[0]
+
+
+def test_textured_bsdfs_under_a_sun_match_cycles(tmp_path):
+    img = str(tmp_path / "img.png")
+    make_image("img", path=img)
+    cases = [_diffuse_image(img), _principled_checker, _principled_emission, _mix_shader_fac]
+    names = ["diffuse image*", "principled checker base*", "principled ramp emission", "mix shader fac*"]
+    cycles, drt, res = P.render_tiles(cases, 2, tmp_path, "sun", shader=True, sun=(3.0, (0.4, 0.3, 0)))
+    bad = {}
+    for k in range(len(cases)):
+        err = np.abs(P.tile(cycles, k, 2) - P.tile(drt, k, 2)).max(axis=2)
+        # 2e-3 of the tile's brightest value: the 0.01-pixel sample jitter moves steep
+        # gradients (magnified texels, ramps) by ~1e-3 of their range
+        rel = err / P.tile(cycles, k, 2).max()
+        allowed = 1 if names[k].endswith("*") else 0
+        if np.count_nonzero(rel > 2e-3) > allowed:
+            bad[names[k]] = float(np.sort(rel.ravel())[-1 - allowed])
+    assert not bad, f"error vs Cycles (fraction of the tile's peak): {bad}"
+    assert cycles.mean() > 0.1
+    assert not res.warnings
+
+
+# --- the compiler, without rendering ---------------------------------------------------------
+
+@pytest.fixture
+def fresh():
+    import _common as C
+    from test_addon import ensure_registered
+
+    ensure_registered()
+    scene = C.reset()
+    C.camera((0, -5, 1), (0, 0, 0))
+    return scene
+
+
+def _export():
+    from addon.export.blend import export_current
+
+    return export_current()
+
+
+def _mat(name):
+    import _common as C
+
+    return C._new_material(name)
+
+
+def _plane(mat, name="Q", z=0.0):
+    bpy.ops.mesh.primitive_plane_add(size=1, location=(0, 0, z))
+    obj = bpy.context.object
+    obj.name = name
+    obj.data.materials.append(mat)
+    return obj
+
+
+def _material_dict(res, name):
+    return next(m for m in res.header["materials"] if m["name"] == name)
+
+
+def _ops(m):
+    from addon.export.node_programs import OP_CHECKER, OP_IMAGE, OP_MATH  # noqa: F401
+
+    return [op[0] for op in m["program"]["ops"]]
+
+
+def test_constants_fold_to_todays_lobes(fresh):
+    mat, nodes, out = _mat("Const")
+    rgb = node(mat.node_tree, "ShaderNodeRGB")
+    rgb.outputs[0].default_value = (0.2, 0.4, 0.6, 1)
+    p = node(mat.node_tree, "ShaderNodeBsdfPrincipled", {"Base Color": rgb.outputs[0], "Metallic": 0.0})
+    mat.node_tree.links.new(p.outputs[0], out.inputs[0])
+    _plane(mat)
+    res = _export()
+    m = _material_dict(res, "Const")
+    assert "program" not in m and "images" not in res.header
+    assert not any(k.endswith(("generated", "object_coords")) for k in res.arrays)
+    assert m["lobes"][0]["color"][2] > m["lobes"][0]["color"][0] > 0
+
+
+def test_textured_principled_compiles_to_register_lobes(fresh):
+    from addon.export.node_programs import OP_CHECKER, OP_GENERATED, OP_VMATH
+
+    mat, nodes, out = _mat("Tex")
+    nt = mat.node_tree
+    ck = node(nt, "ShaderNodeTexChecker")
+    p = node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": ck.outputs["Color"], "Roughness": ck.outputs["Fac"],
+                                              "Metallic": 0.0})
+    nt.links.new(p.outputs[0], out.inputs[0])
+    _plane(mat)
+    res = _export()
+    m = _material_dict(res, "Tex")
+    ops = _ops(m)
+    # one checker (shared by both outputs) fed by Generated; the lobe weights multiply it by
+    # the folded constant (1 − F) and F
+    assert ops.count(OP_CHECKER) == 1 and ops.count(OP_GENERATED) == 1
+    assert set(ops) <= {OP_CHECKER, OP_GENERATED, OP_VMATH}
+    kinds = [(lb["type"], "color_reg" in lb, "roughness_reg" in lb) for lb in m["lobes"]]
+    assert kinds == [("DIFFUSE", True, False), ("GLOSSY", False, True)]
+    assert "mesh0.generated" in res.arrays and "mesh0.object_coords" not in res.arrays
+    assert res.arrays["mesh0.generated"].shape == (2, 3, 3)
+    assert not res.warnings
+
+
+def test_principled_in_a_group_exports_like_unwrapped(fresh):
+    """glTF-style: the whole PBR material inside a node group (shader output through the group)."""
+    results = []
+    for wrapped in (False, True):
+        mat, nodes, out = _mat(f"G{wrapped}")
+        nt = mat.node_tree
+        tree = nt
+        if wrapped:
+            tree = bpy.data.node_groups.new("pbr", "ShaderNodeTree")
+            tree.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+            s = tree.interface.new_socket("Scale", in_out="INPUT", socket_type="NodeSocketFloat")
+            s.default_value = 7.0
+        ck = node(tree, "ShaderNodeTexChecker", {"Scale": 7.0})
+        p = node(tree, "ShaderNodeBsdfPrincipled", {"Base Color": ck.outputs["Color"]})
+        if wrapped:
+            gi, go = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+            tree.links.new(gi.outputs[0], ck.inputs["Scale"])
+            tree.links.new(p.outputs[0], go.inputs[0])
+            g = nt.nodes.new("ShaderNodeGroup")
+            g.node_tree = tree
+            nt.links.new(g.outputs[0], out.inputs[0])
+        else:
+            nt.links.new(p.outputs[0], out.inputs[0])
+        _plane(mat, f"P{wrapped}", z=float(wrapped))
+    res = _export()
+    a, b = _material_dict(res, "GFalse"), _material_dict(res, "GTrue")
+    assert a["program"] == b["program"] and a["lobes"] == b["lobes"]
+    assert not res.warnings
+
+
+def test_muted_node_passes_through_and_reroutes_vanish(fresh):
+    from addon.export.node_programs import OP_MATH
+
+    mat, nodes, out = _mat("Muted")
+    nt = mat.node_tree
+    ck = node(nt, "ShaderNodeTexChecker")
+    r = nt.nodes.new("NodeReroute")
+    nt.links.new(ck.outputs["Fac"], r.inputs[0])
+    m = node(nt, "ShaderNodeMath", {0: r.outputs[0], 1: 10.0}, operation="ADD")
+    m.mute = True
+    em = node(nt, "ShaderNodeEmission", {"Color": m.outputs[0]})
+    nt.links.new(em.outputs[0], out.inputs[0])
+    _plane(mat)
+    d = _material_dict(_export(), "Muted")
+    assert OP_MATH not in _ops(d) and "emission_reg" in d
+
+
+def test_unsupported_texture_warns_and_falls_back(fresh):
+    mat, nodes, out = _mat("Noisy")
+    nt = mat.node_tree
+    noise = nt.nodes.new("ShaderNodeTexNoise")
+    p = node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.3, 0.2, 0.1, 1)})
+    nt.links.new(noise.outputs["Color"], p.inputs["Color"])
+    nt.links.new(p.outputs[0], out.inputs[0])
+    _plane(mat)
+    res = _export()
+    d = _material_dict(res, "Noisy")
+    assert "program" not in d and d["lobes"][0]["color"] == pytest.approx([0.3, 0.2, 0.1])
+    assert len(res.warnings) == 1 and "'Noisy'" in res.warnings[0] and "ShaderNodeTexNoise" in res.warnings[0]
+
+
+def test_images_stored_once_as_bytes(fresh, tmp_path):
+    path = str(tmp_path / "i.png")
+    make_image("i", w=5, h=3, path=path)
+    for name in ("A", "B"):
+        mat, nodes, out = _mat(name)
+        nt = mat.node_tree
+        t = node(nt, "ShaderNodeTexImage", image=bpy.data.images.load(path, check_existing=True))
+        e = node(nt, "ShaderNodeEmission", {"Color": t.outputs["Color"]})
+        nt.links.new(e.outputs[0], out.inputs[0])
+        _plane(mat, name, z=float(name == "B"))
+    res = _export()
+    assert len(res.header["images"]) == 1
+    px = res.arrays["image0.pixels"]
+    assert px.dtype == np.uint8 and px.shape == (3, 5, 4)
+    from drt.scene import scene_from_dict
+
+    scene = scene_from_dict(res.header, res.arrays)
+    assert len(scene.images) == 1

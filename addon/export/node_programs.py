@@ -205,6 +205,7 @@ class ProgramBuilder:
         self.n_regs = 0
         self._const_regs: dict = {}
         self._cache: dict = {}
+        self._geometry: dict = {}
         self.problems: list[str] = []
 
     # --- registers ---------------------------------------------------------------------------
@@ -268,15 +269,29 @@ class ProgramBuilder:
         return self.input(node, socket(node.inputs, key), ctx, kind)
 
     def output(self, out_sock, ctx) -> Value:
+        """The Value of a node's output socket; a node is compiled once per group context (a
+        node with several outputs — a texture's Color and Fac — emits one operation)."""
         node = out_sock.node
-        key = (node.as_pointer(), out_sock.identifier, tuple(n.as_pointer() for n in ctx))
-        hit = self._cache.get(key)
+        key = (node.as_pointer(), tuple(n.as_pointer() for n in ctx))
+        outs = self._cache.setdefault(key, {})
+        hit = outs.get(out_sock.identifier)
         if hit is None:
             if getattr(node, "mute", False):
                 hit = Value(self, const=_socket_default(out_sock))
             else:
                 hit = self._compile(node, out_sock, ctx)
-            self._cache[key] = hit
+            if isinstance(hit, dict):  # every output of a multi-output operation
+                outs.update(hit)
+                hit = hit[out_sock.identifier]
+            else:
+                outs[out_sock.identifier] = hit
+        return hit
+
+    def geometry(self, opcode) -> Value:
+        """A geometry input (UV, Generated, Object), read once per program."""
+        hit = self._geometry.get(opcode)
+        if hit is None:
+            hit = self._geometry[opcode] = self.emit(opcode, 0, [])
         return hit
 
     # --- nodes -------------------------------------------------------------------------------
@@ -293,9 +308,9 @@ class ProgramBuilder:
             op = {"UV": OP_UV, "Generated": OP_GENERATED, "Object": OP_OBJECT}.get(oname)
             if op is None:
                 raise Unsupported(node)
-            return self.emit(op, 0, [])
+            return self.geometry(op)
         if k == "ShaderNodeUVMap":
-            return self.emit(OP_UV, 0, [])  # the active render UV map (named maps: phase 2)
+            return self.geometry(OP_UV)  # the active render UV map (named maps: phase 2)
         if k == "ShaderNodeMapping":
             vt = node.vector_type
             ins = [self.inp(node, "Vector", ctx)]
@@ -304,17 +319,17 @@ class ProgramBuilder:
             ins.append(self.inp(node, "Scale", ctx))
             return self.emit(OP_MAPPING, MAPPING_TYPES.index(vt), ins)
         if k == "ShaderNodeTexImage":
-            return self._image(node, oname, ctx)
+            return self._image(node, ctx)
         if k == "ShaderNodeTexChecker":
             vec = self._tex_vector(node, ctx, "generated")
             col, fac = self.emit(OP_CHECKER, 0, [vec, self.inp(node, "Color1", ctx),
                                                  self.inp(node, "Color2", ctx),
                                                  self.inp(node, "Scale", ctx, "float")], outputs=2)
-            return col if oname == "Color" else fac
+            return {"Color": col, "Fac": fac}
         if k == "ShaderNodeTexGradient":
             vec = self._tex_vector(node, ctx, "generated")
             col, fac = self.emit(OP_GRADIENT, GRADIENT_TYPES.index(node.gradient_type), [vec], outputs=2)
-            return col if oname == "Color" else fac
+            return {"Color": col, "Fac": fac}
         if k == "ShaderNodeMath":
             op = node.operation
             if op not in MATH_OPS:
@@ -341,7 +356,7 @@ class ProgramBuilder:
             self.data += table
             col, alpha = self.emit(OP_RAMP, int(node.color_ramp.interpolation != "CONSTANT"),
                                    [self.inp(node, "Fac", ctx, "float")], param=off, outputs=2)
-            return col if oname == "Color" else alpha
+            return {"Color": col, "Alpha": alpha}
         if k == "ShaderNodeMapRange":
             if node.data_type != "FLOAT":
                 raise Unsupported(node)
@@ -387,20 +402,20 @@ class ProgramBuilder:
         sock = socket(node.inputs, "Vector")
         src, sctx = resolve(sock, ctx)
         if src is None:
-            return self.emit(OP_UV if default == "uv" else OP_GENERATED, 0, [])
+            return self.geometry(OP_UV if default == "uv" else OP_GENERATED)
         return self.output(src, sctx)
 
-    def _image(self, node, oname, ctx):
+    def _image(self, node, ctx):
         image = node.image
-        if image is None:
-            # Cycles: a missing image renders magenta (1, 0, 1), alpha 1
-            return Value(self, const=(1.0, 0.0, 1.0) if oname == "Color" else 1.0)
+        magenta = {"Color": Value(self, const=(1.0, 0.0, 1.0)), "Alpha": Value(self, const=1.0)}
+        if image is None:  # Cycles: a missing image renders magenta (1, 0, 1), alpha 1
+            return magenta
         if node.projection != "FLAT" or image.source not in ("FILE", "GENERATED"):
             raise Unsupported(node)
         idx = self.images.index_of(image)
         if idx is None:
             self.problems.append(f"image '{image.name}' has no pixels (magenta)")
-            return Value(self, const=(1.0, 0.0, 1.0) if oname == "Color" else 1.0)
+            return magenta
         interp = INTERPOLATIONS.index(node.interpolation)
         if interp == 3:  # Smart: Cycles uses Cubic when magnified, i.e. Linear/Cubic; we use Linear
             interp = 1
@@ -410,7 +425,7 @@ class ProgramBuilder:
         mode = interp * 8 + EXTENSIONS.index(node.extension)
         vec = self._tex_vector(node, ctx, "uv")
         col, alpha = self.emit(OP_IMAGE, mode, [vec], param=idx, outputs=2)
-        return col if oname == "Color" else alpha
+        return {"Color": col, "Alpha": alpha}
 
     def _mix(self, node, oname, ctx):
         if node.bl_idname == "ShaderNodeMixRGB":
