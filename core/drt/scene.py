@@ -378,8 +378,9 @@ def _materials(h: dict, n_images: int = 0) -> list[dict]:
         if m.get("program") is not None:
             try:
                 mat["program"] = validate_program(m["program"], n_images, f"{p}.program")
-            except ValueError as e:
-                raise SceneError(f"{p}.program", str(e).split(": ", 1)[-1]) from None
+            except ValueError as e:  # "materials[i].program.field: problem"
+                where, _, problem = str(e).partition(": ")
+                raise SceneError(where, problem) from None
             if "emission_reg" in m:
                 mat["emission_reg"] = _number(m, "emission_reg", p, integer=True, lo=0)
         out.append(mat)
