@@ -420,8 +420,6 @@ def _material_dict(res, name):
 
 
 def _ops(m):
-    from addon.export.node_programs import OP_CHECKER, OP_IMAGE, OP_MATH  # noqa: F401
-
     return [op[0] for op in m["program"]["ops"]]
 
 
@@ -465,7 +463,6 @@ def test_textured_principled_compiles_to_register_lobes(fresh):
 
 def test_principled_in_a_group_exports_like_unwrapped(fresh):
     """glTF-style: the whole PBR material inside a node group (shader output through the group)."""
-    results = []
     for wrapped in (False, True):
         mat, nodes, out = _mat(f"G{wrapped}")
         nt = mat.node_tree

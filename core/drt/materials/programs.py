@@ -37,12 +37,11 @@ import numpy as np
 from ..kernels import inline_kernel, kernel
 from .dielectric import IOR_ONE_EPS
 from .ggx import ALPHA_SQ_SINGULAR
-
-from .program_format import (LUMINANCE, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,  # noqa: F401
+from .program_format import (LUMINANCE, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
                              OP_COMBINE, OP_COMPONENT, OP_GAMMA, OP_GENERATED, OP_GRADIENT,
                              OP_HSV, OP_HSV_TO_RGB, OP_IMAGE, OP_INVERT, OP_MAP_RANGE,
                              OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
-                             OP_TO_GRAY, OP_UV, OP_VMATH, RAMP_TABLE_SIZE, ProgramData)
+                             OP_TO_GRAY, OP_UV, OP_VMATH, RAMP_TABLE_SIZE)
 
 
 # --- helpers (Cycles's util/math.h semantics) ---------------------------------------------------
