@@ -414,7 +414,8 @@ class ProgramBuilder:
             raise Unsupported(node)
         idx = self.images.index_of(image)
         if idx is None:
-            self.problems.append(f"image '{image.name}' has no pixels (magenta)")
+            self.problems.append(f"image '{image.name}' has no pixels (missing file?), rendered "
+                                 f"magenta as in Cycles")
             return magenta
         interp = INTERPOLATIONS.index(node.interpolation)
         if interp == 3:  # Smart: Cycles uses Cubic when magnified, i.e. Linear/Cubic; we use Linear
