@@ -73,7 +73,7 @@ def test_textures_match_cycles(tmp_path):
     make_image("srgb", path=srgb)
     make_image("data", seed=2, path=data)
     cases, names = [], []
-    for interp in ("Closest", "Linear"):
+    for interp in ("Closest", "Linear", "Cubic"):
         for ext in ("REPEAT", "EXTEND", "CLIP", "MIRROR"):
             cases.append(_image_case(srgb, "sRGB", interp, ext))
             names.append(f"image {interp} {ext}" + ("*" if interp == "Closest" else ""))
@@ -84,7 +84,9 @@ def test_textures_match_cycles(tmp_path):
     for kind in ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "SPHERICAL", "QUADRATIC_SPHERE", "RADIAL"):
         cases.append(_gradient(kind))
         names.append(f"gradient {kind}")
-    res = _check(cases[:16], 4, tmp_path, "textures", names)
+    cases.append(_image_case(srgb, "sRGB", "Smart", "REPEAT", 0.8, 0.1))
+    names.append("image Smart")
+    res = _check(cases, 5, tmp_path, "textures", names)
     assert [im["srgb"] for im in res.header["images"]] == [True, False]
     assert res.arrays["image0.pixels"].dtype == np.uint8
 

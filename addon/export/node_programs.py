@@ -417,12 +417,7 @@ class ProgramBuilder:
             self.problems.append(f"image '{image.name}' has no pixels (missing file?), rendered "
                                  f"magenta as in Cycles")
             return magenta
-        interp = INTERPOLATIONS.index(node.interpolation)
-        if interp == 3:  # Smart: Cycles uses Cubic when magnified, i.e. Linear/Cubic; we use Linear
-            interp = 1
-        if interp == 2:
-            self.problems.append(f"'{node.name}' Cubic interpolation rendered as Linear")
-            interp = 1
+        interp = min(INTERPOLATIONS.index(node.interpolation), 2)  # Smart: Cubic, as Cycles's CPU
         mode = interp * 8 + EXTENSIONS.index(node.extension)
         vec = self._tex_vector(node, ctx, "uv")
         col, alpha = self.emit(OP_IMAGE, mode, [vec], param=idx, outputs=2)

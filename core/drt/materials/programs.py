@@ -586,9 +586,22 @@ def _wrap(i, n, ext):
 
 
 @kernel
+def _bspline(t, k):
+    """Weight of texel k (0..3, from ix − 1) of the uniform cubic B-spline at fraction t
+    (Cycles's SET_CUBIC_SPLINE_WEIGHTS)."""
+    if k == 0:
+        return (((-1.0 / 6.0) * t + 0.5) * t - 0.5) * t + 1.0 / 6.0
+    if k == 1:
+        return ((0.5 * t - 1.0) * t) * t + 2.0 / 3.0
+    if k == 2:
+        return ((-0.5 * t + 0.5) * t + 0.5) * t + 1.0 / 6.0
+    return (1.0 / 6.0) * t * t * t
+
+
+@kernel
 def image_lookup(pd, img, mode, u, v):
     """RGBA of image img at texture coordinate (u, v) (origin bottom-left), Cycles's CPU image
-    interpolation: mode = interpolation·8 + extension (Closest 0 / Linear 1; REPEAT 0,
+    interpolation: mode = interpolation·8 + extension (Closest 0 / Linear 1 / Cubic 2; REPEAT 0,
     EXTEND 1, CLIP 2, MIRROR 3). CLIP reads texels outside the image as 0 (so Linear fades over
     half a texel beyond the border, as in Cycles)."""
     info = pd.img_info[img]
@@ -602,6 +615,25 @@ def image_lookup(pd, img, mode, u, v):
         if ix >= 0 and iy >= 0:
             r, g, b, a = (_texel(pd, img, ix, iy, 0), _texel(pd, img, ix, iy, 1),
                           _texel(pd, img, ix, iy, 2), _texel(pd, img, ix, iy, 3))
+    elif interp == 2:
+        # Cycles's bicubic: uniform cubic B-spline weights over 4×4 texels around (u, v)
+        tx = u * w - 0.5
+        ty = v * h - 0.5
+        fx0 = math.floor(tx)
+        fy0 = math.floor(ty)
+        x0, y0 = int(fx0) - 1, int(fy0) - 1
+        for dy in range(4):
+            wy = _bspline(ty - fy0, dy)
+            iy = _wrap(y0 + dy, h, ext)
+            for dx in range(4):
+                ix = _wrap(x0 + dx, w, ext)
+                if ix < 0 or iy < 0:
+                    continue
+                wgt = _bspline(tx - fx0, dx) * wy
+                r += wgt * _texel(pd, img, ix, iy, 0)
+                g += wgt * _texel(pd, img, ix, iy, 1)
+                b += wgt * _texel(pd, img, ix, iy, 2)
+                a += wgt * _texel(pd, img, ix, iy, 3)
     else:
         tx = u * w - 0.5
         ty = v * h - 0.5
