@@ -541,3 +541,34 @@ def test_images_stored_once_as_bytes(fresh, tmp_path):
 
     scene = scene_from_dict(res.header, res.arrays)
     assert len(scene.images) == 1
+
+
+def _second_uv(render_active=False):
+    """Adds a UV map 'Second' (the first one rotated and scaled) to the plane being built."""
+    mesh = bpy.context.object.data
+    uv = np.empty(2 * len(mesh.loops), np.float32)
+    mesh.uv_layers[0].uv.foreach_get("vector", uv)
+    u, v = uv[0::2].copy(), uv[1::2].copy()
+    uv[0::2], uv[1::2] = 1.7 * v - 0.3, 0.6 * u + 0.2
+    second = mesh.uv_layers.new(name="Second")
+    second.uv.foreach_set("vector", uv)
+    if render_active:
+        second.active_render = True
+
+
+def _uv_case(kind):
+    def case(nt, uv):
+        _second_uv(render_active=kind == "active_render")
+        if kind == "named":
+            return node(nt, "ShaderNodeUVMap", uv_map="Second").outputs[0]
+        if kind == "missing":
+            return node(nt, "ShaderNodeUVMap", uv_map="Nope").outputs[0]
+        return uv  # Texture Coordinate UV: the active render map
+    return case
+
+
+def test_named_uv_maps_match_cycles(tmp_path):
+    names = ["named", "active_render", "default", "missing"]
+    res = _check([_uv_case(k) for k in names], 2, tmp_path, "uvmaps", names)
+    assert res.header["attributes"] == ["uv:Second", "uv:Nope"]
+    assert "mesh0.attr0" in res.arrays and not any(k.endswith("attr1") for k in res.arrays)

@@ -158,6 +158,8 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     header = {"format": "drt-scene", "version": 1, "render": render, "camera": camera,
               "world": world_dict(scene.world, warnings), "materials": mats.materials,
               "lights": lights, "meshes": meshes, "objects": objects}
+    if mats.attributes:  # named per-corner attributes programs read (arrays mesh<K>.attr<I>)
+        header["attributes"] = list(mats.attributes)
     if mats.images.images:  # pixels of the images material programs read (docs/materials.md)
         header["images"] = mats.images.images
         arrays.update(mats.images.arrays)

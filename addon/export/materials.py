@@ -70,6 +70,7 @@ class MaterialExporter:
         self._index: dict = {}  # material pointer (or None) -> index
         self.warnings: list[str] = []
         self.images = ImageTable()
+        self.attributes: list[str] = []  # named per-corner attributes programs read
         self._b = None
 
     def index_of(self, material) -> int:
@@ -82,17 +83,21 @@ class MaterialExporter:
             self.materials.append(DEFAULT_MATERIAL if material is None else self.convert(material))
         return idx
 
-    def reads(self, indices) -> set:
-        """Geometry inputs ("uv", "generated", "object_coords") the programs of the materials
-        with these global indices read."""
-        from .node_programs import OP_GENERATED, OP_OBJECT, OP_UV
+    def reads(self, indices) -> dict:
+        """Geometry inputs the programs of the materials with these global indices read:
+        {"uv" / "generated" / "object_coords": None, named attribute ("uv:Name"): its index in
+        ``attributes``}."""
+        from .node_programs import OP_ATTRIBUTE, OP_GENERATED, OP_OBJECT, OP_UV
 
         names = {OP_UV: "uv", OP_GENERATED: "generated", OP_OBJECT: "object_coords"}
-        out = set()
+        out = {}
         for i in indices:
             prog = self.materials[int(i)].get("program")
-            if prog:
-                out |= {names[op[0]] for op in prog["ops"] if op[0] in names}
+            for op in (prog or {}).get("ops", []):
+                if op[0] in names:
+                    out[names[op[0]]] = None
+                elif op[0] == OP_ATTRIBUTE:
+                    out[self.attributes[op[10]]] = op[10]
         return out
 
     # --- conversion ---------------------------------------------------------------------------
@@ -102,7 +107,7 @@ class MaterialExporter:
         tree = compat.material_node_tree(material)
         lobes: list[dict] = []
         emission = np.zeros(3)
-        self._b = ProgramBuilder(self.images)
+        self._b = ProgramBuilder(self.images, self.attributes)
         if tree is None:
             lobes = [{"type": "DIFFUSE", "color": list(map(float, material.diffuse_color[:3]))}]
         else:

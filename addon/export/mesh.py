@@ -24,7 +24,7 @@ def mesh_arrays(mesh, slot_materials: np.ndarray, attrs=frozenset()) -> dict | N
     Returns {"positions" (V,3) f32, "triangles" (T,3) i32, "material_index" (T,) i32,
     optionally "normals" (T,3,3) f32 and "uvs" (T,3,2) f32}; plus, for the geometry inputs
     named in ``attrs`` (what the material programs read), "generated" and "object_coords"
-    (T,3,3) f32 per corner.
+    (T,3,3) f32 per corner, and "attr<I>" (T,3,3) for a named UV map "uv:<name>" with index I.
     """
     compat.prepare_mesh(mesh)
     if len(mesh.loop_triangles) == 0:
@@ -45,6 +45,13 @@ def mesh_arrays(mesh, slot_materials: np.ndarray, attrs=frozenset()) -> dict | N
         out["object_coords"] = np.ascontiguousarray(out["positions"][tri_verts], dtype=np.float32)
     if "generated" in attrs:
         out["generated"] = generated_coords(mesh, out["positions"])[tri_verts]
+    for name, idx in (attrs.items() if isinstance(attrs, dict) else ()):
+        if name.startswith("uv:") and idx is not None:
+            layer = mesh.uv_layers.get(name[3:])
+            if layer is not None:  # a mesh without the map reads zeros, as in Cycles
+                corner = np.zeros((len(mesh.loops), 3), np.float32)
+                corner[:, :2] = compat.uv_layer_values(mesh, layer)
+                out[f"attr{idx}"] = corner[tri_corners]
     return out
 
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 # --- opcodes: keep in sync with core/drt/materials/programs.py ----------------------------------
-OP_UV, OP_GENERATED, OP_OBJECT = 1, 2, 3
+OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE = 1, 2, 3, 4
 OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING = 10, 11, 12, 13
 OP_IMAGE, OP_CHECKER, OP_GRADIENT, OP_RAMP = 20, 21, 22, 23
 OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31, 32, 33, 34, 35
@@ -197,8 +197,9 @@ def _group_output(tree):
 class ProgramBuilder:
     """Collects the operations of one material's program."""
 
-    def __init__(self, images):
+    def __init__(self, images, attributes=None):
         self.images = images          # ImageTable shared by all materials of the export
+        self.attributes = attributes if attributes is not None else []  # names, shared too
         self.ops: list[list[int]] = []
         self.consts: list[tuple[int, list[float]]] = []
         self.data: list[float] = []
@@ -287,6 +288,17 @@ class ProgramBuilder:
                 outs[out_sock.identifier] = hit
         return hit
 
+    def attribute(self, name: str) -> Value:
+        """A named per-corner attribute (e.g. "uv:UVMap.001"), read once per program."""
+        if name not in self.attributes:
+            self.attributes.append(name)
+        idx = self.attributes.index(name)
+        key = ("attr", idx)
+        hit = self._geometry.get(key)
+        if hit is None:
+            hit = self._geometry[key] = self.emit(OP_ATTRIBUTE, 0, [], param=idx)
+        return hit
+
     def geometry(self, opcode) -> Value:
         """A geometry input (UV, Generated, Object), read once per program."""
         hit = self._geometry.get(opcode)
@@ -310,7 +322,11 @@ class ProgramBuilder:
                 raise Unsupported(node)
             return self.geometry(op)
         if k == "ShaderNodeUVMap":
-            return self.geometry(OP_UV)  # the active render UV map (named maps: phase 2)
+            if getattr(node, "from_instancer", False):
+                raise Unsupported(node)
+            name = getattr(node, "uv_map", "")
+            # no name: the active render UV map, as Cycles
+            return self.attribute("uv:" + name) if name else self.geometry(OP_UV)
         if k == "ShaderNodeMapping":
             vt = node.vector_type
             ins = [self.inp(node, "Vector", ctx)]

@@ -242,6 +242,8 @@ class Scene:
     arrays: dict = field(default_factory=dict, repr=False)
     #: images material programs read: (info dict, (H, W, 4) uint8 or float16 array)
     images: list = field(default_factory=list, repr=False)
+    #: names of the named per-corner attributes programs read (e.g. "uv:UVMap.001")
+    attributes: list = field(default_factory=list, repr=False)
 
     @property
     def has_motion(self) -> bool:
@@ -347,7 +349,7 @@ def _camera(h: dict) -> CameraSpec:
     return cam
 
 
-def _materials(h: dict, n_images: int = 0) -> list[dict]:
+def _materials(h: dict, n_images: int = 0, n_attributes: int = 0) -> list[dict]:
     from .materials.program_format import validate_program
 
     mats = _list(h, "materials", "")
@@ -377,7 +379,7 @@ def _materials(h: dict, n_images: int = 0) -> list[dict]:
         }
         if m.get("program") is not None:
             try:
-                mat["program"] = validate_program(m["program"], n_images, f"{p}.program")
+                mat["program"] = validate_program(m["program"], n_images, f"{p}.program", n_attributes)
             except ValueError as e:  # "materials[i].program.field: problem"
                 where, _, problem = str(e).partition(": ")
                 raise SceneError(where, problem) from None
@@ -466,7 +468,7 @@ def _array(arrays: dict, name: str, kinds: str, ndim: int, shape_tail=()) -> np.
     return a
 
 
-def _meshes(h: dict, arrays: dict, n_materials: int) -> list[MeshData]:
+def _meshes(h: dict, arrays: dict, n_materials: int, n_attributes: int = 0) -> list[MeshData]:
     meshes = _list(h, "meshes", "")
     out = []
     for k, m in enumerate(meshes):
@@ -500,7 +502,7 @@ def _meshes(h: dict, arrays: dict, n_materials: int) -> list[MeshData]:
             if close.shape != pos.shape:
                 raise SceneError(pre + "positions_close", f"has shape {close.shape}, expected {pos.shape}")
         attrs = {}
-        for attr in ("generated", "object_coords"):
+        for attr in ("generated", "object_coords") + tuple(f"attr{i}" for i in range(n_attributes)):
             if pre + attr in arrays:
                 attrs[attr] = _array(arrays, pre + attr, "f", 3, (3, 3))
                 if len(attrs[attr]) != len(tri):
@@ -540,11 +542,14 @@ def scene_from_dict(header: dict, arrays: dict | None = None) -> Scene:
     world = _get(header, "world", "", {"color": [0, 0, 0]})
     world_color = _vector(world, "color", "world", 3, default=[0, 0, 0], lo=0.0)
     images = _images(header, arrays)
-    materials = _materials(header, len(images))
+    attributes = _list(header, "attributes", "") if "attributes" in header else []
+    if not all(isinstance(a, str) for a in attributes):
+        raise SceneError("attributes", "must be a list of names")
+    materials = _materials(header, len(images), len(attributes))
     lights = _lights(header)
-    meshes = _meshes(header, arrays, len(materials))
+    meshes = _meshes(header, arrays, len(materials), len(attributes))
     objects = _objects(header, len(meshes))
     if not materials and any(len(m.triangles) for m in meshes):
         # Geometry without materials renders as a neutral grey diffuse (Blender's default look).
         materials = [{"name": "default", "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}], "emission": [0, 0, 0]}]
-    return Scene(render, camera, world_color, materials, lights, meshes, objects, header, arrays, images)
+    return Scene(render, camera, world_color, materials, lights, meshes, objects, header, arrays, images, list(attributes))

@@ -12,7 +12,9 @@ A material's ``program`` (header JSON):
 and its lobes may carry ``color_reg`` / ``roughness_reg`` (the register that gives the lobe's
 weight colour / Blender roughness at a shading point; the lobe's ``color`` and ``roughness``
 are then representative values used for light-selection hints), the material
-``emission_reg``. Images are a header list ``images`` of {"name", "width", "height", "srgb",
+``emission_reg``. ``OP_ATTRIBUTE`` reads the per-corner attribute ``param`` of the header's
+``attributes`` list (names like ``"uv:UVMap.001"``; arrays ``mesh<K>.attr<I>`` (T, 3, 3)
+float32; zero on meshes without it, as Cycles's missing attributes). Images are a header list ``images`` of {"name", "width", "height", "srgb",
 "array"} whose array is (height, width, 4) uint8 or float16, bottom row first.
 """
 
@@ -22,12 +24,12 @@ from collections import namedtuple
 
 import numpy as np
 
-OP_UV, OP_GENERATED, OP_OBJECT = 1, 2, 3
+OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE = 1, 2, 3, 4
 OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING = 10, 11, 12, 13
 OP_IMAGE, OP_CHECKER, OP_GRADIENT, OP_RAMP = 20, 21, 22, 23
 OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31, 32, 33, 34, 35
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
-OPCODES = {OP_UV, OP_GENERATED, OP_OBJECT, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
+OPCODES = {OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
            OP_CHECKER, OP_GRADIENT, OP_RAMP, OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA,
            OP_BRIGHT_CONTRAST, OP_HSV, OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE,
            OP_RGB_TO_HSV, OP_HSV_TO_RGB}
@@ -56,10 +58,11 @@ ProgramData = namedtuple("ProgramData", [
     "uv",               # (T, 3, 2) float32 ((0, 3, 2): none)
     "generated",        # (T, 3, 3) float32
     "objco",            # (T, 3, 3) float32
+    "attrs",            # (A, T, 3, 3) float32 named per-corner attributes (header "attributes")
 ])
 
 
-def validate_program(prog, n_images: int, where: str) -> dict:
+def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> dict:
     """A checked copy of a material's ``program`` dict; raises ValueError naming the field."""
     if not isinstance(prog, dict):
         raise ValueError(f"{where}: must be an object")
@@ -85,6 +88,8 @@ def validate_program(prog, n_images: int, where: str) -> dict:
             raise ValueError(f"{where}.ops[{k}]: register out of range")
         if row[0] == OP_IMAGE and not 0 <= row[10] < n_images:
             raise ValueError(f"{where}.ops[{k}]: image {int(row[10])} does not exist")
+        if row[0] == OP_ATTRIBUTE and not 0 <= row[10] < n_attributes:
+            raise ValueError(f"{where}.ops[{k}]: attribute {int(row[10])} does not exist")
         if row[0] == OP_RAMP and not 0 <= row[10] <= len(data) - 4 * RAMP_TABLE_SIZE:
             raise ValueError(f"{where}.ops[{k}]: ramp table out of range")
     return {"registers": n, "constants": consts, "ops": ops, "data": data}
@@ -104,7 +109,7 @@ def _reg(v, n, where):
 
 
 def build_program_data(materials: list[dict], table, images: list[tuple[dict, np.ndarray]],
-                       uv, generated, objco, cutoff: float) -> ProgramData | None:
+                       uv, generated, objco, cutoff: float, attrs=None) -> ProgramData | None:
     """ProgramData for the validated ``materials`` (scene.py) and their ``MaterialTable``; None
     when no material has a program. Lobes are matched to table slots with the table's own rule
     (a lobe whose colour's mean is below ``cutoff`` was dropped)."""
@@ -170,7 +175,7 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         img_u8=np.ascontiguousarray(np.concatenate(u8) if u8 else np.zeros(0, np.uint8)),
         img_f32=np.ascontiguousarray(np.concatenate(f32) if f32 else np.zeros(0, np.float32)),
         uv=arr(uv, np.float32, (0, 3, 2)), generated=arr(generated, np.float32, (0, 3, 3)),
-        objco=arr(objco, np.float32, (0, 3, 3)))
+        objco=arr(objco, np.float32, (0, 3, 3)), attrs=arr(attrs, np.float32, (0, 0, 3, 3)))
 
 
 def empty_program_data() -> ProgramData:
@@ -184,4 +189,4 @@ def empty_program_data() -> ProgramData:
                        img_info=np.zeros((0, 5), np.int64), img_u8=np.zeros(0, np.uint8),
                        img_f32=np.zeros(0, np.float32), uv=np.zeros((0, 3, 2), np.float32),
                        generated=np.zeros((0, 3, 3), np.float32),
-                       objco=np.zeros((0, 3, 3), np.float32))
+                       objco=np.zeros((0, 3, 3), np.float32), attrs=np.zeros((0, 0, 3, 3), np.float32))

@@ -40,7 +40,7 @@ from .ggx import ALPHA_SQ_SINGULAR
 from .program_format import (LUMINANCE, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
                              OP_COMBINE, OP_COMPONENT, OP_GAMMA, OP_GENERATED, OP_GRADIENT,
                              OP_HSV, OP_HSV_TO_RGB, OP_IMAGE, OP_INVERT, OP_MAP_RANGE,
-                             OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
+                             OP_ATTRIBUTE, OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
                              OP_TO_GRAY, OP_UV, OP_VMATH, RAMP_TABLE_SIZE)
 
 
@@ -729,6 +729,11 @@ def run_program(pd, regs, prog, prim, b1, b2):
         elif op == OP_GENERATED:
             if pd.generated.shape[0]:
                 _set(regs, o0, _corner3(pd.generated, prim, b0, b1, b2))
+            else:
+                _set1(regs, o0, 0.0)
+        elif op == OP_ATTRIBUTE:
+            if param < pd.attrs.shape[0]:
+                _set(regs, o0, _corner3(pd.attrs[param], prim, b0, b1, b2))
             else:
                 _set1(regs, o0, 0.0)
         elif op == OP_OBJECT:

@@ -316,7 +316,7 @@ class MaterialTable:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_scene(cls, materials: list[dict], images=()) -> "MaterialTable":
+    def from_scene(cls, materials: list[dict], images=(), attributes=()) -> "MaterialTable":
         """Build from the header's ``materials`` list (scene-format.md). Raises ValueError naming
         the material and field, e.g. ``material 'Glass' lobe 1: ior must be > 0, got -1.0``.
         Roughness is Blender's (alpha = roughness²) and must lie in [0, 1]; a DIFFUSE lobe's
@@ -382,7 +382,7 @@ class MaterialTable:
         table = cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission)
         table.program_source = None
         if any(isinstance(mat, dict) and mat.get("program") for mat in materials):
-            table.program_source = (list(materials), list(images))
+            table.program_source = (list(materials), list(images), list(attributes))
             for i, mat in enumerate(materials):
                 if mat.get("program") and mat.get("emission_reg") is not None:
                     table.has_emission[i] = False
@@ -399,8 +399,17 @@ class MaterialTable:
         if src is None:
             return empty_program_data()
         attrs = corner_attrs or {}
+        named = None
+        n_named = len(src[2]) if len(src) > 2 else 0
+        if n_named:
+            t = len(uv) if uv is not None else max((len(a) for a in attrs.values()), default=0)
+            if t:  # else no triangle has any attribute: the programs read zeros
+                named = np.zeros((n_named, t, 3, 3), np.float32)
+                for i in range(n_named):
+                    if f"attr{i}" in attrs:
+                        named[i] = attrs[f"attr{i}"]
         return build_program_data(src[0], self, src[1], uv, attrs.get("generated"),
-                                  attrs.get("object_coords"), CLOSURE_WEIGHT_CUTOFF)
+                                  attrs.get("object_coords"), CLOSURE_WEIGHT_CUTOFF, named)
 
     # ------------------------------------------------------------------ queries
     def _mat_rows(self, mat) -> np.ndarray:
