@@ -572,3 +572,52 @@ def test_named_uv_maps_match_cycles(tmp_path):
     res = _check([_uv_case(k) for k in names], 2, tmp_path, "uvmaps", names)
     assert res.header["attributes"] == ["uv:Second", "uv:Nope"]
     assert "mesh0.attr0" in res.arrays and not any(k.endswith("attr1") for k in res.arrays)
+
+
+def _float_image_case(path, interp, space=None):
+    def case(nt, uv):
+        img = bpy.data.images.load(path, check_existing=space is None)
+        if space is not None:
+            img.colorspace_settings.name = space
+        t = node(nt, "ShaderNodeTexImage", {"Vector": mapping(nt, uv, scale=(1.3, 1.3, 1))}, image=img,
+                 interpolation=interp)
+        return t.outputs["Color"]
+    return case
+
+
+def test_float_image_matches_cycles(tmp_path):
+    """A float (EXR, values above 1) image: stored as float16; tagged sRGB (what bpy assigns to
+    this saved file) Cycles interpolates it sRGB-encoded, tagged Linear it reads it as is."""
+    path = str(tmp_path / "hdr.exr")
+    rng = np.random.default_rng(3)
+    px = np.ones((5, 7, 4), np.float32)
+    px[..., :3] = rng.uniform(0.0, 4.0, (5, 7, 3)).astype(np.float16)  # float16-exact values
+    img = bpy.data.images.new("hdr", 7, 5, alpha=False, float_buffer=True)
+    img.pixels.foreach_set(px.reshape(-1))
+    img.filepath_raw = path
+    img.file_format = "OPEN_EXR"
+    img.save()
+    names = ["float Closest*", "float Linear", "float Cubic", "float Linear Rec.709"]
+    cases = [_float_image_case(path, i) for i in ("Closest", "Linear", "Cubic")]
+    cases.append(_float_image_case(path, "Linear", "Linear Rec.709"))
+    res = _check(cases, 2, tmp_path, "float", names)
+    assert [im["srgb"] for im in res.header["images"]] == [True, False]
+    assert all(res.arrays[f"image{i}.pixels"].dtype == np.float16 for i in range(2))
+
+
+def test_unknown_colour_space_warns_and_falls_back(fresh, tmp_path):
+    path = str(tmp_path / "acescg.png")
+    make_image("a", path=path)
+    mat, nodes, out = _mat("Aces")
+    nt = mat.node_tree
+    img = bpy.data.images.load(path)
+    img.colorspace_settings.name = "ACEScg"
+    t = node(nt, "ShaderNodeTexImage", image=img)
+    d = node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.2, 0.3, 0.4, 1)})
+    nt.links.new(t.outputs["Color"], d.inputs["Color"])
+    nt.links.new(d.outputs[0], out.inputs[0])
+    _plane(mat)
+    res = _export()
+    m = _material_dict(res, "Aces")
+    assert "program" not in m and m["lobes"][0]["color"] == pytest.approx([0.2, 0.3, 0.4])
+    assert len(res.warnings) == 1 and "ACEScg" in res.warnings[0] and "'Aces'" in res.warnings[0]

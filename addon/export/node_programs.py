@@ -428,7 +428,11 @@ class ProgramBuilder:
             return magenta
         if node.projection != "FLAT" or image.source not in ("FILE", "GENERATED"):
             raise Unsupported(node)
-        idx = self.images.index_of(image)
+        try:
+            idx = self.images.index_of(image)
+        except ValueError as e:  # a colour space we cannot convert yet: the input's constant
+            self.problems.append(str(e))
+            raise Unsupported(node) from None
         if idx is None:
             self.problems.append(f"image '{image.name}' has no pixels (missing file?), rendered "
                                  f"magenta as in Cycles")
@@ -517,6 +521,15 @@ def _ramp_table(ramp) -> list[float]:
     return out
 
 
+def _linear_to_srgb(px: np.ndarray) -> np.ndarray:
+    """Cycles's ``color_linear_to_srgb`` on RGB (alpha unchanged); negatives → 0."""
+    out = px.astype(np.float64).copy()
+    c = out[..., :3]
+    out[..., :3] = np.where(c < 0.0031308, np.maximum(c, 0.0) * 12.92,
+                            1.055 * np.power(np.maximum(c, 0.0031308), 1.0 / 2.4) - 0.055)
+    return out.astype(np.float32)
+
+
 class ImageTable:
     """Images referenced by programs: pixels stored once each (uint8 for byte images, float16
     for float images), bottom row first as Blender stores them."""
@@ -548,9 +561,13 @@ class ImageTable:
             raise ValueError(f"image '{image.name}' colour space {cs!r} is not supported")
         srgb = cs == "sRGB"
         if is_float:
+            if srgb:
+                # A float image tagged sRGB: Blender hands over linear pixels, but Cycles
+                # interpolates them sRGB-encoded and decodes after the lookup (measured: see
+                # tests/test_material_programs.py::test_float_image_matches_cycles). Store the
+                # encoded values, like a byte image's.
+                px = _linear_to_srgb(px)
             arr = px.astype(np.float16)
-            if srgb:  # float pixels in an sRGB space: Blender hands them over already linear
-                srgb = False
         else:
             arr = np.clip(np.rint(px * 255.0), 0, 255).astype(np.uint8)
         idx = len(self.images)

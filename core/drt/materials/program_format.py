@@ -15,7 +15,9 @@ are then representative values used for light-selection hints), the material
 ``emission_reg``. ``OP_ATTRIBUTE`` reads the per-corner attribute ``param`` of the header's
 ``attributes`` list (names like ``"uv:UVMap.001"``; arrays ``mesh<K>.attr<I>`` (T, 3, 3)
 float32; zero on meshes without it, as Cycles's missing attributes). Images are a header list ``images`` of {"name", "width", "height", "srgb",
-"array"} whose array is (height, width, 4) uint8 or float16, bottom row first.
+"array"} whose array is (height, width, 4) uint8 or float16, bottom row first; ``srgb``:
+the values are sRGB-encoded and decoded to linear after interpolation (byte images, and float
+images tagged sRGB, as Cycles does).
 """
 
 from __future__ import annotations
@@ -151,7 +153,7 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
     for k, (img, px) in enumerate(images):
         is_float = px.dtype != np.uint8
         info[k] = (img["width"], img["height"], off_f if is_float else off_u8, is_float,
-                   bool(img["srgb"]) and not is_float)
+                   bool(img["srgb"]))
         if is_float:
             f32.append(px.astype(np.float32).reshape(-1))
             off_f += px.size

@@ -18,9 +18,9 @@ the image table, or carries a flag (clamp). Every node is evaluated as Cycles's 
 (``intern/cycles/kernel/svm/*.h``), in float64 instead of float32.
 
 Images: ``img_info`` (I, 5) int64 rows [width, height, offset, is_float, srgb]; byte images live
-in ``img_u8`` (uint8 RGBA, bottom row first), float images in ``img_f32``. 8-bit sRGB images
-are interpolated in sRGB and converted to linear after the lookup, as Cycles does for byte
-textures (``NODE_IMAGE_COMPRESS_AS_SRGB``).
+in ``img_u8`` (uint8 RGBA, bottom row first), float images in ``img_f32``. sRGB images (8-bit,
+or float tagged sRGB) are interpolated sRGB-encoded and converted to linear after the lookup,
+as Cycles does (``NODE_IMAGE_COMPRESS_AS_SRGB``).
 
 Geometry inputs (per global triangle, per corner, interpolated with Embree's barycentrics):
 ``uv`` (T, 3, 2) the active render UV map, ``generated`` (T, 3, 3) Blender's Generated
