@@ -621,3 +621,27 @@ def test_unknown_colour_space_warns_and_falls_back(fresh, tmp_path):
     m = _material_dict(res, "Aces")
     assert "program" not in m and m["lobes"][0]["color"] == pytest.approx([0.2, 0.3, 0.4])
     assert len(res.warnings) == 1 and "ACEScg" in res.warnings[0] and "'Aces'" in res.warnings[0]
+
+
+def test_viewport_shows_textured_materials_at_their_constants():
+    """The viewport (drt.interactive) does not run programs yet: a textured scene renders there
+    with each textured input at its socket's value, as before programs existed."""
+    import os
+
+    from addon import viewport
+    from test_addon import ensure_registered
+    from test_viewport import camera_view_spec
+
+    ensure_registered()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(P.REPO, "blend_scenes", "textured.blend"))
+    vp = viewport.ViewportSync(threads=1)
+    try:
+        dg = bpy.context.evaluated_depsgraph_get()
+        vp.sync(dg)
+        vp.set_view(camera_view_spec(viewport, dg, 32, 24), 32, 24, 4)
+        frame = vp.session.wait(lambda f: f.divider == 1, 120)
+        assert frame is not None, vp.session.error
+        floor = next(m for m in vp.session.live.materials if m["name"] == "Floor")
+        assert "program" not in floor and floor["lobes"][0]["color"] == pytest.approx([0.8] * 3)
+    finally:
+        assert vp.stop()

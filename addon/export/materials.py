@@ -47,8 +47,9 @@ DEFAULT_MATERIAL = {"name": "__drt_default__",
 
 _GLOSSY_IDS = {"ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"}
 _SHARP = {"SHARP"}
-#: representative colour of a lobe whose colour comes from a program (light-selection hints)
-PLACEHOLDER = 0.5
+#: smallest representative colour of a program-driven lobe: the table drops lobes below
+#: CLOSURE_WEIGHT_CUTOFF (1e-5), which would detach the lobe from its register
+MIN_PLACEHOLDER = 1e-4
 
 
 def _rgb(value) -> np.ndarray:
@@ -60,6 +61,28 @@ def _from_socket(link_sock):
     """The socket a link comes from, skipping reroutes, muted links and nodes, node groups;
     None if unlinked."""
     return resolve(link_sock, ())[0]
+
+
+def _representative(v: Value, floor: float) -> list:
+    """The constant standing for a program-driven value: its fallback (0.5 if unknown), each
+    component at least ``floor``."""
+    fb = v.fallback if v.fallback is not None else np.full(3, 0.5)
+    return [float(max(x, floor)) for x in np.broadcast_to(fb, 3)]
+
+
+def constant_materials(materials: list[dict]) -> list[dict]:
+    """The materials without their programs: every lobe at its representative constant (what
+    the material was before programs existed). For renderers that do not run programs yet."""
+    out = []
+    for m in materials:
+        if "program" not in m:
+            out.append(m)
+            continue
+        c = {k: v for k, v in m.items() if k not in ("program", "emission_reg")}
+        c["lobes"] = [{k: v for k, v in lb.items() if k not in ("color_reg", "roughness_reg")}
+                      for lb in m["lobes"]]
+        out.append(c)
+    return out
 
 
 class MaterialExporter:
@@ -127,6 +150,7 @@ class MaterialExporter:
         emission = constant(emission)
         if isinstance(emission, Value):
             result["emission_reg"] = self._b.reg_of(emission)
+            result["emission"] = _representative(emission, 0.0)
         else:
             result["emission"] = [float(x) for x in np.broadcast_to(emission, 3)]
         if "emission_reg" in result or any("color_reg" in lb or "roughness_reg" in lb
@@ -143,7 +167,7 @@ class MaterialExporter:
         out = {"type": lb["type"]}
         color = constant(lb["color"])
         if isinstance(color, Value):
-            out["color"] = [PLACEHOLDER] * 3
+            out["color"] = _representative(color, MIN_PLACEHOLDER)
             out["color_reg"] = self._b.reg_of(color)
         else:
             color = np.broadcast_to(np.asarray(color, dtype=np.float64), 3)
@@ -153,7 +177,7 @@ class MaterialExporter:
         if "roughness" in lb:
             r = constant(lb["roughness"])
             if isinstance(r, Value):
-                out["roughness"] = PLACEHOLDER
+                out["roughness"] = min(max(_representative(r, 0.0)[0], 0.0), 1.0)
                 out["roughness_reg"] = self._b.reg_of(r)
             else:
                 out["roughness"] = min(max(float(np.ravel(r)[0]), 0.0), 1.0)
@@ -177,7 +201,12 @@ class MaterialExporter:
         """The compiled value of an input (a constant or a program register); an input driven by
         a node the compiler does not know falls back to the socket's own value, with a warning."""
         try:
-            return constant(self._b.input(node, sock, ctx, kind))
+            v = constant(self._b.input(node, sock, ctx, kind))
+            if isinstance(v, Value):  # the socket's own value is the fallback (viewport, hints)
+                d = sock.default_value
+                fb = float(d if not hasattr(d, "__len__") else d[0]) if kind == "float" else _rgb(d)
+                v = Value(self._b, reg=v.reg, fallback=fb)
+            return v
         except Unsupported as e:
             problems.append(f"'{node.name}' input '{sock.name}' is driven by {e} (unsupported), "
                             f"using its constant value")

@@ -81,14 +81,20 @@ def _vec3(v) -> np.ndarray:
 
 
 class Value:
-    """A compiled socket value: constant (``const``, a 3-vector) or register (``reg``)."""
+    """A compiled socket value: constant (``const``, a 3-vector) or register (``reg``).
+
+    ``fallback`` (3-vector) is what the value is without programs: the driven socket's own
+    value, carried through the exporter's arithmetic. It is the lobe's representative constant
+    in the scene file and what a renderer without program support (the viewport) shows — the
+    same as before programs existed."""
 
     __array_ufunc__ = None  # numpy arrays defer arithmetic to us
 
-    def __init__(self, builder, reg=None, const=None):
+    def __init__(self, builder, reg=None, const=None, fallback=None):
         self.b = builder
         self.reg = reg
         self.const = None if const is None else _vec3(const)
+        self.fallback = self.const if fallback is None else _vec3(fallback)
 
     @property
     def is_const(self) -> bool:
@@ -99,7 +105,10 @@ class Value:
         a, b = (o, self) if swap else (self, o)
         if a.is_const and b.is_const:
             return Value(self.b, const=_FOLD[mode](a.const, b.const))
-        return self.b.emit(OP_VMATH, VMATH_OPS.index(mode), [a, b])
+        out = self.b.emit(OP_VMATH, VMATH_OPS.index(mode), [a, b])
+        if a.fallback is not None and b.fallback is not None:
+            out.fallback = _FOLD[mode](a.fallback, b.fallback)
+        return out
 
     def __add__(self, o): return self._bin(o, "ADD")
     def __radd__(self, o): return self._bin(o, "ADD", True)
@@ -119,7 +128,10 @@ def clamp01(x):
         if x.is_const:
             return Value(x.b, const=np.clip(x.const, 0.0, 1.0))
         lo = x.b.emit(OP_VMATH, VMATH_OPS.index("MAXIMUM"), [x, Value(x.b, const=0.0)])
-        return x.b.emit(OP_VMATH, VMATH_OPS.index("MINIMUM"), [lo, Value(x.b, const=1.0)])
+        out = x.b.emit(OP_VMATH, VMATH_OPS.index("MINIMUM"), [lo, Value(x.b, const=1.0)])
+        if x.fallback is not None:
+            out.fallback = np.clip(x.fallback, 0.0, 1.0)
+        return out
     return np.clip(x, 0.0, 1.0) if isinstance(x, np.ndarray) else min(max(float(x), 0.0), 1.0)
 
 
