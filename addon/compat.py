@@ -149,10 +149,15 @@ def triangle_normals(mesh, tri_corners: np.ndarray, tri_verts: np.ndarray) -> np
 
 
 def active_uvs(mesh) -> np.ndarray | None:
-    """The active UV map per corner, (L, 2) float32, or None."""
-    layer = mesh.uv_layers.active
+    """The active *render* UV map per corner (Cycles's default UV), (L, 2) float32, or None."""
+    layer = next((uv for uv in mesh.uv_layers if uv.active_render), None) or mesh.uv_layers.active
     if layer is None or len(mesh.loops) == 0:
         return None
+    return uv_layer_values(mesh, layer)
+
+
+def uv_layer_values(mesh, layer) -> np.ndarray:
+    """UV map ``layer`` per corner, (L, 2) float32."""
     out = np.empty(len(mesh.loops) * 2, dtype=np.float32)
     if hasattr(layer, "uv"):  # 3.5+: a float2 attribute, much faster than .data
         layer.uv.foreach_get("vector", out)

@@ -23,7 +23,7 @@ import numpy as np
 
 from . import compat, denoising
 from .export import _instance_key, _instance_name, _is_rendered
-from .export.materials import MaterialExporter
+from .export.materials import MaterialExporter, constant_materials
 from .export.mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays
 from .export.scene_parts import camera_dict, light_dict, matrix_list, render_settings, world_dict
 
@@ -152,7 +152,9 @@ class ViewportSync:
         self._send_materials(scene)
 
     def _send_materials(self, scene) -> None:
-        materials = _validated(scene, self._materials.materials, [], {"color": [0, 0, 0]}).materials
+        # the viewport does not run material programs yet: textured inputs show their constants
+        materials = _validated(scene, constant_materials(self._materials.materials), [],
+                               {"color": [0, 0, 0]}).materials
         self.session.edit(lambda live, m=materials: live.set_materials(m))
 
     def _reconcile(self, depsgraph, geometry: set) -> None:

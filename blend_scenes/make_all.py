@@ -13,7 +13,7 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-SCENES = ["cornell_box", "dof", "motion_blur", "glossy_glass", "all_lights", "showcase", "large_mesh"]
+SCENES = ["cornell_box", "dof", "motion_blur", "glossy_glass", "all_lights", "showcase", "textured", "large_mesh"]
 
 
 def main():

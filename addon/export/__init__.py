@@ -127,7 +127,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
             mkey = ("deform",) + key  # never shared
         k = mesh_of_key.get(mkey)
         if k is None:
-            data = evaluated_mesh_arrays(obj, slot_mats)
+            data = evaluated_mesh_arrays(obj, slot_mats, mats.reads(slot_mats))
             if data is None:
                 mesh_of_key[mkey] = -1
                 continue
@@ -158,6 +158,11 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     header = {"format": "drt-scene", "version": 1, "render": render, "camera": camera,
               "world": world_dict(scene.world, warnings), "materials": mats.materials,
               "lights": lights, "meshes": meshes, "objects": objects}
+    if mats.attributes:  # named per-corner attributes programs read (arrays mesh<K>.attr<I>)
+        header["attributes"] = list(mats.attributes)
+    if mats.images.images:  # pixels of the images material programs read (docs/materials.md)
+        header["images"] = mats.images.images
+        arrays.update(mats.images.arrays)
     return ExportResult(header, arrays, warnings)
 
 

@@ -25,11 +25,21 @@ Mapping (see docs/addon.md, "Materials"):
   stands in for it. Coat, sheen and subsurface are ignored with a warning.
 - Anything else: one warning per material, and a DIFFUSE lobe of the node's color/base color
   (or the material's viewport color).
+
+Textures (docs/materials.md): a linked input is compiled by ``node_programs`` into the
+material's *program*; the arithmetic above is written on ``Value``s, so a textured base colour,
+roughness, metallic, mix factor or emission gives lobes whose colour / roughness come from
+program registers (``color_reg`` / ``roughness_reg`` / ``emission_reg``), and constant inputs
+fold to today's constant lobes. Node groups, reroutes and muted nodes are followed at the
+shader level too. IOR, alpha, transmission, specular and coat stay constant-only (a linked one
+warns and uses its socket's value).
 """
 
 import numpy as np
 
 from .. import compat
+from .node_programs import (ImageTable, ProgramBuilder, Unsupported, Value, clamp01, constant,
+                            maybe_positive, resolve)
 
 DEFAULT_MATERIAL = {"name": "__drt_default__",
                     "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}],
@@ -37,6 +47,9 @@ DEFAULT_MATERIAL = {"name": "__drt_default__",
 
 _GLOSSY_IDS = {"ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"}
 _SHARP = {"SHARP"}
+#: smallest representative colour of a program-driven lobe: the table drops lobes below
+#: CLOSURE_WEIGHT_CUTOFF (1e-5), which would detach the lobe from its register
+MIN_PLACEHOLDER = 1e-4
 
 
 def _rgb(value) -> np.ndarray:
@@ -45,20 +58,31 @@ def _rgb(value) -> np.ndarray:
 
 
 def _from_socket(link_sock):
-    """The socket a link comes from, skipping reroutes and muted links; None if unlinked."""
-    sock = link_sock
-    seen = 0
-    while sock.is_linked and seen < 64:
-        link = sock.links[0]
-        if getattr(link, "is_muted", False) or not getattr(link, "is_valid", True):
-            return None
-        node = link.from_node
-        if node.bl_idname == "NodeReroute":
-            sock = node.inputs[0]
-            seen += 1
+    """The socket a link comes from, skipping reroutes, muted links and nodes, node groups;
+    None if unlinked."""
+    return resolve(link_sock, ())[0]
+
+
+def _representative(v: Value, floor: float) -> list:
+    """The constant standing for a program-driven value: its fallback (0.5 if unknown), each
+    component at least ``floor``."""
+    fb = v.fallback if v.fallback is not None else np.full(3, 0.5)
+    return [float(max(x, floor)) for x in np.broadcast_to(fb, 3)]
+
+
+def constant_materials(materials: list[dict]) -> list[dict]:
+    """The materials without their programs: every lobe at its representative constant (what
+    the material was before programs existed). For renderers that do not run programs yet."""
+    out = []
+    for m in materials:
+        if "program" not in m:
+            out.append(m)
             continue
-        return link.from_socket
-    return None
+        c = {k: v for k, v in m.items() if k not in ("program", "emission_reg")}
+        c["lobes"] = [{k: v for k, v in lb.items() if k not in ("color_reg", "roughness_reg")}
+                      for lb in m["lobes"]]
+        out.append(c)
+    return out
 
 
 class MaterialExporter:
@@ -68,6 +92,9 @@ class MaterialExporter:
         self.materials: list[dict] = []
         self._index: dict = {}  # material pointer (or None) -> index
         self.warnings: list[str] = []
+        self.images = ImageTable()
+        self.attributes: list[str] = []  # named per-corner attributes programs read
+        self._b = None
 
     def index_of(self, material) -> int:
         """Global index of a Blender material (None: the default gray diffuse)."""
@@ -79,6 +106,23 @@ class MaterialExporter:
             self.materials.append(DEFAULT_MATERIAL if material is None else self.convert(material))
         return idx
 
+    def reads(self, indices) -> dict:
+        """Geometry inputs the programs of the materials with these global indices read:
+        {"uv" / "generated" / "object_coords": None, named attribute ("uv:Name"): its index in
+        ``attributes``}."""
+        from .node_programs import OP_ATTRIBUTE, OP_GENERATED, OP_OBJECT, OP_UV
+
+        names = {OP_UV: "uv", OP_GENERATED: "generated", OP_OBJECT: "object_coords"}
+        out = {}
+        for i in indices:
+            prog = self.materials[int(i)].get("program")
+            for op in (prog or {}).get("ops", []):
+                if op[0] in names:
+                    out[names[op[0]]] = None
+                elif op[0] == OP_ATTRIBUTE:
+                    out[self.attributes[op[10]]] = op[10]
+        return out
+
     # --- conversion ---------------------------------------------------------------------------
 
     def convert(self, material) -> dict:
@@ -86,23 +130,60 @@ class MaterialExporter:
         tree = compat.material_node_tree(material)
         lobes: list[dict] = []
         emission = np.zeros(3)
+        self._b = ProgramBuilder(self.images, self.attributes)
         if tree is None:
             lobes = [{"type": "DIFFUSE", "color": list(map(float, material.diffuse_color[:3]))}]
         else:
             out = self._output_node(tree)
             surface = out.inputs.get("Surface") if out is not None else None
-            src = _from_socket(surface) if surface is not None else None
+            src, ctx = resolve(surface, ()) if surface is not None else (None, ())
             if src is None:
                 # Cycles renders an unconnected surface black.
                 lobes = []
             else:
-                lobes, emission = self._shader(src, 1.0, problems, material, depth=0)
-        lobes = [lb for lb in lobes if max(lb["color"]) > 0.0]
+                lobes, emission = self._shader(src, ctx, 1.0, problems, material, depth=0)
+        result = {"name": material.name, "lobes": [], "emission": [0.0, 0.0, 0.0]}
+        for lb in lobes:
+            entry = self._lobe(lb)
+            if entry is not None:
+                result["lobes"].append(entry)
+        emission = constant(emission)
+        if isinstance(emission, Value):
+            result["emission_reg"] = self._b.reg_of(emission)
+            result["emission"] = _representative(emission, 0.0)
+        else:
+            result["emission"] = [float(x) for x in np.broadcast_to(emission, 3)]
+        if "emission_reg" in result or any("color_reg" in lb or "roughness_reg" in lb
+                                           for lb in result["lobes"]):
+            result["program"] = self._b.to_dict()
+        problems += self._b.problems
         if problems:
             uniq = list(dict.fromkeys(problems))
             self.warnings.append(f"Material '{material.name}': " + "; ".join(uniq))
-        return {"name": material.name, "lobes": lobes,
-                "emission": [float(x) for x in emission]}
+        return result
+
+    def _lobe(self, lb: dict) -> dict | None:
+        """A lobe with Value entries → the header's lobe dict (None if constant black)."""
+        out = {"type": lb["type"]}
+        color = constant(lb["color"])
+        if isinstance(color, Value):
+            out["color"] = _representative(color, MIN_PLACEHOLDER)
+            out["color_reg"] = self._b.reg_of(color)
+        else:
+            color = np.broadcast_to(np.asarray(color, dtype=np.float64), 3)
+            if not max(color) > 0.0:
+                return None
+            out["color"] = [float(x) for x in color]
+        if "roughness" in lb:
+            r = constant(lb["roughness"])
+            if isinstance(r, Value):
+                out["roughness"] = min(max(_representative(r, 0.0)[0], 0.0), 1.0)
+                out["roughness_reg"] = self._b.reg_of(r)
+            else:
+                out["roughness"] = min(max(float(np.ravel(r)[0]), 0.0), 1.0)
+        if "ior" in lb:
+            out["ior"] = lb["ior"]
+        return out
 
     @staticmethod
     def _output_node(tree):
@@ -116,144 +197,166 @@ class MaterialExporter:
                 return n
         return outputs[0] if outputs else None
 
-    def _value(self, node, name, problems, default=0.0):
-        """Constant float input, following links to Value nodes."""
+    def _compiled(self, node, sock, ctx, problems, kind):
+        """The compiled value of an input (a constant or a program register); an input driven by
+        a node the compiler does not know falls back to the socket's own value, with a warning."""
+        try:
+            v = constant(self._b.input(node, sock, ctx, kind))
+            if isinstance(v, Value):  # the socket's own value is the fallback (viewport, hints)
+                d = sock.default_value
+                fb = float(d if not hasattr(d, "__len__") else d[0]) if kind == "float" else _rgb(d)
+                v = Value(self._b, reg=v.reg, fallback=fb)
+            return v
+        except Unsupported as e:
+            problems.append(f"'{node.name}' input '{sock.name}' is driven by {e} (unsupported), "
+                            f"using its constant value")
+            return _rgb(sock.default_value) if kind is None else None
+
+    def _value(self, node, name, problems, default=0.0, ctx=()):
+        """Float input: a float, or a Value when it varies over the surface."""
         sock = compat.find_input(node, name)
         if sock is None:
             return default
-        src = _from_socket(sock)
-        if src is not None:
-            if src.node.bl_idname == "ShaderNodeValue":
-                return float(src.node.outputs[0].default_value)
-            problems.append(f"'{node.name}' input '{sock.name}' is driven by "
-                            f"'{src.node.name}' (unsupported), using its constant value")
-        v = sock.default_value
-        return float(v if not hasattr(v, "__len__") else v[0])
+        v = self._compiled(node, sock, ctx, problems, "float")
+        if v is None:
+            d = sock.default_value
+            return float(d if not hasattr(d, "__len__") else d[0])
+        return v if isinstance(v, Value) else float(np.ravel(v)[0])
 
-    def _color(self, node, name, problems, default=(0.8, 0.8, 0.8)):
-        """Constant color input, following links to RGB / Value nodes."""
+    def _const_value(self, node, name, problems, default=0.0, ctx=()):
+        """Float input that must be constant (a textured one warns and uses the socket value)."""
+        v = self._value(node, name, problems, default, ctx)
+        if isinstance(v, Value):
+            sock = compat.find_input(node, name)
+            problems.append(f"'{node.name}' textured '{sock.name}' not supported yet, using its value")
+            d = sock.default_value
+            return float(d if not hasattr(d, "__len__") else d[0])
+        return v
+
+    def _color(self, node, name, problems, default=(0.8, 0.8, 0.8), ctx=()):
+        """Colour input: an RGB array, or a Value when it varies over the surface."""
         sock = compat.find_input(node, name)
         if sock is None:
             return _rgb(default)
-        src = _from_socket(sock)
-        if src is not None:
-            if src.node.bl_idname == "ShaderNodeRGB":
-                return _rgb(src.node.outputs[0].default_value)
-            if src.node.bl_idname == "ShaderNodeValue":
-                return _rgb(src.node.outputs[0].default_value)
-            problems.append(f"'{node.name}' input '{sock.name}' is driven by "
-                            f"'{src.node.name}' (unsupported), using its constant value")
-        return _rgb(sock.default_value)
+        v = self._compiled(node, sock, ctx, problems, None)
+        return v if isinstance(v, Value) else _rgb(v)
 
-    def _roughness(self, node, problems):
+    def _const_color(self, node, name, problems, default=(0.8, 0.8, 0.8), ctx=()):
+        v = self._color(node, name, problems, default, ctx)
+        if isinstance(v, Value):
+            sock = compat.find_input(node, name)
+            problems.append(f"'{node.name}' textured '{sock.name}' not supported yet, using its value")
+            return _rgb(sock.default_value)
+        return v
+
+    def _roughness(self, node, problems, ctx):
         dist = getattr(node, "distribution", "GGX")
         if dist in _SHARP:
             return 0.0
         if dist not in ("GGX", "MULTI_GGX"):
             problems.append(f"'{node.name}' distribution {dist} rendered as GGX")
-        return min(max(self._value(node, "Roughness", problems), 0.0), 1.0)
+        r = self._value(node, "Roughness", problems, 0.5, ctx)
+        return r if isinstance(r, Value) else min(max(r, 0.0), 1.0)
 
-    def _shader(self, sock, weight, problems, material, depth):
+    def _shader(self, sock, ctx, weight, problems, material, depth):
         """Lobes and emission of the shader output ``sock`` scaled by ``weight``."""
         node = sock.node
         kind = node.bl_idname
         if depth > 32:
             problems.append("shader graph too deep")
             return [], np.zeros(3)
-        if getattr(node, "mute", False):
-            problems.append(f"'{node.name}' is muted")
-            return [], np.zeros(3)
-        w = float(weight)
+        w = weight
 
         if kind == "ShaderNodeBsdfDiffuse":
-            if self._value(node, "Roughness", problems) > 0.0:
+            r = self._value(node, "Roughness", problems, 0.0, ctx)
+            if isinstance(r, Value) or r > 0.0:
                 problems.append(f"'{node.name}' roughness ignored (rendered as Lambert)")
-            return [{"type": "DIFFUSE", "color": (w * self._color(node, "Color", problems)).tolist()}], \
+            return [{"type": "DIFFUSE", "color": w * self._color(node, "Color", problems, ctx=ctx)}], \
                 np.zeros(3)
         if kind in _GLOSSY_IDS:
-            if kind == "ShaderNodeBsdfAnisotropic" and abs(self._value(node, "Anisotropy", problems)) > 0:
+            if kind == "ShaderNodeBsdfAnisotropic" and abs(self._const_value(node, "Anisotropy", problems, 0.0, ctx)) > 0:
                 problems.append(f"'{node.name}' anisotropy ignored")
-            return [{"type": "GLOSSY", "color": (w * self._color(node, "Color", problems)).tolist(),
-                     "roughness": self._roughness(node, problems)}], np.zeros(3)
+            return [{"type": "GLOSSY", "color": w * self._color(node, "Color", problems, ctx=ctx),
+                     "roughness": self._roughness(node, problems, ctx)}], np.zeros(3)
         if kind == "ShaderNodeBsdfGlass":
-            return [{"type": "GLASS", "color": (w * self._color(node, "Color", problems)).tolist(),
-                     "roughness": self._roughness(node, problems),
-                     "ior": max(self._value(node, "IOR", problems, 1.45), 1.0)}], np.zeros(3)
+            return [{"type": "GLASS", "color": w * self._color(node, "Color", problems, ctx=ctx),
+                     "roughness": self._roughness(node, problems, ctx),
+                     "ior": max(self._const_value(node, "IOR", problems, 1.45, ctx), 1.0)}], np.zeros(3)
         if kind == "ShaderNodeBsdfTransparent":
-            return [{"type": "GLASS", "color": (w * self._color(node, "Color", problems)).tolist(),
+            return [{"type": "GLASS", "color": w * self._color(node, "Color", problems, ctx=ctx),
                      "roughness": 0.0, "ior": 1.0}], np.zeros(3)
         if kind == "ShaderNodeEmission":
-            col = self._color(node, "Color", problems, (1, 1, 1))
-            return [], w * col * self._value(node, "Strength", problems, 1.0)
+            col = self._color(node, "Color", problems, (1, 1, 1), ctx)
+            return [], w * col * self._value(node, "Strength", problems, 1.0, ctx)
         if kind == "ShaderNodeMixShader":
-            fac = min(max(self._value(node, ("Fac", "Factor"), problems, 0.5), 0.0), 1.0)
+            fac = clamp01(self._value(node, ("Fac", "Factor"), problems, 0.5, ctx))
             lobes, em = [], np.zeros(3)
             for inp, f in ((node.inputs[1], 1.0 - fac), (node.inputs[2], fac)):
-                src = _from_socket(inp)
-                if src is not None and f > 0.0:
-                    lb, e = self._shader(src, w * f, problems, material, depth + 1)
+                src, sctx = resolve(inp, ctx)
+                if src is not None and maybe_positive(f):
+                    lb, e = self._shader(src, sctx, w * f, problems, material, depth + 1)
                     lobes += lb
                     em = em + e
             return lobes, em
         if kind == "ShaderNodeAddShader":
             lobes, em = [], np.zeros(3)
             for inp in node.inputs[:2]:
-                src = _from_socket(inp)
+                src, sctx = resolve(inp, ctx)
                 if src is not None:
-                    lb, e = self._shader(src, w, problems, material, depth + 1)
+                    lb, e = self._shader(src, sctx, w, problems, material, depth + 1)
                     lobes += lb
                     em = em + e
             return lobes, em
         if kind == "ShaderNodeBsdfPrincipled":
-            return self._principled(node, w, problems)
+            return self._principled(node, w, problems, ctx)
 
         # Unsupported: its (base) color as diffuse.
         problems.append(f"unsupported shader '{node.name}' ({kind}), rendered as diffuse")
         for name in ("Base Color", "Color"):
             if node.inputs.get(name) is not None:
-                col = self._color(node, name, problems)
+                col = self._color(node, name, problems, ctx=ctx)
                 break
         else:
             col = _rgb(material.diffuse_color)
-        return [{"type": "DIFFUSE", "color": (w * col).tolist()}], np.zeros(3)
+        return [{"type": "DIFFUSE", "color": w * col}], np.zeros(3)
 
-    def _principled(self, node, w, problems):
-        base = self._color(node, "Base Color", problems)
-        metallic = min(max(self._value(node, "Metallic", problems), 0.0), 1.0)
-        rough = min(max(self._value(node, "Roughness", problems, 0.5), 0.0), 1.0)
-        ior = max(self._value(node, "IOR", problems, 1.5), 1.0)
-        alpha = min(max(self._value(node, "Alpha", problems, 1.0), 0.0), 1.0)
-        trans = min(max(self._value(node, "transmission", problems), 0.0), 1.0)
-        spec = max(self._value(node, "specular", problems, 0.5), 0.0)
+    def _principled(self, node, w, problems, ctx):
+        base = self._color(node, "Base Color", problems, ctx=ctx)
+        metallic = clamp01(self._value(node, "Metallic", problems, 0.0, ctx))
+        rough = self._value(node, "Roughness", problems, 0.5, ctx)
+        rough = rough if isinstance(rough, Value) else min(max(rough, 0.0), 1.0)
+        ior = max(self._const_value(node, "IOR", problems, 1.5, ctx), 1.0)
+        alpha = min(max(self._const_value(node, "Alpha", problems, 1.0, ctx), 0.0), 1.0)
+        trans = min(max(self._const_value(node, "transmission", problems, 0.0, ctx), 0.0), 1.0)
+        spec = max(self._const_value(node, "specular", problems, 0.5, ctx), 0.0)
         tint_sock = compat.find_input(node, "specular_tint")
         if tint_sock is not None and tint_sock.type == "RGBA":
-            tint = self._color(node, "specular_tint", problems, (1, 1, 1))
+            tint = self._const_color(node, "specular_tint", problems, (1, 1, 1), ctx)
         else:  # 3.x: a float blending white toward the base color
-            t = self._value(node, "specular_tint", problems, 0.0) if tint_sock is not None else 0.0
+            t = self._const_value(node, "specular_tint", problems, 0.0, ctx) if tint_sock is not None else 0.0
             tint = (1.0 - t) * np.ones(3) + t * base
-        em_col = self._color(node, "emission_color", problems, (0, 0, 0))
-        em_strength = self._value(node, "Emission Strength", problems, 1.0) \
+        em_col = self._color(node, "emission_color", problems, (0, 0, 0), ctx)
+        em_strength = self._value(node, "Emission Strength", problems, 1.0, ctx) \
             if node.inputs.get("Emission Strength") is not None else 1.0
         for key in ("coat", "sheen", "subsurface"):
-            if self._value(node, key, problems, 0.0) > 0.0:
+            if self._const_value(node, key, problems, 0.0, ctx) > 0.0:
                 problems.append(f"'{node.name}' {key} ignored")
 
         f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
         f_avg = min(2.0 * spec * (f0 + (1.0 - f0) / 21.0), 1.0) if ior > 1.0 else 0.0
         lobes = []
         wa = w * alpha
-        if metallic > 0:
-            lobes.append({"type": "GLOSSY", "color": (wa * metallic * base).tolist(), "roughness": rough})
-        if trans > 0 and metallic < 1:
-            lobes.append({"type": "GLASS", "color": (wa * (1 - metallic) * trans * base).tolist(),
+        if maybe_positive(metallic):
+            lobes.append({"type": "GLOSSY", "color": wa * metallic * base, "roughness": rough})
+        dielectric = 1.0 - metallic
+        if trans > 0 and maybe_positive(dielectric):
+            lobes.append({"type": "GLASS", "color": wa * dielectric * trans * base,
                           "roughness": rough, "ior": ior})
-        opaque = wa * (1 - metallic) * (1 - trans)
-        if opaque > 0:
-            lobes.append({"type": "DIFFUSE", "color": (opaque * (1 - f_avg) * base).tolist()})
+        opaque = wa * dielectric * (1 - trans)
+        if maybe_positive(opaque):
+            lobes.append({"type": "DIFFUSE", "color": opaque * (1 - f_avg) * base})
             if f_avg > 0:
-                lobes.append({"type": "GLOSSY", "color": (opaque * f_avg * tint).tolist(),
-                              "roughness": rough})
+                lobes.append({"type": "GLOSSY", "color": opaque * f_avg * tint, "roughness": rough})
         if alpha < 1:
-            lobes.append({"type": "GLASS", "color": [w * (1 - alpha)] * 3, "roughness": 0.0,
-                          "ior": 1.0})
+            lobes.append({"type": "GLASS", "color": w * (1 - alpha), "roughness": 0.0, "ior": 1.0})
         return lobes, wa * em_col * em_strength

@@ -16,13 +16,15 @@ def read_positions(mesh) -> np.ndarray:
     return compat.positions(mesh)
 
 
-def mesh_arrays(mesh, slot_materials: np.ndarray) -> dict | None:
+def mesh_arrays(mesh, slot_materials: np.ndarray, attrs=frozenset()) -> dict | None:
     """Arrays of one evaluated mesh, or None when it has no triangles.
 
     slot_materials: (S,) int32, the global material index of each material slot (S >= 1);
     triangles whose slot index is out of range use the last slot, as Blender does.
     Returns {"positions" (V,3) f32, "triangles" (T,3) i32, "material_index" (T,) i32,
-    optionally "normals" (T,3,3) f32 and "uvs" (T,3,2) f32}.
+    optionally "normals" (T,3,3) f32 and "uvs" (T,3,2) f32}; plus, for the geometry inputs
+    named in ``attrs`` (what the material programs read), "generated" and "object_coords"
+    (T,3,3) f32 per corner, and "attr<I>" (T,3,3) for a named UV map "uv:<name>" with index I.
     """
     compat.prepare_mesh(mesh)
     if len(mesh.loop_triangles) == 0:
@@ -39,10 +41,31 @@ def mesh_arrays(mesh, slot_materials: np.ndarray) -> dict | None:
     uvs = compat.active_uvs(mesh)
     if uvs is not None:
         out["uvs"] = uvs[tri_corners]
+    if "object_coords" in attrs:
+        out["object_coords"] = np.ascontiguousarray(out["positions"][tri_verts], dtype=np.float32)
+    if "generated" in attrs:
+        out["generated"] = generated_coords(mesh, out["positions"])[tri_verts]
+    for name, idx in (attrs.items() if isinstance(attrs, dict) else ()):
+        if name.startswith("uv:") and idx is not None:
+            layer = mesh.uv_layers.get(name[3:])
+            if layer is not None:  # a mesh without the map reads zeros, as in Cycles
+                corner = np.zeros((len(mesh.loops), 3), np.float32)
+                corner[:, :2] = compat.uv_layer_values(mesh, layer)
+                out[f"attr{idx}"] = corner[tri_corners]
     return out
 
 
-def evaluated_mesh_arrays(obj, slot_materials: np.ndarray) -> dict | None:
+def generated_coords(mesh, positions: np.ndarray) -> np.ndarray:
+    """Blender's Generated texture coordinates of the vertices, (V, 3) float32: the mesh's
+    texture space (auto: its bounding box) mapped to [0, 1]³, as Cycles computes them
+    (``(co − location) / (2·size) + 0.5``; a zero size component gives 0.5)."""
+    loc = np.array(mesh.texspace_location, dtype=np.float64)
+    size = np.array(mesh.texspace_size, dtype=np.float64)
+    inv = np.divide(0.5, size, out=np.zeros(3), where=size != 0.0)
+    return ((positions - loc) * inv + 0.5).astype(np.float32)
+
+
+def evaluated_mesh_arrays(obj, slot_materials: np.ndarray, attrs=frozenset()) -> dict | None:
     """``mesh_arrays`` of an evaluated object (modifiers, curves, text, geometry nodes)."""
     try:
         mesh = obj.to_mesh()
@@ -51,7 +74,7 @@ def evaluated_mesh_arrays(obj, slot_materials: np.ndarray) -> dict | None:
     try:
         if mesh is None:
             return None
-        return mesh_arrays(mesh, slot_materials)
+        return mesh_arrays(mesh, slot_materials, attrs)
     finally:
         obj.to_mesh_clear()
 

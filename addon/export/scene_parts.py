@@ -55,7 +55,7 @@ def render_settings(scene, preview: bool = False) -> dict:
         "pixel_aspect": [float(r.pixel_aspect_x), float(r.pixel_aspect_y)],
         "border": border,
         "film_transparent": bool(r.film_transparent),
-        "filter": {"type": d.filter_type, "width": float(r.filter_size)},
+        "filter": {"type": d.filter_type, "width": round(float(r.filter_size), 6)},  # float32 0.01 < 0.01
         "spp": int(d.preview_samples if preview else d.samples),
         "seed": int(d.seed),
         "sampler": d.sampler,

@@ -50,6 +50,9 @@ class SceneGeometry:
     normals: np.ndarray | None = None  # (T_all, 3, 3) float32 shading normals (world for static, local for moving)
     has_normals: np.ndarray = None  # (T_all,) bool; False: flat shading
     uvs: np.ndarray | None = None  # (T_all, 3, 2) float32
+    #: per-corner attributes material programs read, (T_all, 3, 3) float32 by name ("generated",
+    #: "object_coords"); only those some mesh has (zeros on the other meshes' triangles)
+    corner_attrs: dict = field(default_factory=dict)
     triangle_count: int = 0
     scene_radius: float = 1.0  # radius of the bounding sphere of all geometry (scene units)
 
@@ -115,6 +118,7 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     static_pos, static_tri, moving = [], [], []
     mats_static, nrm_static, hasn_static, uv_static = [], [], [], []
     mats_moving, nrm_moving, hasn_moving, uv_moving = [], [], [], []
+    order_static, order_moving = [], []  # meshes in global triangle order (for corner_attrs)
     v_offset = 0
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
@@ -138,6 +142,7 @@ def build_geometry(scene: Scene) -> SceneGeometry:
             moving.append(MovingMesh(obj.name, 0, mesh.positions, mesh.positions_close, mesh.triangles, rm))
             m, n, h, u = per_tri(mesh, mesh.normals)
             mats_moving.append(m), nrm_moving.append(n), hasn_moving.append(h), uv_moving.append(u)
+            order_moving.append(mesh)
             for mat in (m_open, m_close):
                 for pos in (mesh.positions, mesh.positions_close if mesh.positions_close is not None else mesh.positions):
                     w = transform_rows(pos, np.asarray(mat)[:3, :3]) + np.asarray(mat)[:3, 3] - shift
@@ -152,6 +157,7 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         nw = _transform_normals(mesh.normals, m) if mesh.normals is not None else None
         a, b, c, d = per_tri(mesh, nw)
         mats_static.append(a), nrm_static.append(b), hasn_static.append(c), uv_static.append(d)
+        order_static.append(mesh)
 
     geom = SceneGeometry(
         origin_shift=shift,
@@ -172,6 +178,11 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     geom.normals = cat(nrm_static + nrm_moving, np.zeros((0, 3, 3), np.float32)) if any_normals else None
     geom.uvs = cat(uv_static + uv_moving, np.zeros((0, 3, 2), np.float32)) if any_uvs else None
     geom.triangle_count = offset
+    for name in sorted({k for m in scene.meshes for k in m.corner_attrs}):
+        geom.corner_attrs[name] = cat(
+            [np.asarray(m.corner_attrs[name], np.float32) if name in m.corner_attrs
+             else np.zeros((len(m.triangles), 3, 3), np.float32) for m in order_static + order_moving],
+            np.zeros((0, 3, 3), np.float32))
     if np.all(np.isfinite(lo)):
         center = 0.5 * (lo + hi)
         geom.scene_radius = float(max(np.linalg.norm(hi - center), 1e-3))

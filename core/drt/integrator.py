@@ -100,6 +100,10 @@ class Integrator:
             direct=DIRECT_STRATEGIES.index(direct), indirect=INDIRECT_STRATEGIES.index(indirect),
             film_transparent=bool(settings.film_transparent), motion=self.motion)
         self._workspaces = threading.local()
+        # material programs (textures): a thread rewrites its own copy of the material data
+        self.programs = materials.program_data(geom.uvs, getattr(geom, "corner_attrs", None))
+        self.n_registers = int(max((m["program"]["registers"] for m in materials.program_source[0]
+                                    if m.get("program")), default=0)) if self.programs.prog_of.shape[0] else 0
         normals = geom.normals if geom.normals is not None else np.zeros((0, 3, 3), np.float32)
         self.surfaces = stages.Surfaces(
             material=np.ascontiguousarray(geom.material, dtype=np.int32),
@@ -118,6 +122,17 @@ class Integrator:
         return stages.HitArrays(prim=hits.prim, t=hits.t, b1=hits.b1, b2=hits.b2, p=hits.p,
                                 ng=hits.ng, normal_xform=xform, moving=moving)
 
+    def _material_workspace(self):
+        """This thread's (material data, register file): the shared read-only table when no
+        material has a program, else a private copy that ``shade`` rewrites per textured hit."""
+        ws = getattr(self._workspaces, "materials", None)
+        if ws is None:
+            md = self.materials.data
+            if self.n_registers:
+                md = type(md)(*(np.array(a, copy=True) for a in md))
+            ws = self._workspaces.materials = (md, np.zeros((max(self.n_registers, 1), 3)))
+        return ws
+
     def _workspace(self, n: int) -> tuple[stages.Paths, stages.ShadowRays]:
         """This thread's path and shadow-ray arrays, at least n rows (views of the first n).
         Reused from batch to batch: fresh arrays would cost a page fault per 4 KB every batch."""
@@ -135,7 +150,8 @@ class Integrator:
         out = stages.Outputs(radiance=np.empty((n, 3)), alpha=np.empty(n), depth=np.empty(n),
                              normal=np.empty((n, 3)), albedo=np.empty((n, 3)), eye=np.empty((n, 3)),
                              forward=np.empty((n, 3)))
-        sd, md, ld = self.sampler.data, self.materials.data, self.lights.data
+        sd, ld = self.sampler.data, self.lights.data
+        md, regs = self._material_workspace()
         stages.camera_stage(sd, self.filter.data, self.camera.data, self.stage_settings,
                             np.ascontiguousarray(x, dtype=np.int64), np.ascontiguousarray(row, dtype=np.int64),
                             np.ascontiguousarray(index, dtype=np.int64), paths, out)
@@ -144,7 +160,7 @@ class Integrator:
             if live == 0:
                 break
             hits = self.tracer.intersect(paths.o[:live], paths.d[:live], paths.tau[:live], paths.tmax[:live])
-            live, n_shadow = stages.shade(sd, md, ld, self.surfaces, self.stage_settings, depth_i, live,
+            live, n_shadow = stages.shade(sd, md, self.programs, regs, ld, self.surfaces, self.stage_settings, depth_i, live,
                                           paths, self._hit_arrays(hits), out, shadow)
             if n_shadow:
                 blocked = self.tracer.occluded(shadow.o[:n_shadow], shadow.d[:n_shadow],

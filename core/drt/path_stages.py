@@ -46,6 +46,7 @@ from .lights.common import I_VISIBLE_CAMERA
 from .lights import (emissive_pdf, light_sample, shape_emission, shape_intersect, sun_emission, sun_in_cone,
                      world_pdf, world_radiance)
 from .materials import LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, bsdf_eval, bsdf_sample
+from .materials.programs import eval_material
 from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_5d
 from .sampling.warps import cosine_hemisphere, uniform_hemisphere
@@ -227,9 +228,12 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
 
 
 @kernel
-def shade(sd, md, ld, surf, settings, depth_i, live, paths, hits, out, shadow):
+def shade(sd, md, pd, regs, ld, surf, settings, depth_i, live, paths, hits, out, shadow):
     """One bounce for paths [0, live) (see the module docstring). Returns (paths still alive,
-    now compacted to the front; shadow rays queued in ``shadow``)."""
+    now compacted to the front; shadow rays queued in ``shadow``). ``pd`` holds the material
+    programs (``drt.materials.programs``; no programs: zero-size arrays); when there are any,
+    ``md`` must be this thread's own copy of the material data and ``regs`` its register file,
+    since a textured material's row is rewritten at each of its hits."""
     camera = depth_i == 0
     base = D_BOUNCE0 + DIMS_PER_BOUNCE * depth_i
     direct = settings.direct
@@ -278,6 +282,8 @@ def shade(sd, md, ld, surf, settings, depth_i, live, paths, hits, out, shadow):
 
         # --- the surface hit: its emission (also for paths stopping here at a bounce limit)
         mat = surf.material[prim]
+        if pd.prog_of.shape[0] and pd.prog_of[mat] >= 0:  # a textured material: this hit's parameters
+            eval_material(pd, md, regs, mat, prim, hits.b1[i], hits.b2[i])
         p = load(hits.p, i)
         ng = load(hits.ng, i)
         if md.has_emission[mat]:

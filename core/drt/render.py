@@ -110,7 +110,7 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
     settings = replace(scene.render, **overrides)
     geom = build_geometry(scene)
     try:
-        materials = MaterialTable.from_scene(scene.materials)
+        materials = MaterialTable.from_scene(scene.materials, scene.images, scene.attributes)
     except ValueError as e:
         raise SceneError("materials", str(e)) from None
     emissive = _emissive_triangles(scene, geom, materials)

@@ -217,6 +217,8 @@ class MeshData:
     normals: np.ndarray | None = None
     uvs: np.ndarray | None = None
     positions_close: np.ndarray | None = None
+    #: per-corner (T, 3, 3) float arrays material programs read: "generated", "object_coords"
+    corner_attrs: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -238,6 +240,10 @@ class Scene:
     objects: list[ObjectSpec]
     header: dict = field(default_factory=dict, repr=False)
     arrays: dict = field(default_factory=dict, repr=False)
+    #: images material programs read: (info dict, (H, W, 4) uint8 or float16 array)
+    images: list = field(default_factory=list, repr=False)
+    #: names of the named per-corner attributes programs read (e.g. "uv:UVMap.001")
+    attributes: list = field(default_factory=list, repr=False)
 
     @property
     def has_motion(self) -> bool:
@@ -343,7 +349,9 @@ def _camera(h: dict) -> CameraSpec:
     return cam
 
 
-def _materials(h: dict) -> list[dict]:
+def _materials(h: dict, n_images: int = 0, n_attributes: int = 0) -> list[dict]:
+    from .materials.program_format import validate_program
+
     mats = _list(h, "materials", "")
     out = []
     for i, m in enumerate(mats):
@@ -360,14 +368,48 @@ def _materials(h: dict) -> list[dict]:
                 entry["roughness"] = _number(lobe, "roughness", lp, 0.5 if t == "GLOSSY" else 0.0, lo=0, hi=1)
             if t == "GLASS":
                 entry["ior"] = _number(lobe, "ior", lp, 1.45, lo=0, lo_open=True, hi=100)
+            for key in ("color_reg", "roughness_reg"):
+                if key in lobe:
+                    entry[key] = _number(lobe, key, lp, integer=True, lo=0)
             clean.append(entry)
-        out.append(
-            {
-                "name": str(_get(m, "name", p, f"material{i}")),
-                "lobes": clean,
-                "emission": _vector(m, "emission", p, 3, default=[0, 0, 0], lo=0.0).tolist(),
-            }
-        )
+        mat = {
+            "name": str(_get(m, "name", p, f"material{i}")),
+            "lobes": clean,
+            "emission": _vector(m, "emission", p, 3, default=[0, 0, 0], lo=0.0).tolist(),
+        }
+        if m.get("program") is not None:
+            try:
+                mat["program"] = validate_program(m["program"], n_images, f"{p}.program", n_attributes)
+            except ValueError as e:  # "materials[i].program.field: problem"
+                where, _, problem = str(e).partition(": ")
+                raise SceneError(where, problem) from None
+            if "emission_reg" in m:
+                mat["emission_reg"] = _number(m, "emission_reg", p, integer=True, lo=0)
+        out.append(mat)
+    return out
+
+
+def _images(h: dict, arrays: dict) -> list:
+    """The header's ``images`` with their pixel arrays ((H, W, 4) uint8 or float16)."""
+    out = []
+    for i, img in enumerate(_list(h, "images", "") if "images" in h else []):
+        p = f"images[{i}]"
+        if not isinstance(img, dict):
+            raise SceneError(p, "must be an object")
+        name = str(_get(img, "array", p))
+        a = arrays.get(name)
+        if not isinstance(a, np.ndarray) or a.dtype not in (np.uint8, np.float16, np.float32) \
+                or a.ndim != 3 or a.shape[2] != 4:
+            raise SceneError(name, "must be an (H, W, 4) uint8 or float16 array")
+        w = _number(img, "width", p, integer=True, lo=1)
+        hgt = _number(img, "height", p, integer=True, lo=1)
+        if a.shape[:2] != (hgt, w):
+            raise SceneError(name, f"has shape {a.shape}, expected ({hgt}, {w}, 4)")
+        if a.dtype != np.uint8 and not np.all(np.isfinite(a)):
+            raise SceneError(name, "contains NaN or infinite values")
+        info = {"name": str(img.get("name", name)), "width": w, "height": hgt,
+                "srgb": _bool(img, "srgb", p, False)}
+        out.append((info, a))
     return out
 
 
@@ -426,7 +468,7 @@ def _array(arrays: dict, name: str, kinds: str, ndim: int, shape_tail=()) -> np.
     return a
 
 
-def _meshes(h: dict, arrays: dict, n_materials: int) -> list[MeshData]:
+def _meshes(h: dict, arrays: dict, n_materials: int, n_attributes: int = 0) -> list[MeshData]:
     meshes = _list(h, "meshes", "")
     out = []
     for k, m in enumerate(meshes):
@@ -459,7 +501,13 @@ def _meshes(h: dict, arrays: dict, n_materials: int) -> list[MeshData]:
             close = _array(arrays, pre + "positions_close", "f", 2, (3,)).astype(np.float64)
             if close.shape != pos.shape:
                 raise SceneError(pre + "positions_close", f"has shape {close.shape}, expected {pos.shape}")
-        out.append(MeshData(str(m.get("name", f"mesh{k}")), pos, tri, mi, normals, uvs, close))
+        attrs = {}
+        for attr in ("generated", "object_coords") + tuple(f"attr{i}" for i in range(n_attributes)):
+            if pre + attr in arrays:
+                attrs[attr] = _array(arrays, pre + attr, "f", 3, (3, 3))
+                if len(attrs[attr]) != len(tri):
+                    raise SceneError(pre + attr, f"has {len(attrs[attr])} triangles, expected {len(tri)}")
+        out.append(MeshData(str(m.get("name", f"mesh{k}")), pos, tri, mi, normals, uvs, close, attrs))
     return out
 
 
@@ -493,11 +541,15 @@ def scene_from_dict(header: dict, arrays: dict | None = None) -> Scene:
     camera = _camera(header)
     world = _get(header, "world", "", {"color": [0, 0, 0]})
     world_color = _vector(world, "color", "world", 3, default=[0, 0, 0], lo=0.0)
-    materials = _materials(header)
+    images = _images(header, arrays)
+    attributes = _list(header, "attributes", "") if "attributes" in header else []
+    if not all(isinstance(a, str) for a in attributes):
+        raise SceneError("attributes", "must be a list of names")
+    materials = _materials(header, len(images), len(attributes))
     lights = _lights(header)
-    meshes = _meshes(header, arrays, len(materials))
+    meshes = _meshes(header, arrays, len(materials), len(attributes))
     objects = _objects(header, len(meshes))
     if not materials and any(len(m.triangles) for m in meshes):
         # Geometry without materials renders as a neutral grey diffuse (Blender's default look).
         materials = [{"name": "default", "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}], "emission": [0, 0, 0]}]
-    return Scene(render, camera, world_color, materials, lights, meshes, objects, header, arrays)
+    return Scene(render, camera, world_color, materials, lights, meshes, objects, header, arrays, images, list(attributes))

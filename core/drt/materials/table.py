@@ -316,11 +316,16 @@ class MaterialTable:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_scene(cls, materials: list[dict]) -> "MaterialTable":
+    def from_scene(cls, materials: list[dict], images=(), attributes=()) -> "MaterialTable":
         """Build from the header's ``materials`` list (scene-format.md). Raises ValueError naming
         the material and field, e.g. ``material 'Glass' lobe 1: ior must be > 0, got -1.0``.
         Roughness is Blender's (alpha = roughness²) and must lie in [0, 1]; a DIFFUSE lobe's
-        roughness, if present, is ignored (Lambert only)."""
+        roughness, if present, is ignored (Lambert only).
+
+        Materials with a (validated, ``drt.scene``) ``program`` are kept in ``program_source``
+        with the scene's ``images``, for ``program_data``; their emission, which varies over
+        the surface, is not a light for next-event estimation (``has_emission`` False here,
+        ``data.has_emission`` True: hits still collect it)."""
         if not isinstance(materials, (list, tuple)):
             raise ValueError(f"materials must be a list, got {type(materials).__name__}")
         names, parsed, emissions = [], [], []
@@ -374,7 +379,37 @@ class MaterialTable:
             for j, (t, c, a, eta) in enumerate(rows):
                 lobe_type[i, j], lobe_color[i, j], lobe_alpha[i, j], lobe_ior[i, j] = t, c, a, eta
         emission = np.array(emissions).reshape(m, 3)
-        return cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission)
+        table = cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission)
+        table.program_source = None
+        if any(isinstance(mat, dict) and mat.get("program") for mat in materials):
+            table.program_source = (list(materials), list(images), list(attributes))
+            for i, mat in enumerate(materials):
+                if mat.get("program") and mat.get("emission_reg") is not None:
+                    table.has_emission[i] = False
+                    table.data.has_emission[i] = True
+        return table
+
+    def program_data(self, uv=None, corner_attrs=None):
+        """The ``ProgramData`` of this scene's material programs (geometry inputs: the global
+        per-triangle uv (T, 3, 2) and ``corner_attrs`` of ``SceneGeometry``); zero-size arrays
+        when no material has a program."""
+        from .program_format import build_program_data, empty_program_data
+
+        src = getattr(self, "program_source", None)
+        if src is None:
+            return empty_program_data()
+        attrs = corner_attrs or {}
+        named = None
+        n_named = len(src[2]) if len(src) > 2 else 0
+        if n_named:
+            t = len(uv) if uv is not None else max((len(a) for a in attrs.values()), default=0)
+            if t:  # else no triangle has any attribute: the programs read zeros
+                named = np.zeros((n_named, t, 3, 3), np.float32)
+                for i in range(n_named):
+                    if f"attr{i}" in attrs:
+                        named[i] = attrs[f"attr{i}"]
+        return build_program_data(src[0], self, src[1], uv, attrs.get("generated"),
+                                  attrs.get("object_coords"), CLOSURE_WEIGHT_CUTOFF, named)
 
     # ------------------------------------------------------------------ queries
     def _mat_rows(self, mat) -> np.ndarray:

@@ -1,0 +1,128 @@
+"""Cost of material programs: render time of a scene whose every surface runs a 20-node texture
+graph against the same scene with constant materials (issue 11's acceptance: < 2×).
+
+    python benchmarks/texture_cost.py [--spp 32] [--resolution 160x120]
+
+Builds, with bpy, the shipped blend_scenes/textured scene, gives every material a Principled
+base colour from a chain of 20 texture/converter nodes (checker, gradient, image, ramp, mapping,
+math, mix, hue/saturation, ...), exports it, and renders it on one thread with DRT: once as is,
+once with the programs stripped (each lobe keeps its representative constant). Best of three
+each. Prints both times and the ratio; asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+for p in (REPO, os.path.join(REPO, "blend_scenes"), os.path.join(REPO, "tests")):
+    sys.path.insert(0, p)
+
+
+def twenty_node_chain(nt, img):
+    """Base colour from 20 nodes; returns the colour socket."""
+    from node_parity import mapping, node
+
+    tc = nt.nodes.new("ShaderNodeTexCoord")                                              # 1
+    m = mapping(nt, tc.outputs["UV"], scale=(3, 3, 1), rot=(0, 0, 0.2))                  # 2
+    ck = node(nt, "ShaderNodeTexChecker", {"Vector": m, "Scale": 2.0})                    # 3
+    gr = node(nt, "ShaderNodeTexGradient", {"Vector": tc.outputs["Generated"]})            # 4
+    im = node(nt, "ShaderNodeTexImage", {"Vector": m}, image=img, interpolation="Linear")  # 5
+    ramp = node(nt, "ShaderNodeValToRGB", {0: gr.outputs["Fac"]})                          # 6
+    sep = node(nt, "ShaderNodeSeparateXYZ", {0: tc.outputs["UV"]})                         # 7
+    a = node(nt, "ShaderNodeMath", {0: sep.outputs[0], 1: 6.0}, operation="MULTIPLY")      # 8
+    b = node(nt, "ShaderNodeMath", {0: a.outputs[0]}, operation="SINE")                    # 9
+    c = node(nt, "ShaderNodeMath", {0: b.outputs[0], 1: 0.5, 2: 0.5}, operation="MULTIPLY_ADD")  # 10
+    mix1 = node(nt, "ShaderNodeMix", {"Factor": c.outputs[0]}, data_type="RGBA")          # 11
+    socks = [s for s in mix1.inputs if s.enabled]
+    nt.links.new(ck.outputs["Color"], socks[1])
+    nt.links.new(im.outputs["Color"], socks[2])
+    mix2 = node(nt, "ShaderNodeMix", {"Factor": 0.5}, data_type="RGBA", blend_type="MULTIPLY")  # 12
+    socks = [s for s in mix2.inputs if s.enabled]
+    nt.links.new([o for o in mix1.outputs if o.enabled][0], socks[1])
+    nt.links.new(ramp.outputs["Color"], socks[2])
+    hsv = node(nt, "ShaderNodeHueSaturation", {"Color": [o for o in mix2.outputs if o.enabled][0],
+                                               "Saturation": 1.2})                         # 13
+    gam = node(nt, "ShaderNodeGamma", {"Color": hsv.outputs[0], "Gamma": 1.1})             # 14
+    bc = node(nt, "ShaderNodeBrightContrast", {"Color": gam.outputs[0], "Contrast": 0.1})  # 15
+    inv = node(nt, "ShaderNodeInvert", {"Color": bc.outputs[0], "Fac": 0.1})               # 16
+    mr = node(nt, "ShaderNodeMapRange", {"Value": sep.outputs[1], "To Min": 0.8})         # 17
+    vm = node(nt, "ShaderNodeVectorMath", {0: inv.outputs[0], 3: 1.0}, operation="SCALE")  # 18
+    nt.links.new(mr.outputs[0], vm.inputs[3])
+    cl = node(nt, "ShaderNodeClamp", {"Value": mr.outputs[0]})                             # 19
+    mix3 = node(nt, "ShaderNodeMix", {"Factor": cl.outputs[0]}, data_type="RGBA")          # 20
+    socks = [s for s in mix3.inputs if s.enabled]
+    nt.links.new(vm.outputs[0], socks[1])
+    nt.links.new(inv.outputs[0], socks[2])
+    return [o for o in mix3.outputs if o.enabled][0]
+
+
+def build(spp, w, h):
+    import bpy
+    import textured
+    from addon.export import export_depsgraph
+
+    scene = textured.build()
+    from test_addon import ensure_registered
+
+    ensure_registered()
+    img = bpy.data.images["planks"]
+    for mat in bpy.data.materials:
+        p = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+        mat.node_tree.links.new(twenty_node_chain(mat.node_tree, img), p.inputs["Base Color"])
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = w, h, 100
+    scene.drt.samples = spp
+    res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
+    assert not res.warnings, res.warnings
+    return res.header, res.arrays
+
+
+def strip(header):
+    h = copy.deepcopy(header)
+    for m in h["materials"]:
+        m.pop("program", None)
+        m.pop("emission_reg", None)
+        for lb in m["lobes"]:
+            lb.pop("color_reg", None)
+            lb.pop("roughness_reg", None)
+    return h
+
+
+def best_time(header, arrays, spp, runs=3):
+    from drt.render import prepare, render
+    from drt.scene import scene_from_dict
+
+    scene = scene_from_dict(header, arrays)
+    ctx = prepare(scene)
+    render(scene, spp=1, threads=1, context=ctx)  # warm: kernels loaded
+    best = float("inf")
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        render(scene, spp=spp, threads=1, context=ctx)
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser()
+    p.add_argument("--spp", type=int, default=32)
+    p.add_argument("--resolution", default="160x120")
+    o = p.parse_args(argv)
+    w, h = (int(x) for x in o.resolution.split("x"))
+    header, arrays = build(o.spp, w, h)
+    n_ops = max(len(m["program"]["ops"]) for m in header["materials"] if "program" in m)
+    textured_t = best_time(header, arrays, o.spp)
+    plain_t = best_time(strip(header), arrays, o.spp)
+    print(f"{w}x{h} at {o.spp} spp, one thread; every material: 20 nodes -> {n_ops} operations")
+    print(f"  constant materials : {plain_t:.3f} s")
+    print(f"  20-node textures   : {textured_t:.3f} s  ({textured_t / plain_t:.2f}x)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

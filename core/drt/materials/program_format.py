@@ -1,0 +1,194 @@
+"""Material programs in the scene file: opcodes, validation and the arrays the interpreter reads
+(``ProgramData``). Plain numpy (no kernels): ``drt.scene`` validates programs with it, and
+``drt.materials.programs`` interprets them. See docs/materials.md and docs/scene-format.md.
+
+A material's ``program`` (header JSON):
+
+    {"registers": R,                      # register count (each three float64)
+     "constants": [[reg, x, y, z], ...],  # registers loaded before the first operation
+     "ops": [[opcode, mode, out0, out1, in0, in1, in2, in3, in4, in5, param], ...],
+     "data": [float, ...]}                # colour-ramp tables (RAMP_TABLE_SIZE × RGBA each)
+
+and its lobes may carry ``color_reg`` / ``roughness_reg`` (the register that gives the lobe's
+weight colour / Blender roughness at a shading point; the lobe's ``color`` and ``roughness``
+are then representative values used for light-selection hints), the material
+``emission_reg``. ``OP_ATTRIBUTE`` reads the per-corner attribute ``param`` of the header's
+``attributes`` list (names like ``"uv:UVMap.001"``; arrays ``mesh<K>.attr<I>`` (T, 3, 3)
+float32; zero on meshes without it, as Cycles's missing attributes). Images are a header list ``images`` of {"name", "width", "height", "srgb",
+"array"} whose array is (height, width, 4) uint8 or float16, bottom row first; ``srgb``:
+the values are sRGB-encoded and decoded to linear after interpolation (byte images, and float
+images tagged sRGB, as Cycles does).
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+
+OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE = 1, 2, 3, 4
+OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING = 10, 11, 12, 13
+OP_IMAGE, OP_CHECKER, OP_GRADIENT, OP_RAMP = 20, 21, 22, 23
+OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31, 32, 33, 34, 35
+OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
+OPCODES = {OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
+           OP_CHECKER, OP_GRADIENT, OP_RAMP, OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA,
+           OP_BRIGHT_CONTRAST, OP_HSV, OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE,
+           OP_RGB_TO_HSV, OP_HSV_TO_RGB}
+#: geometry inputs an opcode reads (the scene stores those per-corner arrays only if read)
+READS = {OP_UV: "uv", OP_GENERATED: "generated", OP_OBJECT: "object_coords"}
+OP_WIDTH = 11
+RAMP_TABLE_SIZE = 256
+#: Rec.709 luminance weights (Blender's default working space): Cycles's colour → float
+LUMINANCE = (0.2126729, 0.7151522, 0.0721750)
+MAX_REGISTERS = 4096
+
+ProgramData = namedtuple("ProgramData", [
+    "prog_of",          # (M,) int64 program of each material, −1: constant material
+    "op_start",         # (P+1,) int64 rows of ``ops`` per program
+    "ops",              # (N, OP_WIDTH) int64
+    "const_start",      # (P+1,) int64 rows of const_reg/const_val per program
+    "const_reg",        # (K,) int64
+    "const_val",        # (K, 3) float64
+    "data",             # (D,) float64 ramp tables
+    "lobe_color_reg",   # (M, L) int64, −1: the lobe's constant colour
+    "lobe_rough_reg",   # (M, L) int64, −1: constant roughness
+    "emission_reg",     # (M,) int64, −1: constant emission
+    "img_info",         # (I, 5) int64 [width, height, offset, is_float, srgb]
+    "img_u8",           # (X,) uint8
+    "img_f32",          # (Y,) float32
+    "uv",               # (T, 3, 2) float32 ((0, 3, 2): none)
+    "generated",        # (T, 3, 3) float32
+    "objco",            # (T, 3, 3) float32
+    "attrs",            # (A, T, 3, 3) float32 named per-corner attributes (header "attributes")
+])
+
+
+def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> dict:
+    """A checked copy of a material's ``program`` dict; raises ValueError naming the field."""
+    if not isinstance(prog, dict):
+        raise ValueError(f"{where}: must be an object")
+    n = prog.get("registers")
+    if isinstance(n, bool) or not isinstance(n, int) or not 0 < n <= MAX_REGISTERS:
+        raise ValueError(f"{where}.registers: must be an integer in [1, {MAX_REGISTERS}], got {n!r}")
+    try:
+        consts = np.array(prog.get("constants", []), dtype=np.float64).reshape(-1, 4)
+        ops = np.array(prog.get("ops", []), dtype=np.int64).reshape(-1, OP_WIDTH)
+        data = np.array(prog.get("data", []), dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: constants must be [reg, x, y, z] rows and ops rows of "
+                         f"{OP_WIDTH} integers") from None
+    if not (np.all(np.isfinite(consts)) and np.all(np.isfinite(data))):
+        raise ValueError(f"{where}: constants and data must be finite")
+    if len(consts) and (consts[:, 0].min() < 0 or consts[:, 0].max() >= n):
+        raise ValueError(f"{where}.constants: register out of range")
+    for k, row in enumerate(ops):
+        if int(row[0]) not in OPCODES:
+            raise ValueError(f"{where}.ops[{k}]: unknown opcode {int(row[0])}")
+        regs = row[2:10]
+        if regs.max() >= n or regs.min() < -1 or row[2] < 0:
+            raise ValueError(f"{where}.ops[{k}]: register out of range")
+        if row[0] == OP_IMAGE and not 0 <= row[10] < n_images:
+            raise ValueError(f"{where}.ops[{k}]: image {int(row[10])} does not exist")
+        if row[0] == OP_ATTRIBUTE and not 0 <= row[10] < n_attributes:
+            raise ValueError(f"{where}.ops[{k}]: attribute {int(row[10])} does not exist")
+        if row[0] == OP_RAMP and not 0 <= row[10] <= len(data) - 4 * RAMP_TABLE_SIZE:
+            raise ValueError(f"{where}.ops[{k}]: ramp table out of range")
+    return {"registers": n, "constants": consts, "ops": ops, "data": data}
+
+
+def reads(prog: dict) -> set[str]:
+    """The geometry inputs (``READS`` values) a validated program reads."""
+    return {READS[int(op)] for op in prog["ops"][:, 0] if int(op) in READS}
+
+
+def _reg(v, n, where):
+    if v is None:
+        return -1
+    if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v < n:
+        raise ValueError(f"{where}: must be a register in [0, {n}), got {v!r}")
+    return v
+
+
+def build_program_data(materials: list[dict], table, images: list[tuple[dict, np.ndarray]],
+                       uv, generated, objco, cutoff: float, attrs=None) -> ProgramData | None:
+    """ProgramData for the validated ``materials`` (scene.py) and their ``MaterialTable``; None
+    when no material has a program. Lobes are matched to table slots with the table's own rule
+    (a lobe whose colour's mean is below ``cutoff`` was dropped)."""
+    if not any(m.get("program") for m in materials):
+        return None
+    m_count = len(materials)
+    n_slots = table.lobe_type.shape[1]
+    prog_of = np.full(m_count, -1, np.int64)
+    color_reg = np.full((m_count, n_slots), -1, np.int64)
+    rough_reg = np.full((m_count, n_slots), -1, np.int64)
+    emission_reg = np.full(m_count, -1, np.int64)
+    op_rows, const_rows, data, op_start, const_start = [], [], [], [0], [0]
+    for i, mat in enumerate(materials):
+        prog = mat.get("program")
+        if not prog:
+            continue
+        n = prog["registers"]
+        where = f"material {mat['name']!r}"
+        prog_of[i] = len(op_start) - 1
+        ops = prog["ops"].copy()
+        ramp = ops[:, 0] == OP_RAMP
+        ops[ramp, 10] += sum(len(d) for d in data)
+        op_rows.append(ops)
+        const_rows.append(prog["constants"])
+        data.append(prog["data"])
+        op_start.append(op_start[-1] + len(ops))
+        const_start.append(const_start[-1] + len(prog["constants"]))
+        slot = 0
+        for j, lobe in enumerate(mat["lobes"]):
+            if np.mean(lobe["color"]) < cutoff:
+                continue
+            color_reg[i, slot] = _reg(lobe.get("color_reg"), n, f"{where} lobe {j} color_reg")
+            rough_reg[i, slot] = _reg(lobe.get("roughness_reg"), n, f"{where} lobe {j} roughness_reg")
+            slot += 1
+        emission_reg[i] = _reg(mat.get("emission_reg"), n, f"{where} emission_reg")
+    info = np.zeros((len(images), 5), np.int64)
+    u8, f32 = [], []
+    off_u8 = off_f = 0
+    for k, (img, px) in enumerate(images):
+        is_float = px.dtype != np.uint8
+        info[k] = (img["width"], img["height"], off_f if is_float else off_u8, is_float,
+                   bool(img["srgb"]))
+        if is_float:
+            f32.append(px.astype(np.float32).reshape(-1))
+            off_f += px.size
+        else:
+            u8.append(px.reshape(-1))
+            off_u8 += px.size
+    consts = np.concatenate(const_rows) if const_rows else np.zeros((0, 4))
+
+    def arr(a, dtype, shape):
+        return np.ascontiguousarray(a, dtype=dtype) if a is not None else np.zeros(shape, dtype)
+
+    return ProgramData(
+        prog_of=prog_of, op_start=np.array(op_start, np.int64),
+        ops=np.ascontiguousarray(np.concatenate(op_rows), np.int64),
+        const_start=np.array(const_start, np.int64),
+        const_reg=np.ascontiguousarray(consts[:, 0], np.int64),
+        const_val=np.ascontiguousarray(consts[:, 1:], np.float64),
+        data=np.ascontiguousarray(np.concatenate(data) if data else np.zeros(0), np.float64),
+        lobe_color_reg=color_reg, lobe_rough_reg=rough_reg, emission_reg=emission_reg,
+        img_info=info,
+        img_u8=np.ascontiguousarray(np.concatenate(u8) if u8 else np.zeros(0, np.uint8)),
+        img_f32=np.ascontiguousarray(np.concatenate(f32) if f32 else np.zeros(0, np.float32)),
+        uv=arr(uv, np.float32, (0, 3, 2)), generated=arr(generated, np.float32, (0, 3, 3)),
+        objco=arr(objco, np.float32, (0, 3, 3)), attrs=arr(attrs, np.float32, (0, 0, 3, 3)))
+
+
+def empty_program_data() -> ProgramData:
+    """A ProgramData with no programs (for scenes without any): same types, zero-size arrays."""
+    z = np.zeros(0, np.int64)
+    return ProgramData(prog_of=z, op_start=np.zeros(1, np.int64),
+                       ops=np.zeros((0, OP_WIDTH), np.int64), const_start=np.zeros(1, np.int64),
+                       const_reg=z, const_val=np.zeros((0, 3)), data=np.zeros(0),
+                       lobe_color_reg=np.zeros((0, 0), np.int64),
+                       lobe_rough_reg=np.zeros((0, 0), np.int64), emission_reg=z,
+                       img_info=np.zeros((0, 5), np.int64), img_u8=np.zeros(0, np.uint8),
+                       img_f32=np.zeros(0, np.float32), uv=np.zeros((0, 3, 2), np.float32),
+                       generated=np.zeros((0, 3, 3), np.float32),
+                       objco=np.zeros((0, 3, 3), np.float32), attrs=np.zeros((0, 0, 3, 3), np.float32))

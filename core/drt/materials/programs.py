@@ -1,0 +1,888 @@
+"""Material programs: the interpreter half of docs/materials.md (Cycles's SVM as the model).
+
+A material whose node tree has textures is exported with a *program*: a flat list of operations
+over a register file, plus the registers that give, per lobe, its colour (weight) and roughness
+and the material's emission. At a shading point ``eval_material`` runs the program and writes
+the results into that material's row of a *per-thread copy* of ``MaterialData`` (lobe colour,
+alpha, selection probabilities, emission and the derived flags), so that ``bsdf_eval`` /
+``bsdf_sample`` and the rest of the shade stage run unchanged. The light-selection summary stays
+the material's constant one (a hint; NEE and BSDF-hit MIS must see the same one).
+
+Registers hold three float64; a float is stored replicated in all three. One operation is a row
+of ``ops`` (int64):
+
+    [opcode, mode, out0, out1, in0, in1, in2, in3, in4, in5, param]
+
+ins/outs are register indices (−1: unused); ``param`` indexes ``data`` (colour-ramp tables) or
+the image table, or carries a flag (clamp). Every node is evaluated as Cycles's SVM evaluates it
+(``intern/cycles/kernel/svm/*.h``), in float64 instead of float32.
+
+Images: ``img_info`` (I, 5) int64 rows [width, height, offset, is_float, srgb]; byte images live
+in ``img_u8`` (uint8 RGBA, bottom row first), float images in ``img_f32``. sRGB images (8-bit,
+or float tagged sRGB) are interpolated sRGB-encoded and converted to linear after the lookup,
+as Cycles does (``NODE_IMAGE_COMPRESS_AS_SRGB``).
+
+Geometry inputs (per global triangle, per corner, interpolated with Embree's barycentrics):
+``uv`` (T, 3, 2) the active render UV map, ``generated`` (T, 3, 3) Blender's Generated
+coordinates (texture space → [0, 1]³), ``objco`` (T, 3, 3) object-space positions; (0, 3, k)
+when no program reads them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..kernels import inline_kernel, kernel
+from .dielectric import IOR_ONE_EPS
+from .ggx import ALPHA_SQ_SINGULAR
+from .program_format import (LUMINANCE, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
+                             OP_COMBINE, OP_COMPONENT, OP_GAMMA, OP_GENERATED, OP_GRADIENT,
+                             OP_HSV, OP_HSV_TO_RGB, OP_IMAGE, OP_INVERT, OP_MAP_RANGE,
+                             OP_ATTRIBUTE, OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
+                             OP_TO_GRAY, OP_UV, OP_VMATH, RAMP_TABLE_SIZE)
+
+
+# --- helpers (Cycles's util/math.h semantics) ---------------------------------------------------
+
+@kernel
+def safe_divide(a, b):
+    return a / b if b != 0.0 else 0.0
+
+
+@kernel
+def fract(x):
+    return x - math.floor(x)
+
+
+@kernel
+def compatible_pow(x, y):
+    if x < 0.0:
+        if np.fmod(-y, 2.0) == 0.0:
+            return math.pow(-x, y)
+        return -math.pow(-x, y)
+    if x == 0.0:
+        return 0.0
+    return math.pow(x, y)
+
+
+@kernel
+def safe_pow(a, b):
+    if a < 0.0 and b != float(int(b)):
+        return 0.0
+    return compatible_pow(a, b)
+
+
+@kernel
+def safe_log(a, b):
+    if a <= 0.0 or b <= 0.0:
+        return 0.0
+    return safe_divide(math.log(a), math.log(b))
+
+
+@kernel
+def safe_modulo(a, b):
+    return np.fmod(a, b) if b != 0.0 else 0.0
+
+
+@kernel
+def wrapf(value, vmax, vmin):
+    r = vmax - vmin
+    return value - r * math.floor((value - vmin) / r) if r != 0.0 else vmin
+
+
+@kernel
+def pingpong(a, b):
+    return abs(fract((a - b) / (b * 2.0)) * b * 2.0 - b) if b != 0.0 else 0.0
+
+
+@kernel
+def smoothmin(a, b, c):
+    if c != 0.0:
+        h = max(c - abs(a - b), 0.0) / c
+        return min(a, b) - h * h * h * c * (1.0 / 6.0)
+    return min(a, b)
+
+
+@kernel
+def saturate(x):
+    return min(max(x, 0.0), 1.0)
+
+
+@kernel
+def math_op(op, a, b, c):
+    """Cycles's ``svm_math`` (NodeMathType in Blender's enum order)."""
+    if op == 0:
+        return a + b
+    if op == 1:
+        return a - b
+    if op == 2:
+        return a * b
+    if op == 3:
+        return safe_divide(a, b)
+    if op == 4:
+        return a * b + c
+    if op == 5:
+        return safe_pow(a, b)
+    if op == 6:
+        return safe_log(a, b)
+    if op == 7:
+        return math.sqrt(a) if a > 0.0 else 0.0
+    if op == 8:
+        return 1.0 / math.sqrt(a) if a > 0.0 else 0.0
+    if op == 9:
+        return abs(a)
+    if op == 10:
+        return math.exp(a)
+    if op == 11:
+        return min(a, b)
+    if op == 12:
+        return max(a, b)
+    if op == 13:
+        return 1.0 if a < b else 0.0
+    if op == 14:
+        return 1.0 if a > b else 0.0
+    if op == 15:
+        return 1.0 if a > 0.0 else (-1.0 if a < 0.0 else 0.0)
+    if op == 16:
+        return 1.0 if (a == b or abs(a - b) <= max(c, 1.1920929e-07)) else 0.0
+    if op == 17:
+        return smoothmin(a, b, c)
+    if op == 18:
+        return -smoothmin(-a, -b, c)
+    if op == 19:
+        return math.floor(a + 0.5)
+    if op == 20:
+        return math.floor(a)
+    if op == 21:
+        return math.ceil(a)
+    if op == 22:
+        return math.floor(a) if a >= 0.0 else math.ceil(a)
+    if op == 23:
+        return a - math.floor(a)
+    if op == 24:
+        return safe_modulo(a, b)
+    if op == 25:
+        return a - math.floor(a / b) * b if b != 0.0 else 0.0
+    if op == 26:
+        return wrapf(a, b, c)
+    if op == 27:
+        return math.floor(safe_divide(a, b)) * b
+    if op == 28:
+        return pingpong(a, b)
+    if op == 29:
+        return math.sin(a)
+    if op == 30:
+        return math.cos(a)
+    if op == 31:
+        return math.tan(a)
+    if op == 32:
+        return math.asin(min(max(a, -1.0), 1.0))
+    if op == 33:
+        return math.acos(min(max(a, -1.0), 1.0))
+    if op == 34:
+        return math.atan(a)
+    if op == 35:
+        return math.atan2(a, b)
+    if op == 36:
+        return math.sinh(a)
+    if op == 37:
+        return math.cosh(a)
+    if op == 38:
+        return math.tanh(a)
+    if op == 39:
+        return a * (math.pi / 180.0)
+    if op == 40:
+        return a * (180.0 / math.pi)
+    return 0.0
+
+
+@kernel
+def _safe_div3(a, b):
+    return (safe_divide(a[0], b[0]), safe_divide(a[1], b[1]), safe_divide(a[2], b[2]))
+
+
+@kernel
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@kernel
+def _len(a):
+    return math.sqrt(_dot(a, a))
+
+
+@kernel
+def _normalize(a):
+    n = _len(a)
+    return (a[0] / n, a[1] / n, a[2] / n) if n != 0.0 else (0.0, 0.0, 0.0)
+
+
+@kernel
+def _sign(x):
+    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
+
+
+@kernel
+def vmath_op(op, a, b, c, s):
+    """Cycles's ``svm_vector_math`` (NodeVectorMathType in Blender's enum order); a float result
+    is returned replicated."""
+    if op == 0:
+        return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+    if op == 1:
+        return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+    if op == 2:
+        return (a[0] * b[0], a[1] * b[1], a[2] * b[2])
+    if op == 3:
+        return _safe_div3(a, b)
+    if op == 4:
+        return (a[0] * b[0] + c[0], a[1] * b[1] + c[1], a[2] * b[2] + c[2])
+    if op == 5:
+        return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+    if op == 6:
+        bb = _dot(b, b)
+        f = _dot(a, b) / bb if bb != 0.0 else 0.0
+        return (b[0] * f, b[1] * f, b[2] * f)
+    if op == 7:
+        n = _normalize(b)
+        d = 2.0 * _dot(a, n)
+        return (a[0] - d * n[0], a[1] - d * n[1], a[2] - d * n[2])
+    if op == 8:
+        d = _dot(a, b)
+        return (d, d, d)
+    if op == 9:
+        d = _len((a[0] - b[0], a[1] - b[1], a[2] - b[2]))
+        return (d, d, d)
+    if op == 10:
+        d = _len(a)
+        return (d, d, d)
+    if op == 11:
+        return (a[0] * s, a[1] * s, a[2] * s)
+    if op == 12:
+        return _normalize(a)
+    if op == 13:
+        return (abs(a[0]), abs(a[1]), abs(a[2]))
+    if op == 14:
+        return (min(a[0], b[0]), min(a[1], b[1]), min(a[2], b[2]))
+    if op == 15:
+        return (max(a[0], b[0]), max(a[1], b[1]), max(a[2], b[2]))
+    if op == 16:
+        return (math.floor(a[0]), math.floor(a[1]), math.floor(a[2]))
+    if op == 17:
+        return (math.ceil(a[0]), math.ceil(a[1]), math.ceil(a[2]))
+    if op == 18:
+        return (fract(a[0]), fract(a[1]), fract(a[2]))
+    if op == 19:
+        return (safe_modulo(a[0], b[0]), safe_modulo(a[1], b[1]), safe_modulo(a[2], b[2]))
+    if op == 20:
+        return (wrapf(a[0], b[0], c[0]), wrapf(a[1], b[1], c[1]), wrapf(a[2], b[2], c[2]))
+    if op == 21:
+        return (math.floor(safe_divide(a[0], b[0])) * b[0], math.floor(safe_divide(a[1], b[1])) * b[1],
+                math.floor(safe_divide(a[2], b[2])) * b[2])
+    if op == 22:
+        return (math.sin(a[0]), math.sin(a[1]), math.sin(a[2]))
+    if op == 23:
+        return (math.cos(a[0]), math.cos(a[1]), math.cos(a[2]))
+    if op == 24:
+        return (math.tan(a[0]), math.tan(a[1]), math.tan(a[2]))
+    if op == 25:
+        return (safe_pow(a[0], b[0]), safe_pow(a[1], b[1]), safe_pow(a[2], b[2]))
+    if op == 26:
+        return (_sign(a[0]), _sign(a[1]), _sign(a[2]))
+    return (0.0, 0.0, 0.0)
+
+
+@kernel
+def rgb_to_hsv(rgb):
+    r, g, b = rgb
+    cmax = max(r, max(g, b))
+    cmin = min(r, min(g, b))
+    cdelta = cmax - cmin
+    v = cmax
+    h = 0.0
+    s = cdelta / cmax if cmax != 0.0 else 0.0
+    if s != 0.0:
+        cr, cg, cb = (cmax - r) / cdelta, (cmax - g) / cdelta, (cmax - b) / cdelta
+        if r == cmax:
+            h = cb - cg
+        elif g == cmax:
+            h = 2.0 + cr - cb
+        else:
+            h = 4.0 + cg - cr
+        h /= 6.0
+        if h < 0.0:
+            h += 1.0
+    return (h, s, v)
+
+
+@kernel
+def hsv_to_rgb(hsv):
+    h, s, v = hsv
+    if s == 0.0:
+        return (v, v, v)
+    if h == 1.0:
+        h = 0.0
+    h *= 6.0
+    i = math.floor(h)
+    f = h - i
+    p = v * (1.0 - s)
+    q = v * (1.0 - s * f)
+    t = v * (1.0 - s * (1.0 - f))
+    if i == 0.0:
+        return (v, t, p)
+    if i == 1.0:
+        return (q, v, p)
+    if i == 2.0:
+        return (p, v, t)
+    if i == 3.0:
+        return (p, q, v)
+    if i == 4.0:
+        return (t, p, v)
+    return (v, p, q)
+
+
+@kernel
+def _lerp3(a, b, t):
+    return ((1.0 - t) * a[0] + t * b[0], (1.0 - t) * a[1] + t * b[1], (1.0 - t) * a[2] + t * b[2])
+
+
+@kernel
+def _dodge(c1, c2, t):
+    if c1 != 0.0:
+        tmp = 1.0 - t * c2
+        if tmp <= 0.0:
+            return 1.0
+        tmp = c1 / tmp
+        return 1.0 if tmp > 1.0 else tmp
+    return c1
+
+
+@kernel
+def _burn(c1, c2, t):
+    tmp = (1.0 - t) + t * c2
+    if tmp <= 0.0:
+        return 0.0
+    tmp = 1.0 - (1.0 - c1) / tmp
+    if tmp < 0.0:
+        return 0.0
+    return 1.0 if tmp > 1.0 else tmp
+
+
+@kernel
+def _overlay(c1, c2, t):
+    tm = 1.0 - t
+    if c1 < 0.5:
+        return c1 * (tm + 2.0 * t * c2)
+    return 1.0 - (tm + 2.0 * t * (1.0 - c2)) * (1.0 - c1)
+
+
+@kernel
+def _divide(c1, c2, t):
+    return (1.0 - t) * c1 + t * c1 / c2 if c2 != 0.0 else c1
+
+
+@kernel
+def _soft_light(c1, c2, t):
+    scr = 1.0 - (1.0 - c2) * (1.0 - c1)
+    return (1.0 - t) * c1 + t * ((1.0 - c1) * c2 * c1 + c1 * scr)
+
+
+@kernel
+def mix_blend(mode, t, c1, c2):
+    """Cycles's ``svm_mix`` colour blend modes (NodeMix in Blender's enum order), factor t."""
+    tm = 1.0 - t
+    if mode == 0:
+        return _lerp3(c1, c2, t)
+    if mode == 1:
+        return _lerp3(c1, (min(c1[0], c2[0]), min(c1[1], c2[1]), min(c1[2], c2[2])), t)
+    if mode == 2:
+        return (c1[0] * (tm + t * c2[0]), c1[1] * (tm + t * c2[1]), c1[2] * (tm + t * c2[2]))
+    if mode == 3:
+        return (_burn(c1[0], c2[0], t), _burn(c1[1], c2[1], t), _burn(c1[2], c2[2], t))
+    if mode == 4:
+        return _lerp3(c1, (max(c1[0], c2[0]), max(c1[1], c2[1]), max(c1[2], c2[2])), t)
+    if mode == 5:
+        return (1.0 - (tm + t * (1.0 - c2[0])) * (1.0 - c1[0]),
+                1.0 - (tm + t * (1.0 - c2[1])) * (1.0 - c1[1]),
+                1.0 - (tm + t * (1.0 - c2[2])) * (1.0 - c1[2]))
+    if mode == 6:
+        return (_dodge(c1[0], c2[0], t), _dodge(c1[1], c2[1], t), _dodge(c1[2], c2[2], t))
+    if mode == 7:
+        return (c1[0] + t * c2[0], c1[1] + t * c2[1], c1[2] + t * c2[2])
+    if mode == 8:
+        return (_overlay(c1[0], c2[0], t), _overlay(c1[1], c2[1], t), _overlay(c1[2], c2[2], t))
+    if mode == 9:
+        return (_soft_light(c1[0], c2[0], t), _soft_light(c1[1], c2[1], t),
+                _soft_light(c1[2], c2[2], t))
+    if mode == 10:
+        return (c1[0] + t * (2.0 * c2[0] - 1.0), c1[1] + t * (2.0 * c2[1] - 1.0),
+                c1[2] + t * (2.0 * c2[2] - 1.0))
+    if mode == 11:
+        return (tm * c1[0] + t * abs(c1[0] - c2[0]), tm * c1[1] + t * abs(c1[1] - c2[1]),
+                tm * c1[2] + t * abs(c1[2] - c2[2]))
+    if mode == 12:
+        return (max(tm * c1[0] + t * (c1[0] + c2[0] - 2.0 * c1[0] * c2[0]), 0.0),
+                max(tm * c1[1] + t * (c1[1] + c2[1] - 2.0 * c1[1] * c2[1]), 0.0),
+                max(tm * c1[2] + t * (c1[2] + c2[2] - 2.0 * c1[2] * c2[2]), 0.0))
+    if mode == 13:
+        return (c1[0] - t * c2[0], c1[1] - t * c2[1], c1[2] - t * c2[2])
+    if mode == 14:
+        return (_divide(c1[0], c2[0], t), _divide(c1[1], c2[1], t), _divide(c1[2], c2[2], t))
+    if mode == 15:  # hue
+        hsv = rgb_to_hsv(c2)
+        if hsv[1] != 0.0:
+            hsv2 = rgb_to_hsv(c1)
+            return _lerp3(c1, hsv_to_rgb((hsv[0], hsv2[1], hsv2[2])), t)
+        return c1
+    if mode == 16:  # saturation
+        hsv = rgb_to_hsv(c1)
+        if hsv[1] != 0.0:
+            hsv2 = rgb_to_hsv(c2)
+            return hsv_to_rgb((hsv[0], tm * hsv[1] + t * hsv2[1], hsv[2]))
+        return c1
+    if mode == 17:  # value
+        hsv = rgb_to_hsv(c1)
+        hsv2 = rgb_to_hsv(c2)
+        return hsv_to_rgb((hsv[0], hsv[1], tm * hsv[2] + t * hsv2[2]))
+    if mode == 18:  # color
+        hsv2 = rgb_to_hsv(c2)
+        if hsv2[1] != 0.0:
+            hsv = rgb_to_hsv(c1)
+            return _lerp3(c1, hsv_to_rgb((hsv2[0], hsv2[1], hsv[2])), t)
+        return c1
+    return c1
+
+
+@kernel
+def euler_rotate(r, v, transposed):
+    """Cycles's ``euler_to_transform`` (XYZ Euler, R = Rz·Ry·Rx) applied to v (or Rᵀ)."""
+    cx, cy, cz = math.cos(r[0]), math.cos(r[1]), math.cos(r[2])
+    sx, sy, sz = math.sin(r[0]), math.sin(r[1]), math.sin(r[2])
+    m00, m01, m02 = cy * cz, sy * sx * cz - cx * sz, sy * cx * cz + sx * sz
+    m10, m11, m12 = cy * sz, sy * sx * sz + cx * cz, sy * cx * sz - sx * cz
+    m20, m21, m22 = -sy, cy * sx, cy * cx
+    if transposed:
+        return (m00 * v[0] + m10 * v[1] + m20 * v[2], m01 * v[0] + m11 * v[1] + m21 * v[2],
+                m02 * v[0] + m12 * v[1] + m22 * v[2])
+    return (m00 * v[0] + m01 * v[1] + m02 * v[2], m10 * v[0] + m11 * v[1] + m12 * v[2],
+            m20 * v[0] + m21 * v[1] + m22 * v[2])
+
+
+@kernel
+def mapping(mode, v, loc, rot, scale):
+    """Cycles's ``svm_mapping``: POINT, TEXTURE, VECTOR, NORMAL."""
+    if mode == 0:
+        p = euler_rotate(rot, (v[0] * scale[0], v[1] * scale[1], v[2] * scale[2]), False)
+        return (p[0] + loc[0], p[1] + loc[1], p[2] + loc[2])
+    if mode == 1:
+        p = euler_rotate(rot, (v[0] - loc[0], v[1] - loc[1], v[2] - loc[2]), True)
+        return _safe_div3(p, scale)
+    if mode == 2:
+        return euler_rotate(rot, (v[0] * scale[0], v[1] * scale[1], v[2] * scale[2]), False)
+    return _normalize(euler_rotate(rot, _safe_div3(v, scale), False))
+
+
+@kernel
+def checker(p):
+    """Cycles's ``svm_checker``: 1 or 0."""
+    x = (p[0] + 0.000001) * 0.999999
+    y = (p[1] + 0.000001) * 0.999999
+    z = (p[2] + 0.000001) * 0.999999
+    xi = abs(int(math.floor(x)))
+    yi = abs(int(math.floor(y)))
+    zi = abs(int(math.floor(z)))
+    return 1.0 if ((xi % 2 == yi % 2) == (zi % 2 == 1)) else 0.0
+
+
+@kernel
+def gradient(mode, p):
+    """Cycles's ``svm_gradient`` (before its saturate)."""
+    x, y, z = p
+    if mode == 0:
+        return x
+    if mode == 1:
+        r = max(x, 0.0)
+        return r * r
+    if mode == 2:
+        r = min(max(x, 0.0), 1.0)
+        t = r * r
+        return 3.0 * t - 2.0 * t * r
+    if mode == 3:
+        return (x + y) * 0.5
+    if mode == 6:
+        return math.atan2(y, x) / (2.0 * math.pi) + 0.5
+    r = max(0.999999 - math.sqrt(x * x + y * y + z * z), 0.0)
+    if mode == 5:
+        return r * r
+    return r
+
+
+@kernel
+def smoothstep(e0, e1, x):
+    if x < e0:
+        return 0.0
+    if x >= e1:
+        return 1.0
+    t = (x - e0) / (e1 - e0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+@kernel
+def map_range(mode, clamp, value, fmin, fmax, tmin, tmax, steps):
+    """Cycles's ``svm_node_map_range`` for floats."""
+    if mode == 0:
+        f = safe_divide(value - fmin, fmax - fmin)
+    elif mode == 1:
+        f = safe_divide(value - fmin, fmax - fmin)
+        f = math.floor(f * (steps + 1.0)) / steps if steps > 0.0 else 0.0
+    elif mode == 2:
+        f = 1.0 - smoothstep(fmax, fmin, value) if fmin > fmax else smoothstep(fmin, fmax, value)
+    else:
+        if fmin > fmax:
+            x = saturate(safe_divide(value - fmax, fmin - fmax))
+            f = 1.0 - x * x * x * (x * (x * 6.0 - 15.0) + 10.0)
+        else:
+            x = saturate(safe_divide(value - fmin, fmax - fmin))
+            f = x * x * x * (x * (x * 6.0 - 15.0) + 10.0)
+    r = tmin + f * (tmax - tmin)
+    if clamp and mode <= 1:
+        r = min(max(r, tmax), tmin) if tmin > tmax else min(max(r, tmin), tmax)
+    return r
+
+
+@kernel
+def srgb_to_linear(c):
+    if c < 0.04045:
+        return 0.0 if c < 0.0 else c * (1.0 / 12.92)
+    return math.pow((c + 0.055) * (1.0 / 1.055), 2.4)
+
+
+@kernel
+def _texel(pd, img, x, y, c):
+    info = pd.img_info[img]
+    w = info[0]
+    k = info[2] + (y * w + x) * 4 + c
+    if info[3]:
+        return float(pd.img_f32[k])
+    return pd.img_u8[k] * (1.0 / 255.0)
+
+
+@kernel
+def _wrap(i, n, ext):
+    """Texel index i in [0, n) by extension (REPEAT, EXTEND, CLIP → −1 outside, MIRROR)."""
+    if ext == 0:
+        r = i % n
+        return r + n if r < 0 else r
+    if ext == 1:
+        return min(max(i, 0), n - 1)
+    if ext == 2:
+        return i if 0 <= i < n else -1
+    # mirror: period 2n
+    m = i % (2 * n)
+    if m < 0:
+        m += 2 * n
+    return m if m < n else 2 * n - 1 - m
+
+
+@kernel
+def _bspline(t, k):
+    """Weight of texel k (0..3, from ix − 1) of the uniform cubic B-spline at fraction t
+    (Cycles's SET_CUBIC_SPLINE_WEIGHTS)."""
+    if k == 0:
+        return (((-1.0 / 6.0) * t + 0.5) * t - 0.5) * t + 1.0 / 6.0
+    if k == 1:
+        return ((0.5 * t - 1.0) * t) * t + 2.0 / 3.0
+    if k == 2:
+        return ((-0.5 * t + 0.5) * t + 0.5) * t + 1.0 / 6.0
+    return (1.0 / 6.0) * t * t * t
+
+
+@kernel
+def image_lookup(pd, img, mode, u, v):
+    """RGBA of image img at texture coordinate (u, v) (origin bottom-left), Cycles's CPU image
+    interpolation: mode = interpolation·8 + extension (Closest 0 / Linear 1 / Cubic 2; REPEAT 0,
+    EXTEND 1, CLIP 2, MIRROR 3). CLIP reads texels outside the image as 0 (so Linear fades over
+    half a texel beyond the border, as in Cycles)."""
+    info = pd.img_info[img]
+    w, h = info[0], info[1]
+    interp = mode // 8
+    ext = mode % 8
+    r = g = b = a = 0.0
+    if interp == 0:
+        ix = _wrap(int(math.floor(u * w)), w, ext)
+        iy = _wrap(int(math.floor(v * h)), h, ext)
+        if ix >= 0 and iy >= 0:
+            r, g, b, a = (_texel(pd, img, ix, iy, 0), _texel(pd, img, ix, iy, 1),
+                          _texel(pd, img, ix, iy, 2), _texel(pd, img, ix, iy, 3))
+    elif interp == 2:
+        # Cycles's bicubic: uniform cubic B-spline weights over 4×4 texels around (u, v)
+        tx = u * w - 0.5
+        ty = v * h - 0.5
+        fx0 = math.floor(tx)
+        fy0 = math.floor(ty)
+        x0, y0 = int(fx0) - 1, int(fy0) - 1
+        for dy in range(4):
+            wy = _bspline(ty - fy0, dy)
+            iy = _wrap(y0 + dy, h, ext)
+            for dx in range(4):
+                ix = _wrap(x0 + dx, w, ext)
+                if ix < 0 or iy < 0:
+                    continue
+                wgt = _bspline(tx - fx0, dx) * wy
+                r += wgt * _texel(pd, img, ix, iy, 0)
+                g += wgt * _texel(pd, img, ix, iy, 1)
+                b += wgt * _texel(pd, img, ix, iy, 2)
+                a += wgt * _texel(pd, img, ix, iy, 3)
+    else:
+        tx = u * w - 0.5
+        ty = v * h - 0.5
+        fx0 = math.floor(tx)
+        fy0 = math.floor(ty)
+        fx = tx - fx0
+        fy = ty - fy0
+        x0, y0 = int(fx0), int(fy0)
+        for dy in range(2):
+            wy = fy if dy else 1.0 - fy
+            iy = _wrap(y0 + dy, h, ext)
+            for dx in range(2):
+                wx = fx if dx else 1.0 - fx
+                ix = _wrap(x0 + dx, w, ext)
+                if ix < 0 or iy < 0:
+                    continue
+                wgt = wx * wy
+                r += wgt * _texel(pd, img, ix, iy, 0)
+                g += wgt * _texel(pd, img, ix, iy, 1)
+                b += wgt * _texel(pd, img, ix, iy, 2)
+                a += wgt * _texel(pd, img, ix, iy, 3)
+    if info[4]:
+        r, g, b = srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b)
+    return r, g, b, a
+
+
+@kernel
+def ramp_lookup(pd, off, interpolate, f):
+    """Cycles's ``rgb_ramp_lookup`` on a RAMP_TABLE_SIZE-entry RGBA table at data[off]."""
+    f = min(max(f, 0.0), 1.0) * (RAMP_TABLE_SIZE - 1)
+    i = min(max(int(f), 0), RAMP_TABLE_SIZE - 1)
+    t = f - i
+    k = off + 4 * i
+    r, g, b, a = pd.data[k], pd.data[k + 1], pd.data[k + 2], pd.data[k + 3]
+    if interpolate and t > 0.0:
+        r = (1.0 - t) * r + t * pd.data[k + 4]
+        g = (1.0 - t) * g + t * pd.data[k + 5]
+        b = (1.0 - t) * b + t * pd.data[k + 6]
+        a = (1.0 - t) * a + t * pd.data[k + 7]
+    return r, g, b, a
+
+
+@inline_kernel
+def _reg(regs, r):
+    return (regs[r, 0], regs[r, 1], regs[r, 2])
+
+
+@inline_kernel
+def _set(regs, r, v):
+    regs[r, 0] = v[0]
+    regs[r, 1] = v[1]
+    regs[r, 2] = v[2]
+
+
+@inline_kernel
+def _set1(regs, r, x):
+    regs[r, 0] = x
+    regs[r, 1] = x
+    regs[r, 2] = x
+
+
+@inline_kernel
+def _corner3(arr, prim, b0, b1, b2):
+    c = arr[prim]
+    return (b0 * c[0, 0] + b1 * c[1, 0] + b2 * c[2, 0], b0 * c[0, 1] + b1 * c[1, 1] + b2 * c[2, 1],
+            b0 * c[0, 2] + b1 * c[1, 2] + b2 * c[2, 2])
+
+
+@kernel
+def run_program(pd, regs, prog, prim, b1, b2):
+    """Run program ``prog`` at barycentrics (b1, b2) of global triangle ``prim``; results stay
+    in ``regs`` (R, 3) float64."""
+    b0 = 1.0 - b1 - b2
+    for k in range(pd.const_start[prog], pd.const_start[prog + 1]):
+        r = pd.const_reg[k]
+        regs[r, 0] = pd.const_val[k, 0]
+        regs[r, 1] = pd.const_val[k, 1]
+        regs[r, 2] = pd.const_val[k, 2]
+    for k in range(pd.op_start[prog], pd.op_start[prog + 1]):
+        op = pd.ops[k, 0]
+        mode = pd.ops[k, 1]
+        o0 = pd.ops[k, 2]
+        o1 = pd.ops[k, 3]
+        i0, i1, i2, i3, i4, i5 = pd.ops[k, 4], pd.ops[k, 5], pd.ops[k, 6], pd.ops[k, 7], pd.ops[k, 8], pd.ops[k, 9]
+        param = pd.ops[k, 10]
+        if op == OP_UV:
+            if pd.uv.shape[0]:
+                c = pd.uv[prim]
+                _set(regs, o0, (b0 * c[0, 0] + b1 * c[1, 0] + b2 * c[2, 0],
+                                b0 * c[0, 1] + b1 * c[1, 1] + b2 * c[2, 1], 0.0))
+            else:
+                _set1(regs, o0, 0.0)
+        elif op == OP_GENERATED:
+            if pd.generated.shape[0]:
+                _set(regs, o0, _corner3(pd.generated, prim, b0, b1, b2))
+            else:
+                _set1(regs, o0, 0.0)
+        elif op == OP_ATTRIBUTE:
+            if param < pd.attrs.shape[0]:
+                _set(regs, o0, _corner3(pd.attrs[param], prim, b0, b1, b2))
+            else:
+                _set1(regs, o0, 0.0)
+        elif op == OP_OBJECT:
+            if pd.objco.shape[0]:
+                _set(regs, o0, _corner3(pd.objco, prim, b0, b1, b2))
+            else:
+                _set1(regs, o0, 0.0)
+        elif op == OP_VMATH:
+            c = _reg(regs, i2) if i2 >= 0 else (0.0, 0.0, 0.0)
+            s = regs[i3, 0] if i3 >= 0 else 1.0
+            _set(regs, o0, vmath_op(mode, _reg(regs, i0), _reg(regs, i1), c, s))
+        elif op == OP_MATH:
+            x = math_op(mode, regs[i0, 0], regs[i1, 0], regs[i2, 0])
+            _set1(regs, o0, saturate(x) if param else x)
+        elif op == OP_MIX:
+            fac = _reg(regs, i0)
+            a = _reg(regs, i1)
+            b = _reg(regs, i2)
+            if mode == 0 and (fac[0] != fac[1] or fac[1] != fac[2]):  # non-uniform vector mix
+                _set(regs, o0, ((1.0 - fac[0]) * a[0] + fac[0] * b[0], (1.0 - fac[1]) * a[1] + fac[1] * b[1],
+                                (1.0 - fac[2]) * a[2] + fac[2] * b[2]))
+            else:
+                _set(regs, o0, mix_blend(mode, fac[0], a, b))
+        elif op == OP_MAPPING:
+            _set(regs, o0, mapping(mode, _reg(regs, i0), _reg(regs, i1), _reg(regs, i2), _reg(regs, i3)))
+        elif op == OP_IMAGE:
+            v = _reg(regs, i0)
+            r, g, b, a = image_lookup(pd, param, mode, v[0], v[1])
+            _set(regs, o0, (r, g, b))
+            _set1(regs, o1, a)
+        elif op == OP_CHECKER:
+            v = _reg(regs, i0)
+            s = regs[i3, 0]
+            f = checker((v[0] * s, v[1] * s, v[2] * s))
+            _set(regs, o0, _reg(regs, i1) if f == 1.0 else _reg(regs, i2))
+            _set1(regs, o1, f)
+        elif op == OP_GRADIENT:
+            f = saturate(gradient(mode, _reg(regs, i0)))
+            _set1(regs, o0, f)
+            _set1(regs, o1, f)
+        elif op == OP_RAMP:
+            r, g, b, a = ramp_lookup(pd, param, mode, regs[i0, 0])
+            _set(regs, o0, (r, g, b))
+            _set1(regs, o1, a)
+        elif op == OP_MAP_RANGE:
+            _set1(regs, o0, map_range(mode, param, regs[i0, 0], regs[i1, 0], regs[i2, 0], regs[i3, 0],
+                                      regs[i4, 0], regs[i5, 0]))
+        elif op == OP_CLAMP:
+            x, lo, hi = regs[i0, 0], regs[i1, 0], regs[i2, 0]
+            if mode == 1 and lo > hi:
+                lo, hi = hi, lo
+            _set1(regs, o0, min(max(x, lo), hi))
+        elif op == OP_INVERT:
+            f = regs[i0, 0]
+            c = _reg(regs, i1)
+            _set(regs, o0, (f * (1.0 - c[0]) + (1.0 - f) * c[0], f * (1.0 - c[1]) + (1.0 - f) * c[1],
+                            f * (1.0 - c[2]) + (1.0 - f) * c[2]))
+        elif op == OP_GAMMA:
+            c = _reg(regs, i0)
+            gm = regs[i1, 0]
+            _set(regs, o0, (math.pow(c[0], gm) if c[0] > 0.0 else c[0],
+                            math.pow(c[1], gm) if c[1] > 0.0 else c[1],
+                            math.pow(c[2], gm) if c[2] > 0.0 else c[2]))
+        elif op == OP_BRIGHT_CONTRAST:
+            c = _reg(regs, i0)
+            a = 1.0 + regs[i2, 0]
+            b = regs[i1, 0] - regs[i2, 0] * 0.5
+            _set(regs, o0, (max(a * c[0] + b, 0.0), max(a * c[1] + b, 0.0), max(a * c[2] + b, 0.0)))
+        elif op == OP_HSV:
+            c = _reg(regs, i4)
+            hsv = rgb_to_hsv(c)
+            rgb = hsv_to_rgb((fract(hsv[0] + regs[i0, 0] + 0.5), saturate(hsv[1] * regs[i1, 0]),
+                              hsv[2] * regs[i2, 0]))
+            f = regs[i3, 0]
+            _set(regs, o0, (max(f * rgb[0] + (1.0 - f) * c[0], 0.0), max(f * rgb[1] + (1.0 - f) * c[1], 0.0),
+                            max(f * rgb[2] + (1.0 - f) * c[2], 0.0)))
+        elif op == OP_COMPONENT:
+            _set1(regs, o0, regs[i0, mode])
+        elif op == OP_COMBINE:
+            _set(regs, o0, (regs[i0, 0], regs[i1, 0], regs[i2, 0]))
+        elif op == OP_TO_GRAY:
+            c = _reg(regs, i0)
+            _set1(regs, o0, LUMINANCE[0] * c[0] + LUMINANCE[1] * c[1] + LUMINANCE[2] * c[2])
+        elif op == OP_AVERAGE:
+            c = _reg(regs, i0)
+            _set1(regs, o0, (c[0] + c[1] + c[2]) * (1.0 / 3.0))
+        elif op == OP_RGB_TO_HSV:
+            _set(regs, o0, rgb_to_hsv(_reg(regs, i0)))
+        elif op == OP_HSV_TO_RGB:
+            _set(regs, o0, hsv_to_rgb(_reg(regs, i0)))
+
+
+@inline_kernel
+def eval_material(pd, md, regs, m, prim, b1, b2):
+    """Run material m's program at a hit and write its per-hit parameters into row m of ``md``
+    (which must be this thread's private copy): lobe colours and alphas, the lobe selection
+    probabilities and CDF, delta flags, albedo and emission."""
+    run_program(pd, regs, pd.prog_of[m], prim, b1, b2)
+    count = md.lobe_count[m]
+    total = 0.0
+    for l in range(count):
+        r = pd.lobe_color_reg[m, l]
+        if r >= 0:
+            md.lobe_color[m, l, 0] = max(regs[r, 0], 0.0)
+            md.lobe_color[m, l, 1] = max(regs[r, 1], 0.0)
+            md.lobe_color[m, l, 2] = max(regs[r, 2], 0.0)
+        rr = pd.lobe_rough_reg[m, l]
+        if rr >= 0:
+            rough = saturate(regs[rr, 0])
+            alpha = rough * rough
+            md.lobe_alpha[m, l] = alpha
+            t = md.lobe_type[m, l]
+            md.lobe_delta[m, l] = t != 1 and (alpha * alpha <= ALPHA_SQ_SINGULAR or (
+                t == 3 and abs(md.lobe_ior[m, l] - 1.0) < IOR_ONE_EPS))
+        total += (md.lobe_color[m, l, 0] + md.lobe_color[m, l, 1] + md.lobe_color[m, l, 2]) * (1.0 / 3.0)
+    cdf = 0.0
+    delta_only = True
+    trans_delta = False
+    a0 = a1 = a2 = 0.0
+    for l in range(count):
+        w = (md.lobe_color[m, l, 0] + md.lobe_color[m, l, 1] + md.lobe_color[m, l, 2]) * (1.0 / 3.0)
+        p = w / total if total > 0.0 else 0.0
+        md.lobe_select[m, l] = p
+        cdf += p
+        md.lobe_cdf[m, l] = 1.0 if l == count - 1 else cdf
+        if not md.lobe_delta[m, l]:
+            delta_only = False
+        if md.lobe_delta[m, l] or md.lobe_type[m, l] == 3:
+            trans_delta = True
+        a0 += md.lobe_color[m, l, 0]
+        a1 += md.lobe_color[m, l, 1]
+        a2 += md.lobe_color[m, l, 2]
+    md.delta_only[m] = delta_only
+    md.transmission_or_delta[m] = trans_delta
+    md.albedo[m, 0] = a0
+    md.albedo[m, 1] = a1
+    md.albedo[m, 2] = a2
+    e = pd.emission_reg[m]
+    if e >= 0:
+        md.emission[m, 0] = max(regs[e, 0], 0.0)
+        md.emission[m, 1] = max(regs[e, 1], 0.0)
+        md.emission[m, 2] = max(regs[e, 2], 0.0)
+        md.has_emission[m] = md.emission[m, 0] > 0.0 or md.emission[m, 1] > 0.0 or md.emission[m, 2] > 0.0
+
+
+@kernel
+def _run_rows(pd, regs, prog, prim, b1, b2, out_reg, out):
+    for i in range(prim.shape[0]):
+        run_program(pd, regs, prog, prim[i], b1[i], b2[i])
+        out[i, 0] = regs[out_reg, 0]
+        out[i, 1] = regs[out_reg, 1]
+        out[i, 2] = regs[out_reg, 2]
