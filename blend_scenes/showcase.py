@@ -1,11 +1,10 @@
 """Showcase: a product shot a Blender user would recognise, at 1280x720.
 
 Real scanned and modelled meshes (the Stanford bunny in red plastic, Newell's teapot in copper,
-Spot the cow in white ceramic-like plastic, Suzanne in brushed gold) on a tiled floor in front of
-a backdrop, lit by a sun and a sky-blue world with a soft fill light; the camera focuses on the
-bunny at f/2.8 (depth of field), and a ball rolls past in front (motion blur). The floor's tiles
-are geometry with two materials per face: image and procedural textures come with the materials
-issue (11), so this scene uses only what DRT renders like Cycles today.
+Spot the cow with a checker texture on its UVs, Suzanne in brushed gold) on a wooden floor (an
+image texture of planks, painted by the script and packed into the .blend) in front of a
+backdrop, lit by a sun and a sky-blue world with a soft fill light; the camera focuses on the
+bunny at f/2.8 (depth of field), and a ball rolls past in front (motion blur).
 
 Meshes come from ../shared/data/meshes (unmodified public test models, see its README); the
 script bakes them into the .blend, so only building the scene needs them.
@@ -68,25 +67,58 @@ def import_obj(filename, name, height, location, rotation_z, material, smooth=Tr
     return obj
 
 
-def tiled_floor(name, size, tiles, mat_a, mat_b):
-    """A square floor of ``tiles`` x ``tiles`` quads alternating two materials (a checker)."""
-    step = size / tiles
-    verts = [(-size / 2 + i * step, -size / 2 + j * step, 0.0) for j in range(tiles + 1) for i in range(tiles + 1)]
-    faces, mats = [], []
-    for j in range(tiles):
-        for i in range(tiles):
-            a = j * (tiles + 1) + i
-            faces.append((a, a + 1, a + tiles + 2, a + tiles + 1))
-            mats.append((i + j) % 2)
-    return C.mesh_object(name, verts, faces, [mat_a, mat_b], face_materials=mats)
+def plank_floor(name, size, repeats):
+    """A ``size`` m square floor with UVs, its Principled base colour an image texture of
+    planks (painted by textured.py's generator, packed into the .blend) repeated ``repeats``
+    times each way through a Mapping node."""
+    import textured
+
+    mat, nodes, out = C._new_material(name)
+    nt = mat.node_tree
+    img = bpy.data.images.new("showcase_planks", 256, 256, alpha=False, float_buffer=False)
+    img.pixels.foreach_set(textured.plank_pixels(256, 256, seed=11).reshape(-1).astype("float32"))
+    img.pack()
+    tc = nodes.new("ShaderNodeTexCoord")
+    mp = nodes.new("ShaderNodeMapping")
+    mp.inputs["Scale"].default_value = (repeats, repeats, 1.0)
+    nt.links.new(tc.outputs["UV"], mp.inputs["Vector"])
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tex.interpolation = "Linear"
+    nt.links.new(mp.outputs[0], tex.inputs["Vector"])
+    p = nodes.new("ShaderNodeBsdfPrincipled")
+    p.inputs["Roughness"].default_value = 0.35
+    nt.links.new(tex.outputs["Color"], p.inputs["Base Color"])
+    nt.links.new(p.outputs[0], out.inputs["Surface"])
+    bpy.ops.mesh.primitive_plane_add(size=size, location=(0.0, 0.0, 0.0))
+    obj = bpy.context.active_object
+    obj.name = obj.data.name = name
+    obj.data.materials.append(mat)
+    return obj
+
+
+def checker_material(name, color1, color2, scale):
+    """Principled base colour from a Checker texture on the mesh's UVs."""
+    mat, nodes, out = C._new_material(name)
+    nt = mat.node_tree
+    tc = nodes.new("ShaderNodeTexCoord")
+    chk = nodes.new("ShaderNodeTexChecker")
+    chk.inputs["Color1"].default_value = C._rgba(color1)
+    chk.inputs["Color2"].default_value = C._rgba(color2)
+    chk.inputs["Scale"].default_value = scale
+    nt.links.new(tc.outputs["UV"], chk.inputs["Vector"])
+    p = nodes.new("ShaderNodeBsdfPrincipled")
+    p.inputs["Roughness"].default_value = 0.4
+    nt.links.new(chk.outputs["Color"], p.inputs["Base Color"])
+    nt.links.new(p.outputs[0], out.inputs["Surface"])
+    return mat
 
 
 def build():
     scene = C.reset()
     bpy.context.preferences.edit.keyframe_new_interpolation_type = "LINEAR"
     C.set_world(scene.world, (0.45, 0.6, 0.85), 0.45)
-    tiled_floor("Floor", 16.0, 32, principled("TileLight", (0.75, 0.7, 0.62), roughness=0.35),
-                principled("TileDark", (0.25, 0.2, 0.17), roughness=0.35))
+    plank_floor("Floor", 16.0, 8.0)
     # a backdrop wall behind the products
     C.quad("Backdrop", (0.0, 3.0, 2.5), (16.0, 5.0), C.diffuse("Backdrop", (0.55, 0.58, 0.62)),
            rotation=(C.deg(90), 0, 0))
@@ -96,7 +128,7 @@ def build():
     import_obj("teapot.obj", "Teapot", 0.75, (-1.6, 1.4), C.deg(-30),
                principled("Copper", (0.95, 0.64, 0.54), metallic=1.0, roughness=0.2))
     import_obj("spot.obj", "Spot", 0.9, (1.7, 1.5), C.deg(-60),
-               principled("WhitePlastic", (0.85, 0.85, 0.82), roughness=0.4))
+               checker_material("SpotChecker", (0.85, 0.85, 0.82), (0.12, 0.12, 0.14), 8.0))
     import_obj("suzanne.obj", "Suzanne", 0.6, (-0.9, -0.6), C.deg(25),
                principled("Gold", (1.0, 0.77, 0.34), metallic=1.0, roughness=0.35))
 

@@ -60,6 +60,16 @@ def _join(path: str, key: str) -> str:
     return f"{path}.{key}" if path else key
 
 
+#: smallest lens, sensor size (mm) and ortho scale (m): a denormal lens made the field of view
+#: infinite (fuzzing); Blender's own minimum lens is 1 mm
+MIN_CAMERA_LENGTH = 1e-6
+
+#: largest magnitude of any number in the header: beyond it values have no meaning in a Blender
+#: scene and overflow float arithmetic (a strength of 1e308 squared or divided; fuzzing found
+#: several), so they are refused with the field's name instead
+MAX_MAGNITUDE = 1e30
+
+
 def _number(d, key, path, default=..., lo=None, hi=None, lo_open=False, integer=False):
     p = _join(path, key)
     v = _get(d, key, path, default)
@@ -73,6 +83,8 @@ def _number(d, key, path, default=..., lo=None, hi=None, lo_open=False, integer=
         raise SceneError(p, f"must be an integer, got {v!r}")
     if not math.isfinite(v):
         raise SceneError(p, f"must be a finite number, got {v!r}")
+    if abs(v) > MAX_MAGNITUDE and not integer:
+        raise SceneError(p, f"must be within ±{MAX_MAGNITUDE:g}, got {v!r}")
     if lo is not None and (v < lo or (lo_open and v == lo)):
         raise SceneError(p, f"must be {'>' if lo_open else '>='} {lo}, got {v!r}")
     if hi is not None and v > hi:
@@ -105,6 +117,8 @@ def _vector(d, key, path, n, default=..., lo=None):
         raise SceneError(p, f"must be a list of {n} numbers, got shape {a.shape}")
     if not np.all(np.isfinite(a)):
         raise SceneError(p, "must contain only finite numbers")
+    if np.any(np.abs(a) > MAX_MAGNITUDE):
+        raise SceneError(p, f"must contain numbers within ±{MAX_MAGNITUDE:g}")
     if lo is not None and np.any(a < lo):
         raise SceneError(p, f"must contain numbers >= {lo}")
     return a
@@ -327,15 +341,15 @@ def _camera(h: dict) -> CameraSpec:
     cam = CameraSpec(
         type=_enum(c, "type", p, CAMERA_TYPES, "PERSP"),
         matrix=_matrix(c, "matrix_world", p),
-        lens=_number(c, "lens", p, 50.0, lo=0, lo_open=True),
-        sensor_width=_number(c, "sensor_width", p, 36.0, lo=0, lo_open=True),
-        sensor_height=_number(c, "sensor_height", p, 24.0, lo=0, lo_open=True),
+        lens=_number(c, "lens", p, 50.0, lo=MIN_CAMERA_LENGTH),
+        sensor_width=_number(c, "sensor_width", p, 36.0, lo=MIN_CAMERA_LENGTH),
+        sensor_height=_number(c, "sensor_height", p, 24.0, lo=MIN_CAMERA_LENGTH),
         sensor_fit=_enum(c, "sensor_fit", p, SENSOR_FITS, "AUTO"),
         shift_x=_number(c, "shift_x", p, 0.0),
         shift_y=_number(c, "shift_y", p, 0.0),
         clip_start=_number(c, "clip_start", p, 0.1, lo=0),
         clip_end=_number(c, "clip_end", p, 1000.0, lo=0, lo_open=True),
-        ortho_scale=_number(c, "ortho_scale", p, 7.0, lo=0, lo_open=True),
+        ortho_scale=_number(c, "ortho_scale", p, 7.0, lo=MIN_CAMERA_LENGTH),
         dof_use=_bool(dof, "use", dp, False),
         focus_distance=_number(dof, "focus_distance", dp, 10.0, lo=0),
         fstop=_number(dof, "fstop", dp, 2.8, lo=0, lo_open=True),

@@ -633,9 +633,12 @@ class Tracer:
         if scratch:
             o32, d32, dists = o, d, tfar
         else:
-            o32 = np.ascontiguousarray(o, dtype=np.float32)
-            d32 = np.ascontiguousarray(d, dtype=np.float32)
-            dists = np.ascontiguousarray(tfar, dtype=np.float32).copy()
+            # values beyond float32 (an absurd camera) become inf: Embree reports such rays as
+            # misses, which is what a renderer can say about them
+            with np.errstate(over="ignore"):
+                o32 = np.ascontiguousarray(o, dtype=np.float32)
+                d32 = np.ascontiguousarray(d, dtype=np.float32)
+                dists = np.ascontiguousarray(tfar, dtype=np.float32).copy()
         if occluded:
             out = scene.run(o32, d32, dists=dists, query="OCCLUDED")
         else:
