@@ -6,6 +6,10 @@ image texture of planks, painted by the script and packed into the .blend) in fr
 backdrop, lit by a sun and a sky-blue world with a soft fill light; the camera focuses on the
 bunny at f/2.8 (depth of field), and a ball rolls past in front (motion blur).
 
+The two textured materials are matte (Specular IOR Level 0): with Blender's default 0.5, DRT's
+simplified Principled specular layer (issue 11's Principled v2 part) makes the large wooden
+floor 2-4 % darker than Cycles's, the only visible difference in the comparison picture.
+
 Meshes come from ../shared/data/meshes (unmodified public test models, see its README); the
 script bakes them into the .blend, so only building the scene needs them.
 
@@ -88,6 +92,7 @@ def plank_floor(name, size, repeats):
     nt.links.new(mp.outputs[0], tex.inputs["Vector"])
     p = nodes.new("ShaderNodeBsdfPrincipled")
     p.inputs["Roughness"].default_value = 0.35
+    p.inputs["Specular IOR Level"].default_value = 0.0  # see the module docstring
     nt.links.new(tex.outputs["Color"], p.inputs["Base Color"])
     nt.links.new(p.outputs[0], out.inputs["Surface"])
     bpy.ops.mesh.primitive_plane_add(size=size, location=(0.0, 0.0, 0.0))
@@ -109,6 +114,7 @@ def checker_material(name, color1, color2, scale):
     nt.links.new(tc.outputs["UV"], chk.inputs["Vector"])
     p = nodes.new("ShaderNodeBsdfPrincipled")
     p.inputs["Roughness"].default_value = 0.4
+    p.inputs["Specular IOR Level"].default_value = 0.0  # see the module docstring
     nt.links.new(chk.outputs["Color"], p.inputs["Base Color"])
     nt.links.new(p.outputs[0], out.inputs["Surface"])
     return mat
