@@ -72,51 +72,46 @@ class DRT_RENDER_PT_sampling_subset(DRTRenderPanel, bpy.types.Panel):
         col.prop(d, "sample_count")
 
 
-class DRT_RENDER_PT_sampling_denoise(DRTRenderPanel, bpy.types.Panel):
+class _DenoisePanel(DRTRenderPanel):
+    """Cycles's Denoise sub-panel of Sampling; ``prefix`` selects the final-render settings
+    ("denoising_", switch "use_denoising") or the viewport's ("preview_denoising_")."""
+    bl_parent_id = "DRT_RENDER_PT_sampling"
+    bl_options = {"DEFAULT_CLOSED"}
+    prefix = "denoising_"
+    switch = "use_denoising"
+    extra = ()
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.drt, self.switch, text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        d = context.scene.drt
+        on = getattr(d, self.switch)
+        col = layout.column()
+        col.active = on
+        col.prop(d, self.prefix + "input_passes")
+        sub = col.column()
+        sub.active = on and getattr(d, self.prefix + "input_passes") != "RGB"
+        sub.prop(d, self.prefix + "prefilter")
+        col.prop(d, self.prefix + "quality")
+        for name in self.extra:
+            col.prop(d, self.prefix + name)
+
+
+class DRT_RENDER_PT_sampling_denoise(_DenoisePanel, bpy.types.Panel):
     """Cycles's Sampling > Render > Denoise, for DRT's final renders (Open Image Denoise)."""
     bl_label = "Denoise"
-    bl_parent_id = "DRT_RENDER_PT_sampling"
-    bl_options = {"DEFAULT_CLOSED"}
-
-    def draw_header(self, context):
-        self.layout.prop(context.scene.drt, "use_denoising", text="")
-
-    def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        d = context.scene.drt
-        col = layout.column()
-        col.active = d.use_denoising
-        col.prop(d, "denoising_input_passes")
-        sub = col.column()
-        sub.active = d.use_denoising and d.denoising_input_passes != "RGB"
-        sub.prop(d, "denoising_prefilter")
-        col.prop(d, "denoising_quality")
 
 
-class DRT_RENDER_PT_sampling_viewport_denoise(DRTRenderPanel, bpy.types.Panel):
+class DRT_RENDER_PT_sampling_viewport_denoise(_DenoisePanel, bpy.types.Panel):
     """Cycles's Sampling > Viewport > Denoise, for DRT's Rendered viewport."""
     bl_label = "Viewport Denoise"
-    bl_parent_id = "DRT_RENDER_PT_sampling"
-    bl_options = {"DEFAULT_CLOSED"}
-
-    def draw_header(self, context):
-        self.layout.prop(context.scene.drt, "use_preview_denoising", text="")
-
-    def draw(self, context):
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        d = context.scene.drt
-        col = layout.column()
-        col.active = d.use_preview_denoising
-        col.prop(d, "preview_denoising_input_passes")
-        sub = col.column()
-        sub.active = d.use_preview_denoising and d.preview_denoising_input_passes != "RGB"
-        sub.prop(d, "preview_denoising_prefilter")
-        col.prop(d, "preview_denoising_quality")
-        col.prop(d, "preview_denoising_start_sample")
+    prefix = "preview_denoising_"
+    switch = "use_preview_denoising"
+    extra = ("start_sample",)
 
 
 class DRT_VIEWLAYER_PT_passes_data(bpy.types.Panel):

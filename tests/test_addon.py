@@ -174,3 +174,37 @@ def test_border_crop_matches_region():
     rows, cols = drt_engine.border_crop(S(), 100, 80)
     assert (cols.start, cols.stop) == (25, 75)
     assert (rows.start, rows.stop) == (40, 80)  # bottom half, rows counted from the top
+
+
+def test_denoise_panels_draw_existing_settings(registered):
+    """The final-render and viewport Denoise panels share one draw; each shows its own settings,
+    all of which exist on scene.drt (a typo would only show in the UI otherwise)."""
+    from addon import ui
+
+    class Layout:
+        use_property_split = use_property_decorate = active = False
+
+        def __init__(self):
+            self.props = []
+
+        def column(self):
+            return self
+
+        def prop(self, data, name, **_kw):
+            getattr(data, name)  # AttributeError for a missing property
+            self.props.append(name)
+
+    class Context:
+        scene = bpy.context.scene
+
+    drawn = {}
+    for cls in (ui.DRT_RENDER_PT_sampling_denoise, ui.DRT_RENDER_PT_sampling_viewport_denoise):
+        layout = Layout()
+        panel = type("FakePanel", (), {"layout": layout, "switch": cls.switch, "prefix": cls.prefix,
+                                       "extra": cls.extra})()
+        ui._DenoisePanel.draw_header(panel, Context)
+        ui._DenoisePanel.draw(panel, Context)
+        drawn[cls.bl_label] = layout.props
+    assert drawn["Denoise"] == ["use_denoising", "denoising_input_passes", "denoising_prefilter", "denoising_quality"]
+    assert drawn["Viewport Denoise"][0] == "use_preview_denoising" and \
+        drawn["Viewport Denoise"][-1] == "preview_denoising_start_sample"
