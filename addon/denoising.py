@@ -108,15 +108,22 @@ def camera_space(normal: np.ndarray, camera_matrix) -> np.ndarray:
     return np.einsum("hwi,ij->hwj", normal.astype(np.float64), rot).astype(np.float32)
 
 
+def denoise_with(film, input_passes, prefilter, quality, denoise_mod, library, threads=None,
+                 return_info=False):
+    """Denoise a film's combined pass with Cycles-style settings: ``input_passes`` (RGB,
+    RGB_ALBEDO, RGB_ALBEDO_NORMAL) picks the film's guides. Returns the denoised RGB (H, W, 3),
+    top row first (and the DenoiseInfo with ``return_info``)."""
+    albedo = film.albedo if input_passes in ("RGB_ALBEDO", "RGB_ALBEDO_NORMAL") else None
+    normal = film.normal if input_passes == "RGB_ALBEDO_NORMAL" else None
+    return denoise_mod.denoise(film.combined, albedo, normal, prefilter=prefilter, quality=quality,
+                               library=library, threads=threads, return_info=return_info)
+
+
 def denoise(film, scene, denoise_mod, library, threads=None):
-    """(denoised RGB (H, W, 3) top row first, DenoiseInfo) with the scene's settings."""
+    """(denoised RGB (H, W, 3) top row first, DenoiseInfo) with the scene's final-render settings."""
     d = scene.drt
-    guides = d.denoising_input_passes
-    albedo = film.albedo if guides in ("RGB_ALBEDO", "RGB_ALBEDO_NORMAL") else None
-    normal = film.normal if guides == "RGB_ALBEDO_NORMAL" else None
-    return denoise_mod.denoise(film.combined, albedo, normal, prefilter=d.denoising_prefilter,
-                               quality=d.denoising_quality, library=library, threads=threads,
-                               return_info=True)
+    return denoise_with(film, d.denoising_input_passes, d.denoising_prefilter, d.denoising_quality,
+                        denoise_mod, library, threads=threads, return_info=True)
 
 
 def fill_passes(layer, set_pass, film, crop, passes, denoised, camera_matrix) -> None:
@@ -134,5 +141,4 @@ def fill_passes(layer, set_pass, film, crop, passes, denoised, camera_matrix) ->
     if "Denoising Albedo" in names:
         set_pass(layer, "Denoising Albedo", film.albedo[rows, cols])
     if "Denoising Depth" in names:
-        depth = film.depth[rows, cols]
-        set_pass(layer, "Denoising Depth", np.where(np.isfinite(depth), depth, 1e10)[..., None])
+        set_pass(layer, "Denoising Depth", film.depth[rows, cols][..., None])  # background 1e10

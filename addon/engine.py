@@ -227,7 +227,5 @@ def fill_layer(layer, film, crop, wanted) -> None:
     rows, cols = crop
     _set_pass(layer, "Combined", np.nan_to_num(film.combined[rows, cols], nan=0.0))
     for name, channels, _cid, _kind, attr, _flag in wanted:
-        img = np.asarray(getattr(film, attr))[rows, cols]
-        if name == "Depth":
-            img = np.where(np.isfinite(img), img, 1e10)
+        img = np.asarray(getattr(film, attr))[rows, cols]  # film.depth: background already 1e10
         _set_pass(layer, name, img.reshape(img.shape[0], img.shape[1], channels))

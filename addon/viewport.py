@@ -267,10 +267,7 @@ def viewport_denoiser(prefilter: str, quality: str, input_passes: str):
         return unavailable
 
     def run(film):
-        albedo = film.albedo if input_passes in ("RGB_ALBEDO", "RGB_ALBEDO_NORMAL") else None
-        normal = film.normal if input_passes == "RGB_ALBEDO_NORMAL" else None
-        return denoise_mod.denoise(film.combined, albedo, normal, prefilter=prefilter, quality=quality,
-                                   library=library)
+        return denoising.denoise_with(film, input_passes, prefilter, quality, denoise_mod, library)
 
     return run
 

@@ -262,8 +262,6 @@ def _check_output(path: str, ext: str = ".exr"):
 
 
 def cmd_render(args) -> int:
-    from dataclasses import replace
-
     from .exr import write_exr
     from .render import render
     from .scene import SceneError
@@ -279,19 +277,7 @@ def cmd_render(args) -> int:
     if farm_cli.wants_farm_path(args):  # animations and Dask clusters (docs/farm.md)
         return farm_cli.cmd_render(args, load=_load, error_cls=CliError, progress_cls=Progress)
     scene = _load(args)
-    if args.resolution:
-        scene.render = replace(scene.render, width=args.resolution[0], height=args.resolution[1])
-    _check_film_memory(scene.render.width, scene.render.height)
-    spp = args.spp or scene.render.spp
-    if args.sample_offset >= spp:
-        raise CliError(f"--sample-offset {args.sample_offset} must be below the sample count {spp}")
-    count = args.sample_count if args.sample_count is not None else spp - args.sample_offset
-    if args.sample_offset + count > spp:
-        raise CliError(f"--sample-offset + --sample-count ({args.sample_offset + count}) exceeds --spp {spp}")
-    if args.denoise and count < spp:
-        # a denoiser is not linear: denoising each range and averaging is not denoising the image
-        raise CliError("--denoise renders the whole image only: render the sample ranges without it, "
-                       "then `drt merge ... --denoise` denoises the merged image once")
+    spp, count = apply_render_args(args, scene)
 
     stop = threading.Event()
     previous = signal.getsignal(signal.SIGINT)
@@ -335,6 +321,28 @@ def cmd_render(args) -> int:
         f"{100 * st.embree_seconds / max(st.seconds * st.threads, 1e-9):.0f}% of thread time in Embree{nan_note}{dn_note} -> {args.output}"
     )
     return EXIT_INTERRUPTED if st.cancelled else EXIT_OK
+
+
+def apply_render_args(args, scene) -> tuple[int, int]:
+    """Apply ``render``'s --resolution to a loaded scene and check, before any rendering work,
+    the sample range, --denoise and the film's memory: (spp, sample count to render). Shared by
+    the one-process path and drt.farm (clusters, --frames); raises CliError (exit 2)."""
+    from dataclasses import replace
+
+    if args.resolution:
+        scene.render = replace(scene.render, width=args.resolution[0], height=args.resolution[1])
+    _check_film_memory(scene.render.width, scene.render.height)
+    spp = args.spp or scene.render.spp
+    if args.sample_offset >= spp:
+        raise CliError(f"--sample-offset {args.sample_offset} must be below the sample count {spp}")
+    count = args.sample_count if args.sample_count is not None else spp - args.sample_offset
+    if args.sample_offset + count > spp:
+        raise CliError(f"--sample-offset + --sample-count ({args.sample_offset + count}) exceeds --spp {spp}")
+    if args.denoise and count < spp:
+        # a denoiser is not linear: denoising each range and averaging is not denoising the image
+        raise CliError("--denoise renders the whole image only: render the sample ranges without it, "
+                       "then `drt merge ... --denoise` denoises the merged image once")
+    return spp, count
 
 
 def spp_summary(st) -> str:

@@ -11,7 +11,6 @@ import os
 import signal
 import sys
 import threading
-from dataclasses import replace
 
 CLUSTER_ENV = "DRT_CLUSTER"
 
@@ -58,7 +57,7 @@ def cmd_render(args, *, load, error_cls, progress_cls) -> int:
     """``render`` with --frames and/or a cluster. load(args) -> Scene is the CLI's loader;
     error_cls(message, code) its one-line error; progress_cls(stream) its progress bar.
     Denoising (--denoise) runs here on the client, on each whole frame."""
-    from ..cli import _check_film_memory, _denoise
+    from ..cli import _denoise, apply_render_args
     from ..exr import write_exr
     from ..frames import frame_path, parse_frames
     from ..loaders import is_plugin_format
@@ -96,18 +95,7 @@ def cmd_render(args, *, load, error_cls, progress_cls) -> int:
     def load_frame(frame):
         ns = args if frame is None else argparse.Namespace(**{**vars(args), "frame": frame})
         scene = load(ns)
-        if args.resolution:
-            scene.render = replace(scene.render, width=args.resolution[0], height=args.resolution[1])
-        spp = args.spp or scene.render.spp
-        if args.sample_offset >= spp:
-            raise error_cls(f"--sample-offset {args.sample_offset} must be below the sample count {spp}", 2)
-        count = args.sample_count if args.sample_count is not None else spp - args.sample_offset
-        if args.sample_offset + count > spp:
-            raise error_cls(f"--sample-offset + --sample-count ({args.sample_offset + count}) exceeds --spp {spp}", 2)
-        if args.denoise and count < spp:  # a denoiser is not linear: denoise the merged image once
-            raise error_cls("--denoise renders the whole image only: render the sample ranges without it, "
-                            "then `drt merge ... --denoise` denoises the merged image once", 2)
-        _check_film_memory(scene.render.width, scene.render.height)  # the client holds whole frames
+        apply_render_args(args, scene)  # the client holds whole frames: the memory check applies
         return scene
 
     written, notes = [], []
