@@ -38,6 +38,9 @@ OPCODES = {OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_M
 #: geometry inputs an opcode reads (the scene stores those per-corner arrays only if read)
 READS = {OP_UV: "uv", OP_GENERATED: "generated", OP_OBJECT: "object_coords"}
 OP_WIDTH = 11
+#: rows of the ``point`` array a caller fills for a shading point off any triangle (a volume
+#: sample, a world direction): what the coordinate opcodes read there
+POINT_GENERATED, POINT_OBJECT, POINT_UV, POINT_ROWS = 0, 1, 2, 3
 RAMP_TABLE_SIZE = 256
 #: Rec.709 luminance weights (Blender's default working space): Cycles's colour → float
 LUMINANCE = (0.2126729, 0.7151522, 0.0721750)

@@ -37,7 +37,7 @@ import numpy as np
 from ..kernels import inline_kernel, kernel
 from .dielectric import IOR_ONE_EPS
 from .ggx import ALPHA_SQ_SINGULAR
-from .program_format import (LUMINANCE, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
+from .program_format import (LUMINANCE, POINT_GENERATED, POINT_OBJECT, POINT_UV, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
                              OP_COMBINE, OP_COMPONENT, OP_GAMMA, OP_GENERATED, OP_GRADIENT,
                              OP_HSV, OP_HSV_TO_RGB, OP_IMAGE, OP_INVERT, OP_MAP_RANGE,
                              OP_ATTRIBUTE, OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
@@ -703,9 +703,12 @@ def _corner3(arr, prim, b0, b1, b2):
 
 
 @kernel
-def run_program(pd, regs, prog, prim, b1, b2):
+def run_program(pd, regs, prog, prim, b1, b2, point):
     """Run program ``prog`` at barycentrics (b1, b2) of global triangle ``prim``; results stay
-    in ``regs`` (R, 3) float64."""
+    in ``regs`` (R, 3) float64. A shading point that is not on a triangle (``prim`` < 0: a
+    point in a volume, a direction of the world) takes its coordinate inputs from ``point``
+    (rows ``POINT_GENERATED``, ``POINT_OBJECT``, ``POINT_UV``; filled by the caller); a
+    surface hit never reads ``point``."""
     b0 = 1.0 - b1 - b2
     for k in range(pd.const_start[prog], pd.const_start[prog + 1]):
         r = pd.const_reg[k]
@@ -720,24 +723,32 @@ def run_program(pd, regs, prog, prim, b1, b2):
         i0, i1, i2, i3, i4, i5 = pd.ops[k, 4], pd.ops[k, 5], pd.ops[k, 6], pd.ops[k, 7], pd.ops[k, 8], pd.ops[k, 9]
         param = pd.ops[k, 10]
         if op == OP_UV:
-            if pd.uv.shape[0]:
+            if prim < 0:
+                _set(regs, o0, (point[POINT_UV, 0], point[POINT_UV, 1], point[POINT_UV, 2]))
+            elif pd.uv.shape[0]:
                 c = pd.uv[prim]
                 _set(regs, o0, (b0 * c[0, 0] + b1 * c[1, 0] + b2 * c[2, 0],
                                 b0 * c[0, 1] + b1 * c[1, 1] + b2 * c[2, 1], 0.0))
             else:
                 _set1(regs, o0, 0.0)
         elif op == OP_GENERATED:
-            if pd.generated.shape[0]:
+            if prim < 0:
+                _set(regs, o0, (point[POINT_GENERATED, 0], point[POINT_GENERATED, 1], point[POINT_GENERATED, 2]))
+            elif pd.generated.shape[0]:
                 _set(regs, o0, _corner3(pd.generated, prim, b0, b1, b2))
             else:
                 _set1(regs, o0, 0.0)
         elif op == OP_ATTRIBUTE:
-            if param < pd.attrs.shape[0]:
+            if prim < 0:
+                _set1(regs, o0, 0.0)
+            elif param < pd.attrs.shape[0]:
                 _set(regs, o0, _corner3(pd.attrs[param], prim, b0, b1, b2))
             else:
                 _set1(regs, o0, 0.0)
         elif op == OP_OBJECT:
-            if pd.objco.shape[0]:
+            if prim < 0:
+                _set(regs, o0, (point[POINT_OBJECT, 0], point[POINT_OBJECT, 1], point[POINT_OBJECT, 2]))
+            elif pd.objco.shape[0]:
                 _set(regs, o0, _corner3(pd.objco, prim, b0, b1, b2))
             else:
                 _set1(regs, o0, 0.0)
@@ -831,7 +842,7 @@ def eval_material(pd, md, regs, m, prim, b1, b2):
     """Run material m's program at a hit and write its per-hit parameters into row m of ``md``
     (which must be this thread's private copy): lobe colours and alphas, the lobe selection
     probabilities and CDF, delta flags, albedo and emission."""
-    run_program(pd, regs, pd.prog_of[m], prim, b1, b2)
+    run_program(pd, regs, pd.prog_of[m], prim, b1, b2, pd.const_val)  # a hit: ``point`` unread
     count = md.lobe_count[m]
     total = 0.0
     for l in range(count):
@@ -882,7 +893,7 @@ def eval_material(pd, md, regs, m, prim, b1, b2):
 @kernel
 def _run_rows(pd, regs, prog, prim, b1, b2, out_reg, out):
     for i in range(prim.shape[0]):
-        run_program(pd, regs, prog, prim[i], b1[i], b2[i])
+        run_program(pd, regs, prog, prim[i], b1[i], b2[i], pd.const_val)
         out[i, 0] = regs[out_reg, 0]
         out[i, 1] = regs[out_reg, 1]
         out[i, 2] = regs[out_reg, 2]
