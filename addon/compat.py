@@ -156,6 +156,27 @@ def active_uvs(mesh) -> np.ndarray | None:
     return uv_layer_values(mesh, layer)
 
 
+def corner_tangents(mesh, uv_name: str):
+    """MikkTSpace tangents of a UV map (``""``: the active render map, as Cycles's Normal Map
+    default): ((L, 3) float32 tangents, (L,) float32 bitangent signs), or None when the mesh has
+    no such map or Blender cannot compute them (n-gons)."""
+    layer = (mesh.uv_layers.get(uv_name) if uv_name else
+             next((uv for uv in mesh.uv_layers if uv.active_render), None) or mesh.uv_layers.active)
+    if layer is None:
+        return None
+    try:
+        mesh.calc_tangents(uvmap=layer.name)
+    except RuntimeError:
+        return None
+    n = len(mesh.loops)
+    tangent = np.empty(n * 3, np.float32)
+    sign = np.empty(n, np.float32)
+    mesh.loops.foreach_get("tangent", tangent)
+    mesh.loops.foreach_get("bitangent_sign", sign)
+    mesh.free_tangents()
+    return tangent.reshape(n, 3), sign
+
+
 def uv_layer_values(mesh, layer) -> np.ndarray:
     """UV map ``layer`` per corner, (L, 2) float32."""
     out = np.empty(len(mesh.loops) * 2, dtype=np.float32)

@@ -108,10 +108,23 @@ def setup_scene(n):
     return sc
 
 
-def render_tiles(cases, n, tmp_path, tag="tiles", shader=False, sun=None):
+def _add_shape(shape, size, loc):
+    """One tile's object: a plane (UV 0..1), a smooth UV sphere (normals and incoming
+    directions vary over it) or a plane seen from its back (backfacing)."""
+    if shape == "sphere":
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.45 * size, location=loc, segments=48, ring_count=24,
+                                             rotation=(0.4, 0.3, 0.2))
+        bpy.ops.object.shade_smooth()
+    else:
+        bpy.ops.mesh.primitive_plane_add(size=size, location=loc,
+                                         rotation=(math.pi, 0, 0) if shape == "back_plane" else (0, 0, 0))
+
+
+def render_tiles(cases, n, tmp_path, tag="tiles", shader=False, sun=None, shape="plane"):
     """Cycles and DRT images (H, W, 3), top row first, of the cases on an n×n grid. shader: the
     cases return surface shader sockets (shown as they are, not squashed); sun: (strength,
-    rotation) of a sun lamp with a zero angle (a delta light: direct light is exact)."""
+    rotation) of a sun lamp with a zero angle (a delta light: direct light is exact); shape:
+    what each tile shows (see ``_add_shape``)."""
     from addon.export import export_depsgraph
     from drt.render import render
     from drt.scene import scene_from_dict
@@ -121,7 +134,7 @@ def render_tiles(cases, n, tmp_path, tag="tiles", shader=False, sun=None):
     size = 2.0 / n
     for k, case in enumerate(cases):
         r, c = divmod(k, n)
-        bpy.ops.mesh.primitive_plane_add(size=size, location=(-1 + (c + 0.5) * size, 1 - (r + 0.5) * size, 0))
+        _add_shape(shape, size, (-1 + (c + 0.5) * size, 1 - (r + 0.5) * size, 0))
         bpy.context.object.data.materials.append(_material(f"case{k}", case, shader))
     if sun is not None:
         light = bpy.data.lights.new("sun", "SUN")

@@ -50,6 +50,12 @@ def test_checker_program_renders_per_pixel():
     (lambda p: p["ops"].append([F.OP_IMAGE, 0, 1, 2, 0, -1, -1, -1, -1, -1, 0]), "image 0 does not exist"),
     (lambda p: p["ops"].append([F.OP_RAMP, 1, 1, 2, 0, -1, -1, -1, -1, -1, 0]), "ramp table"),
     (lambda p: p["constants"].append([0, float("nan"), 0, 0]), "finite"),
+    (lambda p: p["ops"].append([F.OP_POINT, F.POINT_ROWS, 1, -1, -1, -1, -1, -1, -1, -1, -1]),
+     "shading-point row"),
+    (lambda p: p["ops"].append([F.OP_POINT, F.POINT_N, 1, -1, -1, -1, -1, -1, -1, -1, 3]),
+     "shading-point row"),
+    (lambda p: p["ops"].append([F.OP_NORMAL_MAP, 5, 1, -1, 0, 0, -1, -1, -1, -1, 0]), "normal map space"),
+    (lambda p: p["ops"].append([F.OP_LAYER_WEIGHT, 0, 1, -1, 0, -1, -1, -1, -1, -1, 0]), "missing"),
 ])
 def test_bad_programs_are_refused_by_name(change, field):
     h, a = _checker_scene()

@@ -38,8 +38,11 @@ warns and uses its socket's value).
 import numpy as np
 
 from .. import compat
-from .node_programs import (ImageTable, ProgramBuilder, Unsupported, Value, clamp01, constant,
-                            maybe_positive, resolve)
+from .node_programs import (VMATH_OPS, ImageTable, OP_VMATH, ProgramBuilder, Unsupported, Value, clamp01,
+                            constant, maybe_positive, resolve)
+
+#: a constant Normal input (rare) still goes through a register: normalised once per hit
+OP_VMATH_NORMALIZE = (OP_VMATH, VMATH_OPS.index("NORMALIZE"))
 
 DEFAULT_MATERIAL = {"name": "__drt_default__",
                     "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}],
@@ -131,6 +134,7 @@ class MaterialExporter:
         lobes: list[dict] = []
         emission = np.zeros(3)
         self._b = ProgramBuilder(self.images, self.attributes)
+        self._normal = None  # (source key, Value) of the first BSDF Normal input that is linked
         if tree is None:
             lobes = [{"type": "DIFFUSE", "color": list(map(float, material.diffuse_color[:3]))}]
         else:
@@ -153,8 +157,10 @@ class MaterialExporter:
             result["emission"] = _representative(emission, 0.0)
         else:
             result["emission"] = [float(x) for x in np.broadcast_to(emission, 3)]
-        if "emission_reg" in result or any("color_reg" in lb or "roughness_reg" in lb
-                                           for lb in result["lobes"]):
+        if self._normal is not None and result["lobes"]:
+            result["normal_reg"] = self._b.reg_of(self._normal[1])
+        if "emission_reg" in result or "normal_reg" in result or any(
+                "color_reg" in lb or "roughness_reg" in lb for lb in result["lobes"]):
             result["program"] = self._b.to_dict()
         problems += self._b.problems
         if problems:
@@ -266,6 +272,8 @@ class MaterialExporter:
             problems.append("shader graph too deep")
             return [], np.zeros(3)
         w = weight
+        if node.inputs.get("Normal") is not None and kind != "ShaderNodeBump":
+            self._bsdf_normal(node, ctx, problems)
 
         if kind == "ShaderNodeBsdfDiffuse":
             r = self._value(node, "Roughness", problems, 0.0, ctx)
@@ -320,6 +328,28 @@ class MaterialExporter:
             col = _rgb(material.diffuse_color)
         return [{"type": "DIFFUSE", "color": w * col}], np.zeros(3)
 
+    def _bsdf_normal(self, node, ctx, problems):
+        """Record a BSDF's linked Normal input (a Normal Map...) as the material's shading normal.
+        DRT has one shading normal per material: a second, different linked normal warns."""
+        sock = node.inputs.get("Normal")
+        src, sctx = resolve(sock, ctx)
+        if src is None:
+            return
+        key = (src.node.as_pointer(), src.identifier, tuple(n.as_pointer() for n in sctx))
+        if self._normal is not None:
+            if self._normal[0] != key:
+                problems.append(f"'{node.name}' has its own Normal input; DRT uses one shading normal "
+                                f"per material (the first BSDF's)")
+            return
+        try:
+            v = self._b.input(node, sock, ctx)
+        except Unsupported as e:
+            problems.append(f"'{node.name}' Normal is driven by {e} (unsupported), using the mesh normal")
+            return
+        if v.is_const:
+            v = self._b.emit(OP_VMATH_NORMALIZE[0], OP_VMATH_NORMALIZE[1], [v, v])
+        self._normal = (key, v)
+
     def _principled(self, node, w, problems, ctx):
         base = self._color(node, "Base Color", problems, ctx=ctx)
         metallic = clamp01(self._value(node, "Metallic", problems, 0.0, ctx))
@@ -341,6 +371,10 @@ class MaterialExporter:
         for key in ("coat", "sheen", "subsurface"):
             if self._const_value(node, key, problems, 0.0, ctx) > 0.0:
                 problems.append(f"'{node.name}' {key} ignored")
+        for key in ("Coat Normal", "Tangent"):
+            sock = node.inputs.get(key)
+            if sock is not None and resolve(sock, ctx)[0] is not None:
+                problems.append(f"'{node.name}' linked {key} ignored")
 
         f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
         f_avg = min(2.0 * spec * (f0 + (1.0 - f0) / 21.0), 1.0) if ior > 1.0 else 0.0

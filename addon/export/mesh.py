@@ -24,7 +24,8 @@ def mesh_arrays(mesh, slot_materials: np.ndarray, attrs=frozenset()) -> dict | N
     Returns {"positions" (V,3) f32, "triangles" (T,3) i32, "material_index" (T,) i32,
     optionally "normals" (T,3,3) f32 and "uvs" (T,3,2) f32}; plus, for the geometry inputs
     named in ``attrs`` (what the material programs read), "generated" and "object_coords"
-    (T,3,3) f32 per corner, and "attr<I>" (T,3,3) for a named UV map "uv:<name>" with index I.
+    (T,3,3) f32 per corner, and "attr<I>" (T,3,3) for a named UV map "uv:<name>" with index I,
+    or the MikkTSpace tangents "tangent:<uv>" / bitangent signs "tangent_sign:<uv>" of a UV map.
     """
     compat.prepare_mesh(mesh)
     if len(mesh.loop_triangles) == 0:
@@ -45,7 +46,16 @@ def mesh_arrays(mesh, slot_materials: np.ndarray, attrs=frozenset()) -> dict | N
         out["object_coords"] = np.ascontiguousarray(out["positions"][tri_verts], dtype=np.float32)
     if "generated" in attrs:
         out["generated"] = generated_coords(mesh, out["positions"])[tri_verts]
+    tangents = {}
     for name, idx in (attrs.items() if isinstance(attrs, dict) else ()):
+        if name.startswith(("tangent:", "tangent_sign:")) and idx is not None:
+            uv = name.split(":", 1)[1]
+            if uv not in tangents:
+                tangents[uv] = compat.corner_tangents(mesh, uv)
+            if tangents[uv] is not None:  # else zeros: the Normal Map keeps the mesh normal
+                t, sign = tangents[uv]
+                corner = t if name.startswith("tangent:") else np.repeat(sign[:, None], 3, axis=1)
+                out[f"attr{idx}"] = np.ascontiguousarray(corner[tri_corners], np.float32)
         if name.startswith("uv:") and idx is not None:
             layer = mesh.uv_layers.get(name[3:])
             if layer is not None:  # a mesh without the map reads zeros, as in Cycles

@@ -27,6 +27,22 @@ OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING = 10, 11, 12, 13
 OP_IMAGE, OP_CHECKER, OP_GRADIENT, OP_RAMP = 20, 21, 22, 23
 OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31, 32, 33, 34, 35
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
+OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP = 90, 91, 92, 93
+# shading-point rows (drt.materials.program_format.POINT_*)
+POINT_P, POINT_N, POINT_NG, POINT_I = 3, 4, 5, 6
+POINT_PATH, POINT_PATH2, POINT_DEPTH, POINT_MISC = 8, 9, 10, 11
+NORMAL_MAP_SPACES = ["TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD"]
+#: Geometry node outputs → (row, component or −1 for the vector)
+GEOMETRY_OUTPUTS = {"Position": (POINT_P, -1), "Normal": (POINT_N, -1), "True Normal": (POINT_NG, -1),
+                    "Incoming": (POINT_I, -1), "Backfacing": (POINT_MISC, 2)}
+#: Light Path node outputs → (row, component); None: always 0 for the rays DRT shades
+LIGHT_PATH_OUTPUTS = {
+    "Is Camera Ray": (POINT_PATH, 0), "Is Diffuse Ray": (POINT_PATH, 1), "Is Glossy Ray": (POINT_PATH, 2),
+    "Is Singular Ray": (POINT_PATH2, 0), "Is Reflection Ray": (POINT_PATH2, 1),
+    "Is Transmission Ray": (POINT_PATH2, 2), "Ray Depth": (POINT_DEPTH, 0), "Diffuse Depth": (POINT_DEPTH, 1),
+    "Glossy Depth": (POINT_DEPTH, 2), "Transmission Depth": (POINT_MISC, 0), "Ray Length": (POINT_MISC, 1),
+    "Is Shadow Ray": None, "Is Volume Scatter Ray": None, "Transparent Depth": None, "Portal Depth": None,
+}
 
 MATH_OPS = ["ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM", "SQRT",
             "INVERSE_SQRT", "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM", "LESS_THAN",
@@ -60,6 +76,8 @@ SUPPORTED_NODES = {
     "ShaderNodeGamma", "ShaderNodeBrightContrast", "ShaderNodeHueSaturation",
     "ShaderNodeSeparateXYZ", "ShaderNodeCombineXYZ", "ShaderNodeSeparateRGB",
     "ShaderNodeCombineRGB", "ShaderNodeSeparateColor", "ShaderNodeCombineColor",
+    "ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry", "ShaderNodeLightPath",
+    "ShaderNodeNormalMap",
 }
 
 
@@ -339,6 +357,9 @@ class ProgramBuilder:
             name = getattr(node, "uv_map", "")
             # no name: the active render UV map, as Cycles
             return self.attribute("uv:" + name) if name else self.geometry(OP_UV)
+        if k in ("ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry",
+                 "ShaderNodeLightPath", "ShaderNodeNormalMap"):
+            return self._shading_point_node(node, out, ctx)
         if k == "ShaderNodeMapping":
             vt = node.vector_type
             ins = [self.inp(node, "Vector", ctx)]
@@ -425,6 +446,56 @@ class ProgramBuilder:
                 res = self.emit(OP_HSV_TO_RGB, 0, [res])
             return res
         raise Unsupported(node)
+
+    def _linked_or_none(self, node, key, ctx):
+        """The Value of a vector input if linked, else None (the node's own default applies)."""
+        sock = socket(node.inputs, key)
+        return self.input(node, sock, ctx) if resolve(sock, ctx)[0] is not None else None
+
+    def _shading_point_node(self, node, out, ctx):
+        """Nodes reading the shading point (normal, incoming direction, ray type): Fresnel, Layer
+        Weight, Geometry, Light Path, Normal Map (docs/materials.md, "Shading-point inputs")."""
+        k = node.bl_idname
+        oname = out.name
+        if k == "ShaderNodeFresnel":
+            return self.emit(OP_FRESNEL, 0, [self.inp(node, "IOR", ctx, "float"),
+                                             self._linked_or_none(node, "Normal", ctx)])
+        if k == "ShaderNodeLayerWeight":
+            f, facing = self.emit(OP_LAYER_WEIGHT, 0, [self.inp(node, "Blend", ctx, "float"),
+                                                       self._linked_or_none(node, "Normal", ctx)], outputs=2)
+            return {node.outputs[0].identifier: f, node.outputs[1].identifier: facing}
+        if k == "ShaderNodeNewGeometry":
+            row = GEOMETRY_OUTPUTS.get(oname)
+            if row is None:
+                raise Unsupported(node)
+            return self.point(*row)
+        if k == "ShaderNodeLightPath":
+            if oname not in LIGHT_PATH_OUTPUTS:
+                raise Unsupported(node)
+            row = LIGHT_PATH_OUTPUTS[oname]
+            if row is None:
+                if oname == "Is Shadow Ray":
+                    self.problems.append(f"'{node.name}' Is Shadow Ray is 0: DRT's shadow rays do not "
+                                         f"evaluate materials (shadows stay opaque)")
+                return Value(self, const=0.0)
+            return self.point(*row)
+        # Normal Map
+        space = node.space
+        if space not in ("TANGENT", "WORLD", "BLENDER_WORLD"):
+            raise Unsupported(node)  # object spaces need the object's transform at the hit
+        ins = [self.inp(node, "Strength", ctx, "float"), self.inp(node, "Color", ctx)]
+        if space == "TANGENT":
+            uv = getattr(node, "uv_map", "")
+            ins += [self.attribute("tangent:" + uv), self.attribute("tangent_sign:" + uv)]
+        return self.emit(OP_NORMAL_MAP, NORMAL_MAP_SPACES.index(space), ins)
+
+    def point(self, row: int, component: int) -> Value:
+        """A shading-point input (row of the point array, one component or −1: the vector)."""
+        key = ("point", row, component)
+        hit = self._geometry.get(key)
+        if hit is None:
+            hit = self._geometry[key] = self.emit(OP_POINT, row, [], param=component)
+        return hit
 
     def _tex_vector(self, node, ctx, default):
         sock = socket(node.inputs, "Vector")

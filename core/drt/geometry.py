@@ -111,6 +111,19 @@ def _transform_normals(n: np.ndarray, m: np.ndarray) -> np.ndarray:
     return out
 
 
+def _transform_tangents(t: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Per-corner tangents (T, 3, 3) to world space by the normal transform of object matrix m,
+    each keeping its length: the Normal Map node combines tangent and normal in object space and
+    maps the result by the normal transform (Cycles), which this matches for rotations and
+    uniform scales (non-uniform scales: approximately)."""
+    inv_t = invert_linear(np.asarray(m, np.float64)[:3, :3]).T
+    t64 = np.asarray(t, np.float64)
+    w = t64 @ inv_t.T
+    before = np.linalg.norm(t64, axis=-1, keepdims=True)
+    after = np.linalg.norm(w, axis=-1, keepdims=True)
+    return np.divide(w * before, after, out=np.zeros_like(w), where=after > 0).astype(np.float32)
+
+
 def build_geometry(scene: Scene) -> SceneGeometry:
     """Flatten ``scene`` into tracer-ready arrays (see the module docstring)."""
     shift = np.asarray(scene.camera.matrix, dtype=np.float64)[:3, 3].copy()
@@ -142,7 +155,7 @@ def build_geometry(scene: Scene) -> SceneGeometry:
             moving.append(MovingMesh(obj.name, 0, mesh.positions, mesh.positions_close, mesh.triangles, rm))
             m, n, h, u = per_tri(mesh, mesh.normals)
             mats_moving.append(m), nrm_moving.append(n), hasn_moving.append(h), uv_moving.append(u)
-            order_moving.append(mesh)
+            order_moving.append((mesh, None))
             for mat in (m_open, m_close):
                 for pos in (mesh.positions, mesh.positions_close if mesh.positions_close is not None else mesh.positions):
                     w = transform_rows(pos, np.asarray(mat)[:3, :3]) + np.asarray(mat)[:3, 3] - shift
@@ -157,7 +170,7 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         nw = _transform_normals(mesh.normals, m) if mesh.normals is not None else None
         a, b, c, d = per_tri(mesh, nw)
         mats_static.append(a), nrm_static.append(b), hasn_static.append(c), uv_static.append(d)
-        order_static.append(mesh)
+        order_static.append((mesh, m))
 
     geom = SceneGeometry(
         origin_shift=shift,
@@ -178,11 +191,20 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     geom.normals = cat(nrm_static + nrm_moving, np.zeros((0, 3, 3), np.float32)) if any_normals else None
     geom.uvs = cat(uv_static + uv_moving, np.zeros((0, 3, 2), np.float32)) if any_uvs else None
     geom.triangle_count = offset
+    names = getattr(scene, "attributes", [])
+    tangents = {f"attr{i}" for i, a in enumerate(names) if a.startswith("tangent:")}
+
+    def attr_of(mesh, matrix, name):
+        if name not in mesh.corner_attrs:
+            return np.zeros((len(mesh.triangles), 3, 3), np.float32)
+        a = np.asarray(mesh.corner_attrs[name], np.float32)
+        if name in tangents and matrix is not None:  # static: world space (moving: at the hit)
+            a = _transform_tangents(a, matrix)
+        return a
+
     for name in sorted({k for m in scene.meshes for k in m.corner_attrs}):
-        geom.corner_attrs[name] = cat(
-            [np.asarray(m.corner_attrs[name], np.float32) if name in m.corner_attrs
-             else np.zeros((len(m.triangles), 3, 3), np.float32) for m in order_static + order_moving],
-            np.zeros((0, 3, 3), np.float32))
+        geom.corner_attrs[name] = cat([attr_of(mesh, mat, name) for mesh, mat in order_static + order_moving],
+                                      np.zeros((0, 3, 3), np.float32))
     if np.all(np.isfinite(lo)):
         center = 0.5 * (lo + hi)
         geom.scene_radius = float(max(np.linalg.norm(hi - center), 1e-3))

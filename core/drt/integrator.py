@@ -29,6 +29,7 @@ from .film import SampleBatch
 from .geometry import SceneGeometry
 from .lights import LightSet
 from .materials import MaterialTable
+from .materials.program_format import POINT_ROWS
 from .path_stages import (D_BOUNCE0, D_LENS, D_PIXEL, D_TIME, DIMS_PER_BOUNCE,  # noqa: F401 (re-exported)
                           MAX_SAMPLE_RADIANCE, RR_START_BOUNCE, SHADOW_EPSILON)
 from .sampling.pixel_filter import PixelFilter
@@ -50,7 +51,8 @@ def _paths(n: int) -> stages.Paths:
         prev_p=np.empty((n, 3)), prev_n=np.empty((n, 3)), prev_wo=np.empty((n, 3)),
         prev_mat=np.empty(n, dtype=np.int64), counts=np.empty((n, 4), dtype=np.int32),
         terminate=np.empty(n, dtype=bool), slot=np.empty(n, dtype=np.int64),
-        pixel=np.empty(n, dtype=np.int64), index=np.empty(n, dtype=np.int64))
+        pixel=np.empty(n, dtype=np.int64), index=np.empty(n, dtype=np.int64),
+        prev_flags=np.empty(n, dtype=np.int32))
 
 
 def _shadow_rays(n: int) -> stages.ShadowRays:
@@ -101,7 +103,8 @@ class Integrator:
             film_transparent=bool(settings.film_transparent), motion=self.motion)
         self._workspaces = threading.local()
         # material programs (textures): a thread rewrites its own copy of the material data
-        self.programs = materials.program_data(geom.uvs, getattr(geom, "corner_attrs", None))
+        self.programs = materials.program_data(geom.uvs, getattr(geom, "corner_attrs", None),
+                                              getattr(geom, "origin_shift", None))
         self.n_registers = int(max((m["program"]["registers"] for m in materials.program_source[0]
                                     if m.get("program")), default=0)) if self.programs.prog_of.shape[0] else 0
         normals = geom.normals if geom.normals is not None else np.zeros((0, 3, 3), np.float32)
@@ -123,14 +126,15 @@ class Integrator:
                                 ng=hits.ng, normal_xform=xform, moving=moving)
 
     def _material_workspace(self):
-        """This thread's (material data, register file): the shared read-only table when no
+        """This thread's (material data, register file, shading-point rows): the shared read-only table when no
         material has a program, else a private copy that ``shade`` rewrites per textured hit."""
         ws = getattr(self._workspaces, "materials", None)
         if ws is None:
             md = self.materials.data
             if self.n_registers:
                 md = type(md)(*(np.array(a, copy=True) for a in md))
-            ws = self._workspaces.materials = (md, np.zeros((max(self.n_registers, 1), 3)))
+            ws = self._workspaces.materials = (md, np.zeros((max(self.n_registers, 1), 3)),
+                                               np.zeros((POINT_ROWS, 3)))
         return ws
 
     def _workspace(self, n: int) -> tuple[stages.Paths, stages.ShadowRays]:
@@ -151,7 +155,7 @@ class Integrator:
                              normal=np.empty((n, 3)), albedo=np.empty((n, 3)), eye=np.empty((n, 3)),
                              forward=np.empty((n, 3)))
         sd, ld = self.sampler.data, self.lights.data
-        md, regs = self._material_workspace()
+        md, regs, point = self._material_workspace()
         stages.camera_stage(sd, self.filter.data, self.camera.data, self.stage_settings,
                             np.ascontiguousarray(x, dtype=np.int64), np.ascontiguousarray(row, dtype=np.int64),
                             np.ascontiguousarray(index, dtype=np.int64), paths, out)
@@ -160,7 +164,7 @@ class Integrator:
             if live == 0:
                 break
             hits = self.tracer.intersect(paths.o[:live], paths.d[:live], paths.tau[:live], paths.tmax[:live])
-            live, n_shadow = stages.shade(sd, md, self.programs, regs, ld, self.surfaces, self.stage_settings, depth_i, live,
+            live, n_shadow = stages.shade(sd, md, self.programs, regs, point, ld, self.surfaces, self.stage_settings, depth_i, live,
                                           paths, self._hit_arrays(hits), out, shadow)
             if n_shadow:
                 blocked = self.tracer.occluded(shadow.o[:n_shadow], shadow.d[:n_shadow],

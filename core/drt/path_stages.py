@@ -45,7 +45,10 @@ from .kernels.vec3 import add, build_frame, dot, load, mul, neg, normalize, scal
 from .lights.common import I_VISIBLE_CAMERA
 from .lights import (emissive_pdf, light_sample, shape_emission, shape_intersect, sun_emission, sun_in_cone,
                      world_pdf, world_radiance)
-from .materials import LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, bsdf_eval, bsdf_sample
+from .materials import (LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, NO_BUMP, bsdf_eval_bump,
+                        bsdf_sample_bump)
+from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
+                                       POINT_P, POINT_PATH, POINT_PATH2, POINT_XFORM)
 from .materials.programs import eval_material
 from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_5d
@@ -79,7 +82,11 @@ Paths = namedtuple("Paths", [
     "counts",                             # (n, 4) int32: bounces, diffuse, glossy, transmission
     "terminate",                          # (n,) bool: collect emission at the next hit, then stop
     "slot", "pixel", "index",             # batch row, flat pixel id, sample number
+    "prev_flags",                         # (n,) int32 RAY_* bits of how the ray was scattered
 ])
+
+# how a ray left its last vertex (Cycles's ray-type flags, for the Light Path node); 0: camera
+RAY_DIFFUSE, RAY_GLOSSY, RAY_SINGULAR, RAY_TRANSMIT = 1, 2, 4, 8
 
 Outputs = namedtuple("Outputs", ["radiance", "alpha", "depth", "normal", "albedo", "eye", "forward"])
 
@@ -186,6 +193,73 @@ def material_hint(md, mat, n, wo):
     return (n, wo, s[0], s[1], s[2], s[3])
 
 
+@inline_kernel
+def _put(point, r, v):
+    point[r, 0] = v[0]
+    point[r, 1] = v[1]
+    point[r, 2] = v[2]
+
+
+@inline_kernel
+def fill_point(point, pd, surf, hits, i, prim, p, ng, ns, wo, flags, counts, ray_length, camera):
+    """The shading-point rows (``drt.materials.program_format.POINT_*``) of hit i for the
+    material programs, in Cycles's orientation (normals on the side the ray came from)."""
+    backfacing = dot(wo, ng) < 0.0
+    sgn = -1.0 if backfacing else 1.0
+    _put(point, POINT_P, add(p, (pd.origin[0], pd.origin[1], pd.origin[2])))
+    _put(point, POINT_N, scale(ns, sgn))
+    _put(point, POINT_NG, scale(ng, sgn))
+    _put(point, POINT_I, wo)
+    moving = hits.moving.shape[0] and hits.moving[i]
+    if surf.normals.shape[0] and surf.has_normals[prim]:
+        b1, b2 = hits.b1[i], hits.b2[i]
+        b0 = 1.0 - b1 - b2
+        nc = surf.normals[prim]
+        n = (b0 * nc[0, 0] + b1 * nc[1, 0] + b2 * nc[2, 0], b0 * nc[0, 1] + b1 * nc[1, 1] + b2 * nc[2, 1],
+             b0 * nc[0, 2] + b1 * nc[1, 2] + b2 * nc[2, 2])
+        if moving:
+            m = hits.normal_xform[i]
+            n = (m[0, 0] * n[0] + m[0, 1] * n[1] + m[0, 2] * n[2], m[1, 0] * n[0] + m[1, 1] * n[1] + m[1, 2] * n[2],
+                 m[2, 0] * n[0] + m[2, 1] * n[1] + m[2, 2] * n[2])
+        _put(point, POINT_NSMOOTH, n)
+    else:
+        _put(point, POINT_NSMOOTH, ng)
+    for r in range(3):
+        for c in range(3):
+            point[POINT_XFORM + r, c] = hits.normal_xform[i, r, c] if moving else (1.0 if r == c else 0.0)
+    _put(point, POINT_PATH, (1.0 if camera else 0.0, 1.0 if flags & RAY_DIFFUSE else 0.0,
+                             1.0 if flags & (RAY_GLOSSY | RAY_SINGULAR) else 0.0))
+    _put(point, POINT_PATH2, (1.0 if flags & RAY_SINGULAR else 0.0,
+                              1.0 if not camera and not flags & RAY_TRANSMIT else 0.0,
+                              1.0 if flags & RAY_TRANSMIT else 0.0))
+    _put(point, POINT_DEPTH, (float(counts[0]), float(counts[1]), float(counts[2])))
+    _put(point, POINT_MISC, (float(counts[3]), ray_length, 1.0 if backfacing else 0.0))
+
+
+@kernel
+def valid_specular_normal(ng, wi, n):
+    """Cycles's ``ensure_valid_specular_reflection`` (bump map correction): n (unit, on wi's
+    side like ng) tilted toward ng just enough that the mirror reflection of wi stays above the
+    surface."""
+    r = sub(scale(n, 2.0 * dot(n, wi)), wi)
+    iz = dot(wi, ng)
+    threshold = min(0.9 * iz, 0.01)
+    if dot(ng, r) >= threshold:
+        return n
+    x, xl = normalize(sub(n, scale(ng, dot(n, ng))))
+    if xl == 0.0:
+        x = n
+    ix = dot(wi, x)
+    a = ix * ix + iz * iz
+    b = 2.0 * (a + iz * threshold)
+    c = (threshold + iz) * (threshold + iz)
+    disc = math.sqrt(max(b * b - 4.0 * a * c, 0.0))
+    nz2 = 0.25 * (b + disc) / a if ix < 0.0 else 0.25 * (b - disc) / a
+    nx = math.sqrt(max(1.0 - nz2, 0.0))
+    nz = math.sqrt(max(nz2, 0.0))
+    return add(scale(x, nx), scale(ng, nz))
+
+
 @kernel
 def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
     """Primary rays for camera samples (x column from the left, row from the TOP, sample index);
@@ -215,6 +289,7 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
         for c in range(4):
             paths.counts[i, c] = 0
         paths.terminate[i] = False
+        paths.prev_flags[i] = 0
         paths.slot[i] = i
         paths.pixel[i] = pixel
         paths.index[i] = idx
@@ -228,12 +303,13 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
 
 
 @kernel
-def shade(sd, md, pd, regs, ld, surf, settings, depth_i, live, paths, hits, out, shadow):
+def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hits, out, shadow):
     """One bounce for paths [0, live) (see the module docstring). Returns (paths still alive,
     now compacted to the front; shadow rays queued in ``shadow``). ``pd`` holds the material
     programs (``drt.materials.programs``; no programs: zero-size arrays); when there are any,
     ``md`` must be this thread's own copy of the material data and ``regs`` its register file,
-    since a textured material's row is rewritten at each of its hits."""
+    since a textured material's row is rewritten at each of its hits, and ``point`` its
+    (POINT_ROWS, 3) shading-point array."""
     camera = depth_i == 0
     base = D_BOUNCE0 + DIMS_PER_BOUNCE * depth_i
     direct = settings.direct
@@ -282,10 +358,26 @@ def shade(sd, md, pd, regs, ld, surf, settings, depth_i, live, paths, hits, out,
 
         # --- the surface hit: its emission (also for paths stopping here at a bounce limit)
         mat = surf.material[prim]
-        if pd.prog_of.shape[0] and pd.prog_of[mat] >= 0:  # a textured material: this hit's parameters
-            eval_material(pd, md, regs, mat, prim, hits.b1[i], hits.b2[i])
         p = load(hits.p, i)
         ng = load(hits.ng, i)
+        ns = shading_normal(surf, hits, i, prim, ng)
+        ns_unmapped = ns
+        mapped = False
+        wo = neg(d)
+        if pd.prog_of.shape[0] and pd.prog_of[mat] >= 0:  # a textured material: this hit's parameters
+            if pd.reads_point[mat]:
+                fill_point(point, pd, surf, hits, i, prim, p, ng, ns, wo, paths.prev_flags[i], paths.counts[i],
+                           t_geom, camera)
+            eval_material(pd, md, regs, mat, prim, hits.b1[i], hits.b2[i], point)
+            nr = pd.normal_reg[mat]
+            if nr >= 0:  # a Normal Map: Cycles's orientation (wo's side) → the geometric front side
+                nm, nl = normalize((regs[nr, 0], regs[nr, 1], regs[nr, 2]))
+                if nl > 0.0 and math.isfinite(nl):
+                    side = 1.0 if dot(wo, ng) >= 0.0 else -1.0
+                    if not md.has_diffuse[mat]:  # Cycles corrects glossy lobes' normals only
+                        nm = valid_specular_normal(scale(ng, side), wo, nm)
+                    ns = scale(nm, side)
+                    mapped = True
         if md.has_emission[mat]:
             le = load(md.emission, mat)
             lpdf = emissive_pdf(ld, prim, prev_p, p, ng, prev_hint)
@@ -295,8 +387,6 @@ def shade(sd, md, pd, regs, ld, surf, settings, depth_i, live, paths, hits, out,
         if paths.terminate[i]:
             continue
 
-        ns = shading_normal(surf, hits, i, prim, ng)
-        wo = neg(d)
         if camera:
             out.depth[slot] = max(dot(sub(p, load(out.eye, slot)), load(out.forward, slot)), 0.0)
             store(out.normal, slot, ns)
@@ -306,6 +396,8 @@ def shade(sd, md, pd, regs, ld, surf, settings, depth_i, live, paths, hits, out,
         u_light_select, u_lobe = sample_2d(sd, pixel, idx, base)
         t_ax, b_ax = build_frame(ns)
         wo_l = to_local(wo, t_ax, b_ax, ns)
+        # a normal-mapped hit: the unmapped normal in the mapped frame (bump map correction)
+        ns_local = to_local(ns_unmapped, t_ax, b_ax, ns) if mapped else NO_BUMP
         # lights are sampled over the hemisphere wo is in; transmitted light stays reachable by
         # BSDF sampling, whose MIS weight is then 1
         n_wo = ns if wo_l[2] >= 0.0 else neg(ns)
@@ -317,7 +409,7 @@ def shade(sd, md, pd, regs, ld, surf, settings, depth_i, live, paths, hits, out,
             wi, dist, le, lpdf, l_delta, l_valid = light_sample(ld, p, n_wo, hint, u_light_select, ul0, ul1)
             if l_valid and lpdf > 0.0:
                 wi_l = to_local(wi, t_ax, b_ax, ns)
-                f, bpdf = bsdf_eval(md, mat, wo_l, wi_l)
+                f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local)
                 # geometric and shading normals must agree on reflection vs transmission
                 same_geo = dot(wi, ng) * dot(wo, ng) > 0.0
                 same_sh = wi_l[2] * wo_l[2] > 0.0
@@ -334,7 +426,7 @@ def shade(sd, md, pd, regs, ld, surf, settings, depth_i, live, paths, hits, out,
 
         # --- continue the path by sampling the BSDF
         ub0, ub1 = sample_2d(sd, pixel, idx, base + 2)
-        wi_l, weight, bpdf, kind, b_delta, b_valid = bsdf_sample(md, mat, wo_l, u_lobe, ub0, ub1)
+        wi_l, weight, bpdf, kind, b_delta, b_valid = bsdf_sample_bump(md, mat, wo_l, u_lobe, ub0, ub1, ns_local)
         if settings.indirect != INDIRECT_BSDF and not md.transmission_or_delta[mat]:
             # the lecture's hemisphere estimators, on wo's side of the surface
             if settings.indirect == INDIRECT_COSINE:
@@ -345,7 +437,7 @@ def shade(sd, md, pd, regs, ld, surf, settings, depth_i, live, paths, hits, out,
                 bpdf = 0.5 / math.pi
             if wo_l[2] < 0.0:
                 wi_l = (wi_l[0], wi_l[1], -wi_l[2])
-            f, _ = bsdf_eval(md, mat, wo_l, wi_l)
+            f, _ = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local)
             b_valid = bpdf > 0.0
             weight = scale(f, 1.0 / bpdf) if b_valid else (0.0, 0.0, 0.0)
             b_delta = False
@@ -383,6 +475,8 @@ def shade(sd, md, pd, regs, ld, surf, settings, depth_i, live, paths, hits, out,
         store(paths.prev_n, j, n_wo)
         store(paths.prev_wo, j, wo)
         paths.prev_mat[j] = mat
+        paths.prev_flags[j] = ((RAY_SINGULAR if b_delta else (RAY_DIFFUSE if kind == LOBE_DIFFUSE else RAY_GLOSSY))
+                               | (0 if refl_sh else RAY_TRANSMIT))
         paths.counts[j, 0] = n_bounce
         paths.counts[j, 1] = n_diffuse
         paths.counts[j, 2] = n_glossy

@@ -399,6 +399,8 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0) -> list[dict]:
                 raise SceneError(where, problem) from None
             if "emission_reg" in m:
                 mat["emission_reg"] = _number(m, "emission_reg", p, integer=True, lo=0)
+            if "normal_reg" in m:
+                mat["normal_reg"] = _number(m, "normal_reg", p, integer=True, lo=0)
         out.append(mat)
     return out
 

@@ -45,14 +45,18 @@ from .table import (
     BSDFSample,
     MaterialData,
     MaterialTable,
+    NO_BUMP,
     bsdf_eval,
+    bsdf_eval_bump,
     bsdf_sample,
+    bsdf_sample_bump,
 )
 
 __all__ = [
     "ALPHA_SQ_SINGULAR", "BSDF_DIFFUSE", "BSDF_GLASS", "BSDF_GLOSSY", "BSDF_NONE", "BSDFSample",
     "IOR_ONE_EPS", "LOBE_DIFFUSE", "LOBE_GLOSSY", "LOBE_NONE", "LOBE_TRANSMISSION",
-    "MaterialData", "MaterialTable", "bsdf_eval", "bsdf_sample", "diffuse_eval",
+    "MaterialData", "MaterialTable", "NO_BUMP", "bsdf_eval", "bsdf_eval_bump", "bsdf_sample",
+    "bsdf_sample_bump", "diffuse_eval",
     "diffuse_sample", "eval_diffuse", "eval_glass", "eval_glossy", "fresnel",
     "fresnel_dielectric", "ggx_d", "ggx_lambda", "ggx_ndf", "ggx_smith_lambda",
     "ggx_vndf_sample", "glass_eval", "glass_sample", "glossy_eval", "glossy_sample", "refract",

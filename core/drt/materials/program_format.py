@@ -31,7 +31,9 @@ OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING = 10, 11, 12, 13
 OP_IMAGE, OP_CHECKER, OP_GRADIENT, OP_RAMP = 20, 21, 22, 23
 OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31, 32, 33, 34, 35
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
-OPCODES = {OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
+# shading-point inputs of surface hits (docs/materials.md, "Shading-point inputs")
+OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP = 90, 91, 92, 93
+OPCODES = {OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
            OP_CHECKER, OP_GRADIENT, OP_RAMP, OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA,
            OP_BRIGHT_CONTRAST, OP_HSV, OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE,
            OP_RGB_TO_HSV, OP_HSV_TO_RGB}
@@ -40,7 +42,23 @@ READS = {OP_UV: "uv", OP_GENERATED: "generated", OP_OBJECT: "object_coords"}
 OP_WIDTH = 11
 #: rows of the ``point`` array a caller fills for a shading point off any triangle (a volume
 #: sample, a world direction): what the coordinate opcodes read there
-POINT_GENERATED, POINT_OBJECT, POINT_UV, POINT_ROWS = 0, 1, 2, 3
+POINT_GENERATED, POINT_OBJECT, POINT_UV = 0, 1, 2
+#: rows the shade stage fills at a surface hit of a material whose program reads them
+#: (``ProgramData.reads_point``), all world space with Cycles's orientation: P (Blender world
+#: coordinates), N / NG (shading / true normal, flipped to the side the ray came from, Cycles's
+#: sd->N / sd->Ng), I (unit vector back along the ray, sd->wi), NSMOOTH (interpolated vertex
+#: normal, unnormalised, geometric front side; the true normal when flat shaded), the ray's
+#: Light Path values, and XFORM (3 rows: the normal transform of a moving object's hit, identity
+#: otherwise; static tangents are stored in world space already)
+POINT_P, POINT_N, POINT_NG, POINT_I, POINT_NSMOOTH = 3, 4, 5, 6, 7
+POINT_PATH = 8     # (is camera ray, is diffuse ray, is glossy ray)
+POINT_PATH2 = 9    # (is singular ray, is reflection ray, is transmission ray)
+POINT_DEPTH = 10   # (ray depth, diffuse depth, glossy depth)
+POINT_MISC = 11    # (transmission depth, ray length, backfacing)
+POINT_XFORM = 12   # rows 12..14
+POINT_ROWS = 15
+#: Normal Map spaces (Blender's enum order)
+NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD")
 RAMP_TABLE_SIZE = 256
 #: Rec.709 luminance weights (Blender's default working space): Cycles's colour → float
 LUMINANCE = (0.2126729, 0.7151522, 0.0721750)
@@ -64,6 +82,9 @@ ProgramData = namedtuple("ProgramData", [
     "generated",        # (T, 3, 3) float32
     "objco",            # (T, 3, 3) float32
     "attrs",            # (A, T, 3, 3) float32 named per-corner attributes (header "attributes")
+    "reads_point",      # (M,) bool: the material's program reads shading-point rows (POINT_P...)
+    "normal_reg",       # (M,) int64 register of the shading normal (Normal Map), −1: none
+    "origin",           # (3,) float64 Blender world position of the renderer's origin (P rows)
 ])
 
 
@@ -95,6 +116,12 @@ def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> 
             raise ValueError(f"{where}.ops[{k}]: image {int(row[10])} does not exist")
         if row[0] == OP_ATTRIBUTE and not 0 <= row[10] < n_attributes:
             raise ValueError(f"{where}.ops[{k}]: attribute {int(row[10])} does not exist")
+        if row[0] == OP_POINT and not (0 <= row[1] < POINT_ROWS and -1 <= row[10] <= 2):
+            raise ValueError(f"{where}.ops[{k}]: shading-point row/component out of range")
+        if row[0] == OP_NORMAL_MAP and not (0 <= row[1] < len(NORMAL_MAP_SPACES) and min(row[4], row[5]) >= 0):
+            raise ValueError(f"{where}.ops[{k}]: normal map space or inputs out of range")
+        if row[0] in (OP_FRESNEL, OP_LAYER_WEIGHT) and row[4] < 0 or row[0] == OP_LAYER_WEIGHT and row[3] < 0:
+            raise ValueError(f"{where}.ops[{k}]: missing input or output")
         if row[0] == OP_RAMP and not 0 <= row[10] <= len(data) - 4 * RAMP_TABLE_SIZE:
             raise ValueError(f"{where}.ops[{k}]: ramp table out of range")
     return {"registers": n, "constants": consts, "ops": ops, "data": data}
@@ -113,8 +140,12 @@ def _reg(v, n, where):
     return v
 
 
+#: opcodes that read the shading-point rows a surface hit fills
+POINT_OPS = frozenset({OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP})
+
+
 def build_program_data(materials: list[dict], table, images: list[tuple[dict, np.ndarray]],
-                       uv, generated, objco, cutoff: float, attrs=None) -> ProgramData | None:
+                       uv, generated, objco, cutoff: float, attrs=None, origin=None) -> ProgramData | None:
     """ProgramData for the validated ``materials`` (scene.py) and their ``MaterialTable``; None
     when no material has a program. Lobes are matched to table slots with the table's own rule
     (a lobe whose colour's mean is below ``cutoff`` was dropped)."""
@@ -126,6 +157,8 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
     color_reg = np.full((m_count, n_slots), -1, np.int64)
     rough_reg = np.full((m_count, n_slots), -1, np.int64)
     emission_reg = np.full(m_count, -1, np.int64)
+    normal_reg = np.full(m_count, -1, np.int64)
+    reads_point = np.zeros(m_count, bool)
     op_rows, const_rows, data, op_start, const_start = [], [], [], [0], [0]
     for i, mat in enumerate(materials):
         prog = mat.get("program")
@@ -150,6 +183,8 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
             rough_reg[i, slot] = _reg(lobe.get("roughness_reg"), n, f"{where} lobe {j} roughness_reg")
             slot += 1
         emission_reg[i] = _reg(mat.get("emission_reg"), n, f"{where} emission_reg")
+        normal_reg[i] = _reg(mat.get("normal_reg"), n, f"{where} normal_reg")
+        reads_point[i] = bool(np.isin(ops[:, 0], list(POINT_OPS)).any()) or normal_reg[i] >= 0
     info = np.zeros((len(images), 5), np.int64)
     u8, f32 = [], []
     off_u8 = off_f = 0
@@ -180,7 +215,9 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         img_u8=np.ascontiguousarray(np.concatenate(u8) if u8 else np.zeros(0, np.uint8)),
         img_f32=np.ascontiguousarray(np.concatenate(f32) if f32 else np.zeros(0, np.float32)),
         uv=arr(uv, np.float32, (0, 3, 2)), generated=arr(generated, np.float32, (0, 3, 3)),
-        objco=arr(objco, np.float32, (0, 3, 3)), attrs=arr(attrs, np.float32, (0, 0, 3, 3)))
+        objco=arr(objco, np.float32, (0, 3, 3)), attrs=arr(attrs, np.float32, (0, 0, 3, 3)),
+        reads_point=reads_point, normal_reg=normal_reg,
+        origin=np.asarray(origin if origin is not None else np.zeros(3), np.float64).reshape(3))
 
 
 def empty_program_data() -> ProgramData:
@@ -194,4 +231,5 @@ def empty_program_data() -> ProgramData:
                        img_info=np.zeros((0, 5), np.int64), img_u8=np.zeros(0, np.uint8),
                        img_f32=np.zeros(0, np.float32), uv=np.zeros((0, 3, 2), np.float32),
                        generated=np.zeros((0, 3, 3), np.float32),
-                       objco=np.zeros((0, 3, 3), np.float32), attrs=np.zeros((0, 0, 3, 3), np.float32))
+                       objco=np.zeros((0, 3, 3), np.float32), attrs=np.zeros((0, 0, 3, 3), np.float32),
+                       reads_point=np.zeros(0, bool), normal_reg=z, origin=np.zeros(3))

@@ -37,7 +37,9 @@ import numpy as np
 from ..kernels import inline_kernel, kernel
 from .dielectric import IOR_ONE_EPS
 from .ggx import ALPHA_SQ_SINGULAR
-from .program_format import (LUMINANCE, POINT_GENERATED, POINT_OBJECT, POINT_UV, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
+from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, POINT_N, POINT_NSMOOTH,
+                             POINT_OBJECT, POINT_UV, POINT_XFORM, OP_FRESNEL, OP_LAYER_WEIGHT,
+                             OP_NORMAL_MAP, OP_POINT, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
                              OP_COMBINE, OP_COMPONENT, OP_GAMMA, OP_GENERATED, OP_GRADIENT,
                              OP_HSV, OP_HSV_TO_RGB, OP_IMAGE, OP_INVERT, OP_MAP_RANGE,
                              OP_ATTRIBUTE, OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
@@ -676,6 +678,75 @@ def ramp_lookup(pd, off, interpolate, f):
     return r, g, b, a
 
 
+@kernel
+def fresnel_dielectric_cos(cosi, eta):
+    """Unpolarised Fresnel reflectance for relative IOR eta at |cos| cosi (Cycles's
+    ``fresnel_dielectric_cos``; 1 under total internal reflection)."""
+    c = abs(cosi)
+    g = eta * eta - 1.0 + c * c
+    if g > 0.0:
+        g = math.sqrt(g)
+        a = (g - c) / (g + c)
+        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+        return 0.5 * a * a * (1.0 + b * b)
+    return 1.0
+
+
+@kernel
+def _row(point, r):
+    return (point[r, 0], point[r, 1], point[r, 2])
+
+
+@kernel
+def normal_map(space, strength, color, tangent, sign, point):
+    """Cycles's ``svm_node_normal_map`` for a surface hit: the perturbed shading normal, world
+    space, on the side the ray came from (zero when it cannot be formed: the caller keeps N).
+    Tangent space: ``tangent``/``sign`` are the interpolated MikkTSpace tangent (world space for
+    static objects, local for moving ones: ``POINT_XFORM`` maps it) and bitangent sign; the base
+    normal is the unnormalised interpolated vertex normal (the true normal when flat)."""
+    c = (2.0 * (color[0] - 0.5), 2.0 * (color[1] - 0.5), 2.0 * (color[2] - 0.5))
+    backfacing = point[POINT_MISC, 2] != 0.0
+    lerp_strength = space != 0
+    if space == 0:
+        if tangent[0] == 0.0 and tangent[1] == 0.0 and tangent[2] == 0.0:
+            return (0.0, 0.0, 0.0)  # no tangents (no UV map): Cycles keeps the unperturbed N
+        # strength acts in tangent space (Blender 5): tilt scaled, z blended toward 1
+        c = (c[0] * strength, c[1] * strength, 1.0 + (c[2] - 1.0) * min(max(strength, 0.0), 1.0))
+        x = point[POINT_XFORM:POINT_XFORM + 3]
+        tl = math.sqrt(tangent[0] * tangent[0] + tangent[1] * tangent[1] + tangent[2] * tangent[2])
+        t = (x[0, 0] * tangent[0] + x[0, 1] * tangent[1] + x[0, 2] * tangent[2],
+             x[1, 0] * tangent[0] + x[1, 1] * tangent[1] + x[1, 2] * tangent[2],
+             x[2, 0] * tangent[0] + x[2, 1] * tangent[1] + x[2, 2] * tangent[2])
+        tw = _len(t)
+        if tw > 0.0:
+            t = (t[0] * tl / tw, t[1] * tl / tw, t[2] * tl / tw)
+        n = _row(point, POINT_NSMOOTH)
+        b = (sign * (n[1] * t[2] - n[2] * t[1]), sign * (n[2] * t[0] - n[0] * t[2]),
+             sign * (n[0] * t[1] - n[1] * t[0]))
+        nm = _normalize((c[0] * t[0] + c[1] * b[0] + c[2] * n[0], c[0] * t[1] + c[1] * b[1] + c[2] * n[1],
+                         c[0] * t[2] + c[1] * b[2] + c[2] * n[2]))
+        if backfacing:
+            nm = (-nm[0], -nm[1], -nm[2])
+    else:
+        if space >= 3:  # Blender's object/world spaces: y and z flipped
+            c = (c[0], -c[1], -c[2])
+        nm = _normalize(c)
+        if space == 1 or space == 3:  # object space: through the object's normal transform
+            x = point[POINT_XFORM:POINT_XFORM + 3]
+            nm = _normalize((x[0, 0] * nm[0] + x[0, 1] * nm[1] + x[0, 2] * nm[2],
+                             x[1, 0] * nm[0] + x[1, 1] * nm[1] + x[1, 2] * nm[2],
+                             x[2, 0] * nm[0] + x[2, 1] * nm[1] + x[2, 2] * nm[2]))
+        if backfacing:
+            nm = (-nm[0], -nm[1], -nm[2])
+    n0 = _row(point, POINT_N)
+    if lerp_strength and strength != 1.0:
+        s = max(strength, 0.0)
+        nm = _normalize((n0[0] + (nm[0] - n0[0]) * s, n0[1] + (nm[1] - n0[1]) * s, n0[2] + (nm[2] - n0[2]) * s))
+    if not (math.isfinite(nm[0]) and math.isfinite(nm[1]) and math.isfinite(nm[2])):
+        return (0.0, 0.0, 0.0)
+    return nm
+
+
 @inline_kernel
 def _reg(regs, r):
     return (regs[r, 0], regs[r, 1], regs[r, 2])
@@ -752,6 +823,37 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
                 _set(regs, o0, _corner3(pd.objco, prim, b0, b1, b2))
             else:
                 _set1(regs, o0, 0.0)
+        elif op == OP_POINT:
+            if param >= 0:
+                _set1(regs, o0, point[mode, param])
+            else:
+                _set(regs, o0, (point[mode, 0], point[mode, 1], point[mode, 2]))
+        elif op == OP_FRESNEL:
+            nrm = _reg(regs, i1) if i1 >= 0 else _row(point, POINT_N)
+            eta = max(regs[i0, 0], 1e-5)
+            if point[POINT_MISC, 2] != 0.0:
+                eta = 1.0 / eta
+            _set1(regs, o0, fresnel_dielectric_cos(_dot(_row(point, POINT_I), nrm), eta))
+        elif op == OP_LAYER_WEIGHT:
+            nrm = _reg(regs, i1) if i1 >= 0 else _row(point, POINT_N)
+            blend = regs[i0, 0]
+            cos_i = _dot(_row(point, POINT_I), nrm)
+            eta = max(1.0 - blend, 1e-5)
+            if point[POINT_MISC, 2] == 0.0:
+                eta = 1.0 / eta
+            _set1(regs, o0, fresnel_dielectric_cos(cos_i, eta))
+            f = abs(cos_i)
+            if blend != 0.5:
+                bl = min(max(blend, 0.0), 1.0 - 1e-5)
+                bl = 2.0 * bl if bl < 0.5 else 0.5 / (1.0 - bl)
+                f = math.pow(f, bl)
+            _set1(regs, o1, 1.0 - f)
+        elif op == OP_NORMAL_MAP:
+            nm = normal_map(mode, regs[i0, 0], _reg(regs, i1), _reg(regs, i2) if i2 >= 0 else (0.0, 0.0, 0.0),
+                            regs[i3, 0] if i3 >= 0 else 1.0, point)
+            if nm[0] == 0.0 and nm[1] == 0.0 and nm[2] == 0.0:
+                nm = _row(point, POINT_N)
+            _set(regs, o0, nm)
         elif op == OP_VMATH:
             c = _reg(regs, i2) if i2 >= 0 else (0.0, 0.0, 0.0)
             s = regs[i3, 0] if i3 >= 0 else 1.0
@@ -838,11 +940,12 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
 
 
 @inline_kernel
-def eval_material(pd, md, regs, m, prim, b1, b2):
+def eval_material(pd, md, regs, m, prim, b1, b2, point):
     """Run material m's program at a hit and write its per-hit parameters into row m of ``md``
     (which must be this thread's private copy): lobe colours and alphas, the lobe selection
-    probabilities and CDF, delta flags, albedo and emission."""
-    run_program(pd, regs, pd.prog_of[m], prim, b1, b2, pd.const_val)  # a hit: ``point`` unread
+    probabilities and CDF, delta flags, albedo and emission. ``point`` holds the shading-point
+    rows the caller filled when ``pd.reads_point[m]`` (else it is not read)."""
+    run_program(pd, regs, pd.prog_of[m], prim, b1, b2, point)
     count = md.lobe_count[m]
     total = 0.0
     for l in range(count):

@@ -113,11 +113,50 @@ MaterialData = namedtuple("MaterialData", [
     "transmission_or_delta", "has_diffuse", "summary"])
 
 
+#: ``ns_local`` of a surface without a bump/normal map: the shading frame's own z
+NO_BUMP = (0.0, 0.0, 1.0)
+
+
+@kernel
+def bump_shadowing(ns_local, wi):
+    """Cycles's ``bump_shadowing_term`` for a normal-mapped hit, as (keep, diffuse factor):
+    ``ns_local`` is the unmapped (smooth) shading normal in the mapped normal's local frame, wi
+    the light direction. A direction on different sides of the two normals is dropped (light
+    leaking through the surface); diffuse lobes are softened toward the terminator by a GGX
+    shadowing term whose roughness grows with the normals' deviation."""
+    cos_nsi = ns_local[0] * wi[0] + ns_local[1] * wi[1] + ns_local[2] * wi[2]
+    cos_nsn = ns_local[2]
+    if cos_nsi * cos_nsn * wi[2] < 0.0:
+        return False, 0.0
+    cos_i = abs(cos_nsi)
+    cos_d = abs(cos_nsn)
+    if cos_d >= 1.0 or cos_i >= 1.0:
+        return True, 1.0
+    if cos_i < 1e-6:
+        return True, 0.0
+    alpha2 = min(max(0.125 * (1.0 / (cos_d * cos_d) - 1.0), 0.0), 1.0)
+    lam = 0.5 * (math.sqrt(1.0 + alpha2 * max(1.0 / (cos_i * cos_i) - 1.0, 0.0)) - 1.0)
+    return True, 1.0 / (1.0 + lam)
+
+
 @inline_kernel
 def bsdf_eval(md, m, wo, wi):
     """md: MaterialData; m: material index; wo, wi: local unit 3-tuples. Returns (f, pdf): f the
     3-tuple Σ color_l·f_l·|cos θi| over the material's non-delta lobes, pdf = Σ p_l·pdf_l per
     unit solid angle of wi (exactly what ``bsdf_sample`` reports for a non-delta sample)."""
+    return bsdf_eval_bump(md, m, wo, wi, NO_BUMP)
+
+
+@inline_kernel
+def bsdf_eval_bump(md, m, wo, wi, ns_local):
+    """``bsdf_eval`` at a normal-mapped hit (the local frame's z is the mapped normal;
+    ``ns_local`` the unmapped one in that frame, ``NO_BUMP`` when there is no map): Cycles's
+    bump map correction (``bump_shadowing``) applied."""
+    g_diffuse = 1.0
+    if ns_local[2] < 1.0:
+        keep, g_diffuse = bump_shadowing(ns_local, wi)
+        if not keep:
+            return (0.0, 0.0, 0.0), 0.0
     f0 = 0.0
     f1 = 0.0
     f2 = 0.0
@@ -128,6 +167,7 @@ def bsdf_eval(md, m, wo, wi):
             continue  # a delta lobe has no density to evaluate
         if t == BSDF_DIFFUSE:
             v, p = diffuse_eval(wo, wi)
+            v *= g_diffuse
         elif t == BSDF_GLOSSY:
             v, p = glossy_eval(wo, wi, md.lobe_alpha[m, s])
         elif t == BSDF_GLASS:
@@ -143,12 +183,19 @@ def bsdf_eval(md, m, wo, wi):
 
 @inline_kernel
 def bsdf_sample(md, m, wo, u_lobe, u0, u1):
+    """``bsdf_sample_bump`` without a normal map (see there)."""
+    return bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, NO_BUMP)
+
+
+@inline_kernel
+def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
     """md: MaterialData; m: material index; wo: local unit 3-tuple; u_lobe in [0, 1) picks the
     lobe (and, rescaled inside the picked interval, glass's reflect/refract choice); (u0, u1) in
     [0, 1)² picks the direction. Returns (wi, weight, pdf, lobe_kind, is_delta, valid):
     weight = f·|cos θi| / pdf (3-tuple), pdf the whole material's solid-angle pdf, or for a delta
     event its discrete probability; lobe_kind a LOBE_* value. Invalid samples have zero weight
-    and pdf, LOBE_NONE and is_delta False (wi is kept where one was drawn)."""
+    and pdf, LOBE_NONE and is_delta False (wi is kept where one was drawn). ``ns_local``: the
+    unmapped shading normal at a normal-mapped hit (``bsdf_eval_bump``), else ``NO_BUMP``."""
     zero = (0.0, 0.0, 0.0)
     count = md.lobe_count[m]
     if count == 0 or wo[2] == 0.0:
@@ -193,7 +240,7 @@ def bsdf_sample(md, m, wo, u_lobe, u0, u1):
             pdf *= (1.0 - fr) if refracted else fr
         return wi, weight, pdf, kind, True, True
 
-    if md.pure_diffuse[m]:
+    if md.pure_diffuse[m] and ns_local[2] >= 1.0:
         # One Lambert lobe needs no evaluation: pdf = |cos θi|/π, weight = its colour.
         pdf = abs(wi[2]) * INV_PI
         if not pdf > 0.0:
@@ -202,7 +249,7 @@ def bsdf_sample(md, m, wo, u_lobe, u0, u1):
         return wi, color, pdf, kind, False, True
 
     # One-sample MIS over lobes: the whole material's f and pdf at the sampled wi.
-    f, pdf = bsdf_eval(md, m, wo, wi)
+    f, pdf = bsdf_eval_bump(md, m, wo, wi, ns_local)
     if not pdf > 0.0:
         return wi, zero, 0.0, LOBE_NONE, False, False
     return wi, (f[0] / pdf, f[1] / pdf, f[2] / pdf), pdf, kind, False, True
@@ -389,7 +436,7 @@ class MaterialTable:
                     table.data.has_emission[i] = True
         return table
 
-    def program_data(self, uv=None, corner_attrs=None):
+    def program_data(self, uv=None, corner_attrs=None, origin=None):
         """The ``ProgramData`` of this scene's material programs (geometry inputs: the global
         per-triangle uv (T, 3, 2) and ``corner_attrs`` of ``SceneGeometry``); zero-size arrays
         when no material has a program."""
@@ -409,7 +456,7 @@ class MaterialTable:
                     if f"attr{i}" in attrs:
                         named[i] = attrs[f"attr{i}"]
         return build_program_data(src[0], self, src[1], uv, attrs.get("generated"),
-                                  attrs.get("object_coords"), CLOSURE_WEIGHT_CUTOFF, named)
+                                  attrs.get("object_coords"), CLOSURE_WEIGHT_CUTOFF, named, origin)
 
     # ------------------------------------------------------------------ queries
     def _mat_rows(self, mat) -> np.ndarray:

@@ -1,0 +1,178 @@
+"""Shading-point inputs of the material programs (docs/materials.md, "Shading-point inputs"):
+Fresnel, Layer Weight, Geometry, Light Path and Normal Map, DRT against Cycles pixel by pixel on
+emission-only tiles (tests/node_parity.py): smooth UV spheres under an orthographic camera, so
+the normal and the angle to the viewer vary over every tile."""
+
+import math
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from node_parity import node, render_tiles, tile  # noqa: E402
+
+N = 4
+
+
+def _compare(cycles, drt, count, tol=2e-3, outliers=6):
+    """Per tile, all but a few silhouette pixels (a pixel centre within the sample jitter of the
+    sphere's edge) agree within tol."""
+    bad = []
+    for k in range(count):
+        diff = np.abs(tile(cycles, k, N) - tile(drt, k, N)).max(axis=-1)
+        if int((diff > tol).sum()) > outliers:
+            bad.append((k, int((diff > tol).sum()), float(diff.max())))
+    assert not bad, f"tiles differing from Cycles (case, pixels, max diff): {bad}"
+
+
+def _normal_color(nt, uv):
+    """A normal-map colour varying over the UVs (tilts of up to ~35° in every direction)."""
+    sep = node(nt, "ShaderNodeSeparateXYZ", {0: uv})
+    x = node(nt, "ShaderNodeMath", {0: sep.outputs[0], 1: 0.7, 2: 0.15}, operation="MULTIPLY_ADD")
+    y = node(nt, "ShaderNodeMath", {0: sep.outputs[1], 1: 0.7, 2: 0.15}, operation="MULTIPLY_ADD")
+    return node(nt, "ShaderNodeCombineXYZ", {0: x.outputs[0], 1: y.outputs[0], 2: 0.85}).outputs[0]
+
+
+def _normal_map(space="TANGENT", strength=1.0):
+    def case(nt, uv):
+        return node(nt, "ShaderNodeNormalMap", {"Color": _normal_color(nt, uv), "Strength": strength},
+                    space=space).outputs[0]
+    return case
+
+
+CASES = [
+    lambda nt, uv: node(nt, "ShaderNodeFresnel", {"IOR": 1.45}).outputs[0],
+    lambda nt, uv: node(nt, "ShaderNodeFresnel", {"IOR": 3.0}).outputs[0],
+    lambda nt, uv: node(nt, "ShaderNodeLayerWeight", {"Blend": 0.3}).outputs["Fresnel"],
+    lambda nt, uv: node(nt, "ShaderNodeLayerWeight", {"Blend": 0.3}).outputs["Facing"],
+    lambda nt, uv: node(nt, "ShaderNodeLayerWeight", {"Blend": 0.8}).outputs["Facing"],
+    lambda nt, uv: node(nt, "ShaderNodeLayerWeight", {"Blend": 0.5}).outputs["Facing"],
+    lambda nt, uv: node(nt, "ShaderNodeNewGeometry").outputs["Normal"],
+    lambda nt, uv: node(nt, "ShaderNodeNewGeometry").outputs["Position"],
+    lambda nt, uv: node(nt, "ShaderNodeNewGeometry").outputs["True Normal"],
+    lambda nt, uv: node(nt, "ShaderNodeNewGeometry").outputs["Incoming"],
+    lambda nt, uv: node(nt, "ShaderNodeLightPath").outputs["Ray Length"],
+    lambda nt, uv: node(nt, "ShaderNodeLightPath").outputs["Is Camera Ray"],
+    _normal_map(),
+    _normal_map(strength=0.5),
+    _normal_map("WORLD"),
+    lambda nt, uv: node(nt, "ShaderNodeFresnel", {"IOR": 1.5, "Normal": _normal_map()(nt, uv)}).outputs[0],
+]
+
+
+def test_shading_inputs_match_cycles(tmp_path):
+    cycles, drt, res = render_tiles(CASES, N, tmp_path, shape="sphere")
+    assert not res.warnings, res.warnings
+    _compare(cycles, drt, len(CASES))
+
+
+def test_backfacing_inputs_match_cycles(tmp_path):
+    cases = [lambda nt, uv: node(nt, "ShaderNodeNewGeometry").outputs["Backfacing"],
+             lambda nt, uv: node(nt, "ShaderNodeNewGeometry").outputs["Normal"],
+             lambda nt, uv: node(nt, "ShaderNodeFresnel", {"IOR": 1.45}).outputs[0],
+             _normal_map()]
+    cycles, drt, res = render_tiles(cases, N, tmp_path, shape="back_plane")
+    assert not res.warnings, res.warnings
+    assert np.all(tile(drt, 0, N) > 0.7)  # backfacing = 1 → atan(1)·0.3 + 0.5
+    _compare(cycles, drt, len(cases))
+
+
+def test_normal_mapped_bsdfs_under_a_sun_match_cycles(tmp_path):
+    """Direct light from a delta sun on normal-mapped Diffuse, Glossy and Principled surfaces:
+    exact in both engines at one sample (no bounces), so pixels compare directly."""
+    def bsdf(kind, **inputs):
+        def case(nt, uv):
+            nm = _normal_map()(nt, uv)
+            n = node(nt, kind, dict(inputs, Normal=nm))
+            if hasattr(n, "distribution"):
+                n.distribution = "GGX"  # DRT's GGX is single-scatter
+            return n.outputs[0]
+        return case
+    cases = [bsdf("ShaderNodeBsdfDiffuse", Color=(0.8, 0.6, 0.4, 1)),
+             bsdf("ShaderNodeBsdfGlossy", Color=(0.8, 0.8, 0.8, 1), Roughness=0.4),
+             bsdf("ShaderNodeBsdfPrincipled", **{"Base Color": (0.5, 0.7, 0.3, 1), "Roughness": 0.5}),
+             lambda nt, uv: node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.6, 0.4, 1)}).outputs[0]]
+    cycles, drt, res = render_tiles(cases, 2, tmp_path, shader=True, sun=(3.0, (0.5, 0.3, 0.0)))
+    assert not res.warnings, res.warnings
+    for k in range(len(cases)):
+        a, b = tile(cycles, k, 2), tile(drt, k, 2)
+        assert a.mean() > 0.05
+        assert abs(b.mean() / a.mean() - 1) < 0.01, (k, a.mean(), b.mean())
+        rel = np.abs(a - b).max(axis=-1) / a.max()
+        if k == 2:
+            # Principled: Cycles tilts the specular layer's normal back above the horizon where
+            # the map tilts it too far (bump map correction) but not the diffuse one's; DRT has
+            # one shading normal per material and keeps the diffuse one's (docs/materials.md);
+            # and DRT's Principled specular layer is still the simplified one (issue 11: its
+            # Fresnel-averaged weight differs from Cycles's by a few % at varying angles)
+            assert np.quantile(rel, 0.95) < 0.08, (k, np.quantile(rel, 0.95))
+        else:
+            assert rel.max() < 0.02, (k, rel.max(), a.mean(), b.mean())
+
+
+def test_light_path_ray_types_match_cycles(tmp_path):
+    """Light Path flags and depths of rays after a mirror, a rough glossy reflection and a glass
+    slab: an emitter whose strength encodes them in binary (camera 1, diffuse 2, glossy 4,
+    singular 8, reflection 16, transmission 32, + 64·ray depth + 256·transmission depth) is seen
+    directly, in a mirror, in a rough mirror and through glass; tile means against Cycles."""
+    from addon.export import export_depsgraph
+    from drt.render import render
+    from drt.scene import scene_from_dict
+    from node_parity import setup_scene
+
+    sc = setup_scene(2)
+    sc.cycles.max_bounces = 4
+    sc.cycles.samples = 64
+    sc.cycles.sample_clamp_indirect = 0.0  # Cycles's default 10 would clamp the encoded values
+    sc.drt.max_bounces = 4
+    sc.drt.samples = 64
+    sc.render.filter_size = 1.5
+    emit = bpy.data.materials.new("encoded")
+    nt = emit.node_tree
+    nt.nodes.clear()
+    lp = nt.nodes.new("ShaderNodeLightPath")
+    total = None
+    for name, w in (("Is Camera Ray", 1), ("Is Diffuse Ray", 2), ("Is Glossy Ray", 4), ("Is Singular Ray", 8),
+                    ("Is Reflection Ray", 16), ("Is Transmission Ray", 32), ("Ray Depth", 64),
+                    ("Transmission Depth", 256)):
+        term = node(nt, "ShaderNodeMath", {0: lp.outputs[name], 1: float(w)}, operation="MULTIPLY").outputs[0]
+        total = term if total is None else node(nt, "ShaderNodeMath", {0: total, 1: term}).outputs[0]
+    em = node(nt, "ShaderNodeEmission", {"Color": (1, 1, 1, 1), "Strength": total})
+    nt.links.new(em.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+
+    def plane(size, loc, mat, rotation=(0, 0, 0)):
+        bpy.ops.mesh.primitive_plane_add(size=size, location=loc, rotation=rotation)
+        bpy.context.object.data.materials.append(mat)
+
+    def bsdf(kind, **inputs):
+        m = bpy.data.materials.new(kind)
+        m.node_tree.nodes.clear()
+        b = node(m.node_tree, kind, inputs)
+        if hasattr(b, "distribution"):
+            b.distribution = "GGX"
+        m.node_tree.links.new(b.outputs[0], m.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+        return m
+    plane(12.0, (0, 0, 2), emit, rotation=(math.pi, 0, 0))   # above the camera, facing down
+    plane(12.0, (0, 0, -1), emit)                             # below everything, facing up
+    plane(1.0, (-0.5, 0.5, 0), bsdf("ShaderNodeBsdfGlossy", Roughness=0.0))    # top left: mirror
+    plane(1.0, (0.5, 0.5, 0), bsdf("ShaderNodeBsdfGlossy", Roughness=0.15))    # top right: rough
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(-0.5, -0.5, 0), scale=(1, 1, 0.2))
+    bpy.context.object.data.materials.append(bsdf("ShaderNodeBsdfGlass", IOR=1.5, Roughness=0.0))
+    # bottom right: the lower emitter seen directly
+    path = str(tmp_path / "lp.exr")
+    sc.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path)
+    h = w = 2 * 16
+    cycles = np.array(img.pixels[:], dtype=np.float64).reshape(h, w, 4)[::-1, :, :3]
+    bpy.data.images.remove(img)
+    res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
+    assert not res.warnings, res.warnings
+    drt = np.asarray(render(scene_from_dict(res.header, res.arrays), threads=1).combined, np.float64)[..., :3]
+    inner = (slice(3, 13), slice(3, 13))  # away from tile edges (filter footprint)
+    for k, expected in enumerate([0.8 * 92.0, None, None, 1.0]):  # the mirror reflects 0.8
+        a, b = tile(cycles, k, 2)[inner].mean(), tile(drt, k, 2)[inner].mean()
+        if expected is not None:
+            assert abs(a - expected) < 0.01 * expected and abs(b - expected) < 0.01 * expected, (k, a, b)
+        assert abs(b / a - 1) < 0.02, (k, a, b)
