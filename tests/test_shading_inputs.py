@@ -176,3 +176,74 @@ def test_light_path_ray_types_match_cycles(tmp_path):
         if expected is not None:
             assert abs(a - expected) < 0.01 * expected and abs(b - expected) < 0.01 * expected, (k, a, b)
         assert abs(b / a - 1) < 0.02, (k, a, b)
+
+
+def test_object_info_matches_cycles(tmp_path):
+    """Object Info's Random (Cycles's name hash; instances: Blender's random id), Location,
+    Color, Alpha, Object Index and Material Index on several objects and linked duplicates."""
+    def case(output, scale=1.0):
+        def build(nt, uv):
+            v = node(nt, "ShaderNodeObjectInfo").outputs[output]
+            return node(nt, "ShaderNodeVectorMath", {0: v, 3: scale}, operation="SCALE").outputs[0] \
+                if output in ("Location", "Color") else \
+                node(nt, "ShaderNodeMath", {0: v, 1: scale}, operation="MULTIPLY").outputs[0]
+        return build
+    cases = [case("Random"), case("Location", 0.5), case("Color"), case("Alpha"), case("Object Index", 0.1),
+             case("Material Index", 0.1), case("Random"), case("Random", 3.0)]
+    import bpy as _bpy
+
+    orig_add = _bpy.ops.mesh.primitive_plane_add
+    count = {"n": 0}
+
+    def add_with_props(**kw):  # give every tile object its own colour / pass index
+        orig_add(**kw)
+        ob = _bpy.context.object
+        k = count["n"]
+        count["n"] += 1
+        ob.name = f"Tile object {k} ünïcode"
+        ob.color = (0.1 * k, 0.5, 1.0 - 0.1 * k, 0.25 + 0.05 * k)
+        ob.pass_index = k + 1
+    _bpy.ops.mesh.primitive_plane_add = add_with_props
+    try:
+        cycles, drt, res = render_tiles(cases, 3, tmp_path)
+    finally:
+        _bpy.ops.mesh.primitive_plane_add = orig_add
+    assert not res.warnings, res.warnings
+    for k in range(len(cases)):
+        assert np.abs(tile(cycles, k, 3) - tile(drt, k, 3)).max() < 2e-3, k
+
+
+def test_object_info_random_of_instances_matches_cycles(tmp_path):
+    """Collection instances take Blender's per-instance random id (not the name hash)."""
+    from addon.export import export_depsgraph
+    from drt.render import render
+    from drt.scene import scene_from_dict
+    from node_parity import _material, setup_scene
+
+    sc = setup_scene(2)
+    mat = _material("rnd", lambda nt, uv: node(nt, "ShaderNodeObjectInfo").outputs["Random"])
+    coll = bpy.data.collections.new("src")
+    bpy.ops.mesh.primitive_plane_add(size=1.0)
+    ob = bpy.context.object
+    ob.data.materials.append(mat)
+    for c in ob.users_collection:
+        c.objects.unlink(ob)
+    coll.objects.link(ob)
+    for k, loc in enumerate([(-0.5, 0.5, 0), (0.5, 0.5, 0), (-0.5, -0.5, 0), (0.5, -0.5, 0)]):
+        e = bpy.data.objects.new(f"inst{k}", None)
+        e.instance_type = "COLLECTION"
+        e.instance_collection = coll
+        e.location = loc
+        sc.collection.objects.link(e)
+    path = str(tmp_path / "inst.exr")
+    sc.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path)
+    cycles = np.array(img.pixels[:], dtype=np.float64).reshape(32, 32, 4)[::-1, :, :3]
+    bpy.data.images.remove(img)
+    res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
+    drt = np.asarray(render(scene_from_dict(res.header, res.arrays), threads=1).combined, np.float64)[..., :3]
+    values = [tile(cycles, k, 2).mean() for k in range(4)]
+    assert len(set(np.round(values, 4))) == 4  # four different randoms
+    for k in range(4):
+        assert np.abs(tile(cycles, k, 2) - tile(drt, k, 2)).max() < 2e-3, k

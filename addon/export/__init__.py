@@ -13,6 +13,7 @@ import numpy as np
 from .libraries import missing_link_warnings
 from .materials import MaterialExporter
 from .mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays, evaluated_positions
+from .object_info import object_info
 from .scene_parts import (ExportError, camera_dict, light_dict, matrix_list, render_settings,
                           world_dict)
 
@@ -105,6 +106,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     object_index: dict = {}  # instance key -> index into objects
     deform_keys: dict = {}  # instance key -> mesh index (candidates for deformation)
     lights: list[dict] = []
+    infos: list[dict] = []  # Object Info per object, attached if a material reads it
 
     for inst in depsgraph.object_instances:
         obj = inst.object
@@ -143,6 +145,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
         object_index[key] = len(objects)
         objects.append({"name": _instance_name(inst, key),
                         "mesh": k, "matrix_world": matrix, "motion": None})
+        infos.append(object_info(inst))
 
     cam_obj = scene.camera.evaluated_get(depsgraph)
     camera = camera_dict(cam_obj, cam_obj.matrix_world.copy())
@@ -155,6 +158,9 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
                            object_index, deform_keys, meshes, arrays, warnings)
 
     warnings += mats.warnings
+    if mats.reads_object_info():
+        for o, info in zip(objects, infos):
+            o["info"] = info
     header = {"format": "drt-scene", "version": 1, "render": render, "camera": camera,
               "world": world_dict(scene.world, warnings), "materials": mats.materials,
               "lights": lights, "meshes": meshes, "objects": objects}

@@ -109,6 +109,13 @@ class MaterialExporter:
             self.materials.append(DEFAULT_MATERIAL if material is None else self.convert(material))
         return idx
 
+    def reads_object_info(self) -> bool:
+        """Whether any material program reads Object Info (objects then carry it)."""
+        from .node_programs import OP_OBJECT_INFO
+
+        return any(op[0] == OP_OBJECT_INFO for m in self.materials
+                   for op in (m.get("program") or {}).get("ops", []))
+
     def reads(self, indices) -> dict:
         """Geometry inputs the programs of the materials with these global indices read:
         {"uv" / "generated" / "object_coords": None, named attribute ("uv:Name"): its index in
@@ -135,6 +142,7 @@ class MaterialExporter:
         emission = np.zeros(3)
         self._b = ProgramBuilder(self.images, self.attributes)
         self._normal = None  # (source key, Value) of the first BSDF Normal input that is linked
+        self._b.material_pass_index = int(getattr(material, "pass_index", 0))
         if tree is None:
             lobes = [{"type": "DIFFUSE", "color": list(map(float, material.diffuse_color[:3]))}]
         else:

@@ -27,7 +27,9 @@ OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING = 10, 11, 12, 13
 OP_IMAGE, OP_CHECKER, OP_GRADIENT, OP_RAMP = 20, 21, 22, 23
 OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31, 32, 33, 34, 35
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
-OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP = 90, 91, 92, 93
+OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 92, 93, 94
+#: Object Info outputs → OP_OBJECT_INFO mode (Material Index is the material's constant)
+OBJECT_INFO_OUTPUTS = {"Location": 0, "Color": 1, "Alpha": 2, "Object Index": 3, "Random": 4}
 # shading-point rows (drt.materials.program_format.POINT_*)
 POINT_P, POINT_N, POINT_NG, POINT_I = 3, 4, 5, 6
 POINT_PATH, POINT_PATH2, POINT_DEPTH, POINT_MISC = 8, 9, 10, 11
@@ -77,7 +79,7 @@ SUPPORTED_NODES = {
     "ShaderNodeSeparateXYZ", "ShaderNodeCombineXYZ", "ShaderNodeSeparateRGB",
     "ShaderNodeCombineRGB", "ShaderNodeSeparateColor", "ShaderNodeCombineColor",
     "ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry", "ShaderNodeLightPath",
-    "ShaderNodeNormalMap",
+    "ShaderNodeNormalMap", "ShaderNodeObjectInfo",
 }
 
 
@@ -238,6 +240,7 @@ class ProgramBuilder:
         self._cache: dict = {}
         self._geometry: dict = {}
         self.problems: list[str] = []
+        self.material_pass_index = 0  # the Object Info node's Material Index
 
     # --- registers ---------------------------------------------------------------------------
     def new_reg(self) -> int:
@@ -357,6 +360,16 @@ class ProgramBuilder:
             name = getattr(node, "uv_map", "")
             # no name: the active render UV map, as Cycles
             return self.attribute("uv:" + name) if name else self.geometry(OP_UV)
+        if k == "ShaderNodeObjectInfo":
+            if oname == "Material Index":
+                return Value(self, const=float(self.material_pass_index))
+            if oname not in OBJECT_INFO_OUTPUTS:
+                raise Unsupported(node)
+            key = ("object_info", oname)
+            hit = self._geometry.get(key)
+            if hit is None:
+                hit = self._geometry[key] = self.emit(OP_OBJECT_INFO, OBJECT_INFO_OUTPUTS[oname], [])
+            return hit
         if k in ("ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry",
                  "ShaderNodeLightPath", "ShaderNodeNormalMap"):
             return self._shading_point_node(node, out, ctx)

@@ -50,6 +50,11 @@ class SceneGeometry:
     normals: np.ndarray | None = None  # (T_all, 3, 3) float32 shading normals (world for static, local for moving)
     has_normals: np.ndarray = None  # (T_all,) bool; False: flat shading
     uvs: np.ndarray | None = None  # (T_all, 3, 2) float32
+    #: (T_all,) int32 object of each global triangle and (O, 9) float64 Object Info rows
+    #: (location xyz in Blender world, colour rgb, alpha, pass index, random); only when some
+    #: object carries Object Info (a material program reads it), else None
+    object_of: np.ndarray | None = None
+    object_info: np.ndarray | None = None
     #: per-corner attributes material programs read, (T_all, 3, 3) float32 by name ("generated",
     #: "object_coords"); only those some mesh has (zeros on the other meshes' triangles)
     corner_attrs: dict = field(default_factory=dict)
@@ -132,6 +137,7 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     mats_static, nrm_static, hasn_static, uv_static = [], [], [], []
     mats_moving, nrm_moving, hasn_moving, uv_moving = [], [], [], []
     order_static, order_moving = [], []  # meshes in global triangle order (for corner_attrs)
+    obj_static, obj_moving = [], []  # object index per triangle block (Object Info)
     v_offset = 0
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
@@ -144,7 +150,7 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         uv = mesh.uvs.astype(np.float32) if mesh.uvs is not None else np.zeros((t, 3, 2), np.float32)
         return mesh.material_index.astype(np.int32), nrm.astype(np.float32), np.full(t, mesh.normals is not None), uv
 
-    for obj in scene.objects:
+    for oi, obj in enumerate(scene.objects):
         mesh = scene.meshes[obj.mesh]
         if len(mesh.triangles) == 0:
             continue
@@ -156,6 +162,7 @@ def build_geometry(scene: Scene) -> SceneGeometry:
             m, n, h, u = per_tri(mesh, mesh.normals)
             mats_moving.append(m), nrm_moving.append(n), hasn_moving.append(h), uv_moving.append(u)
             order_moving.append((mesh, None))
+            obj_moving.append(np.full(len(mesh.triangles), oi, np.int32))
             for mat in (m_open, m_close):
                 for pos in (mesh.positions, mesh.positions_close if mesh.positions_close is not None else mesh.positions):
                     w = transform_rows(pos, np.asarray(mat)[:3, :3]) + np.asarray(mat)[:3, 3] - shift
@@ -171,6 +178,7 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         a, b, c, d = per_tri(mesh, nw)
         mats_static.append(a), nrm_static.append(b), hasn_static.append(c), uv_static.append(d)
         order_static.append((mesh, m))
+        obj_static.append(np.full(len(mesh.triangles), oi, np.int32))
 
     geom = SceneGeometry(
         origin_shift=shift,
@@ -191,6 +199,11 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     geom.normals = cat(nrm_static + nrm_moving, np.zeros((0, 3, 3), np.float32)) if any_normals else None
     geom.uvs = cat(uv_static + uv_moving, np.zeros((0, 3, 2), np.float32)) if any_uvs else None
     geom.triangle_count = offset
+    if any(o.info is not None for o in scene.objects):
+        geom.object_of = cat(obj_static + obj_moving, np.zeros(0, np.int32))
+        geom.object_info = np.array([np.concatenate([np.asarray(o.matrix, np.float64)[:3, 3],
+                                                     o.info if o.info is not None else [1, 1, 1, 1, 0, 0]])
+                                     for o in scene.objects], np.float64).reshape(-1, 9)
     names = getattr(scene, "attributes", [])
     tangents = {f"attr{i}" for i, a in enumerate(names) if a.startswith("tangent:")}
 

@@ -241,6 +241,9 @@ class ObjectSpec:
     mesh: int
     matrix: np.ndarray
     motion: tuple[np.ndarray, np.ndarray] | None = None
+    #: Object Info values (only when a material program reads them): (6,) float64 — colour
+    #: rgb, alpha, pass index, random in [0, 1] (the location is the matrix's translation)
+    info: np.ndarray | None = None
 
 
 @dataclass
@@ -535,7 +538,15 @@ def _objects(h: dict, n_meshes: int) -> list[ObjectSpec]:
         mesh = _number(o, "mesh", p, integer=True, lo=0)
         if mesh >= n_meshes:
             raise SceneError(f"{p}.mesh", f"refers to mesh {mesh} but the scene has {n_meshes} meshes")
-        out.append(ObjectSpec(str(o.get("name", f"object{i}")), mesh, _matrix(o, "matrix_world", p), _motion(o, "motion", p)))
+        info = None
+        if o.get("info") is not None:
+            inf = _get(o, "info", p, {})
+            info = np.concatenate([_vector(inf, "color", f"{p}.info", 3, default=[1, 1, 1]),
+                                   [_number(inf, "alpha", f"{p}.info", default=1.0),
+                                    _number(inf, "pass_index", f"{p}.info", default=0.0),
+                                    _number(inf, "random", f"{p}.info", default=0.0, lo=0.0)]])
+        out.append(ObjectSpec(str(o.get("name", f"object{i}")), mesh, _matrix(o, "matrix_world", p),
+                              _motion(o, "motion", p), info))
     return out
 
 

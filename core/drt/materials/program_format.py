@@ -32,8 +32,8 @@ OP_IMAGE, OP_CHECKER, OP_GRADIENT, OP_RAMP = 20, 21, 22, 23
 OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31, 32, 33, 34, 35
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
 # shading-point inputs of surface hits (docs/materials.md, "Shading-point inputs")
-OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP = 90, 91, 92, 93
-OPCODES = {OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
+OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 92, 93, 94
+OPCODES = {OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
            OP_CHECKER, OP_GRADIENT, OP_RAMP, OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA,
            OP_BRIGHT_CONTRAST, OP_HSV, OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE,
            OP_RGB_TO_HSV, OP_HSV_TO_RGB}
@@ -85,6 +85,8 @@ ProgramData = namedtuple("ProgramData", [
     "reads_point",      # (M,) bool: the material's program reads shading-point rows (POINT_P...)
     "normal_reg",       # (M,) int64 register of the shading normal (Normal Map), −1: none
     "origin",           # (3,) float64 Blender world position of the renderer's origin (P rows)
+    "object_of",        # (T,) int32 object of each global triangle ((0,): no Object Info)
+    "object_info",      # (O, 9) float64 [location xyz, colour rgb, alpha, pass index, random]
 ])
 
 
@@ -120,6 +122,8 @@ def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> 
             raise ValueError(f"{where}.ops[{k}]: shading-point row/component out of range")
         if row[0] == OP_NORMAL_MAP and not (0 <= row[1] < len(NORMAL_MAP_SPACES) and min(row[4], row[5]) >= 0):
             raise ValueError(f"{where}.ops[{k}]: normal map space or inputs out of range")
+        if row[0] == OP_OBJECT_INFO and not 0 <= row[1] < 5:
+            raise ValueError(f"{where}.ops[{k}]: object info output out of range")
         if row[0] in (OP_FRESNEL, OP_LAYER_WEIGHT) and row[4] < 0 or row[0] == OP_LAYER_WEIGHT and row[3] < 0:
             raise ValueError(f"{where}.ops[{k}]: missing input or output")
         if row[0] == OP_RAMP and not 0 <= row[10] <= len(data) - 4 * RAMP_TABLE_SIZE:
@@ -145,7 +149,8 @@ POINT_OPS = frozenset({OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP})
 
 
 def build_program_data(materials: list[dict], table, images: list[tuple[dict, np.ndarray]],
-                       uv, generated, objco, cutoff: float, attrs=None, origin=None) -> ProgramData | None:
+                       uv, generated, objco, cutoff: float, attrs=None, origin=None,
+                       object_of=None, object_info=None) -> ProgramData | None:
     """ProgramData for the validated ``materials`` (scene.py) and their ``MaterialTable``; None
     when no material has a program. Lobes are matched to table slots with the table's own rule
     (a lobe whose colour's mean is below ``cutoff`` was dropped)."""
@@ -217,7 +222,8 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         uv=arr(uv, np.float32, (0, 3, 2)), generated=arr(generated, np.float32, (0, 3, 3)),
         objco=arr(objco, np.float32, (0, 3, 3)), attrs=arr(attrs, np.float32, (0, 0, 3, 3)),
         reads_point=reads_point, normal_reg=normal_reg,
-        origin=np.asarray(origin if origin is not None else np.zeros(3), np.float64).reshape(3))
+        origin=np.asarray(origin if origin is not None else np.zeros(3), np.float64).reshape(3),
+        object_of=arr(object_of, np.int32, (0,)), object_info=arr(object_info, np.float64, (0, 9)))
 
 
 def empty_program_data() -> ProgramData:
@@ -232,4 +238,5 @@ def empty_program_data() -> ProgramData:
                        img_f32=np.zeros(0, np.float32), uv=np.zeros((0, 3, 2), np.float32),
                        generated=np.zeros((0, 3, 3), np.float32),
                        objco=np.zeros((0, 3, 3), np.float32), attrs=np.zeros((0, 0, 3, 3), np.float32),
-                       reads_point=np.zeros(0, bool), normal_reg=z, origin=np.zeros(3))
+                       reads_point=np.zeros(0, bool), normal_reg=z, origin=np.zeros(3),
+                       object_of=np.zeros(0, np.int32), object_info=np.zeros((0, 9)))

@@ -39,7 +39,7 @@ from .dielectric import IOR_ONE_EPS
 from .ggx import ALPHA_SQ_SINGULAR
 from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, POINT_N, POINT_NSMOOTH,
                              POINT_OBJECT, POINT_UV, POINT_XFORM, OP_FRESNEL, OP_LAYER_WEIGHT,
-                             OP_NORMAL_MAP, OP_POINT, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
+                             OP_NORMAL_MAP, OP_OBJECT_INFO, OP_POINT, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
                              OP_COMBINE, OP_COMPONENT, OP_GAMMA, OP_GENERATED, OP_GRADIENT,
                              OP_HSV, OP_HSV_TO_RGB, OP_IMAGE, OP_INVERT, OP_MAP_RANGE,
                              OP_ATTRIBUTE, OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
@@ -854,6 +854,15 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
             if nm[0] == 0.0 and nm[1] == 0.0 and nm[2] == 0.0:
                 nm = _row(point, POINT_N)
             _set(regs, o0, nm)
+        elif op == OP_OBJECT_INFO:
+            if prim >= 0 and pd.object_of.shape[0]:
+                info = pd.object_info[pd.object_of[prim]]
+                if mode <= 1:  # location, colour
+                    _set(regs, o0, (info[3 * mode], info[3 * mode + 1], info[3 * mode + 2]))
+                else:  # alpha, pass index, random
+                    _set1(regs, o0, info[4 + mode])
+            else:
+                _set1(regs, o0, 0.0)
         elif op == OP_VMATH:
             c = _reg(regs, i2) if i2 >= 0 else (0.0, 0.0, 0.0)
             s = regs[i3, 0] if i3 >= 0 else 1.0
