@@ -92,11 +92,15 @@ def test_normal_mapped_bsdfs_under_a_sun_match_cycles(tmp_path):
     cases = [bsdf("ShaderNodeBsdfDiffuse", Color=(0.8, 0.6, 0.4, 1)),
              bsdf("ShaderNodeBsdfGlossy", Color=(0.8, 0.8, 0.8, 1), Roughness=0.4),
              bsdf("ShaderNodeBsdfPrincipled", **{"Base Color": (0.5, 0.7, 0.3, 1), "Roughness": 0.5}),
-             lambda nt, uv: node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.6, 0.4, 1)}).outputs[0]]
-    cycles, drt, res = render_tiles(cases, 2, tmp_path, shader=True, sun=(3.0, (0.5, 0.3, 0.0)))
+             lambda nt, uv: node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.6, 0.4, 1)}).outputs[0],
+             lambda nt, uv: node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.6, 0.4, 1),
+                                                               "Normal": _bump()(nt, uv)}).outputs[0],
+             lambda nt, uv: node(nt, "ShaderNodeBsdfGlossy", {"Roughness": 0.3, "Normal": _bump()(nt, uv)},
+                                 distribution="GGX").outputs[0]]
+    cycles, drt, res = render_tiles(cases, 3, tmp_path, shader=True, sun=(3.0, (0.5, 0.3, 0.0)))
     assert not res.warnings, res.warnings
     for k in range(len(cases)):
-        a, b = tile(cycles, k, 2), tile(drt, k, 2)
+        a, b = tile(cycles, k, 3), tile(drt, k, 3)
         assert a.mean() > 0.05
         assert abs(b.mean() / a.mean() - 1) < 0.01, (k, a.mean(), b.mean())
         rel = np.abs(a - b).max(axis=-1) / a.max()
@@ -107,6 +111,10 @@ def test_normal_mapped_bsdfs_under_a_sun_match_cycles(tmp_path):
             # and DRT's Principled specular layer is still the simplified one (issue 11: its
             # Fresnel-averaged weight differs from Cycles's by a few % at varying angles)
             assert np.quantile(rel, 0.95) < 0.08, (k, np.quantile(rel, 0.95))
+        elif k == 5:
+            # a glossy highlight on a bumped surface: Cycles's finite difference (float32, its own
+            # step) and DRT's agree to ~0.3 % in the normal, which moves a highlight's edge pixels
+            assert np.quantile(rel, 0.95) < 0.02 and rel.max() < 0.1, (k, np.quantile(rel, 0.95), rel.max())
         else:
             assert rel.max() < 0.02, (k, rel.max(), a.mean(), b.mean())
 
@@ -247,3 +255,37 @@ def test_object_info_random_of_instances_matches_cycles(tmp_path):
     assert len(set(np.round(values, 4))) == 4  # four different randoms
     for k in range(4):
         assert np.abs(tile(cycles, k, 2) - tile(drt, k, 2)).max() < 2e-3, k
+
+
+def _height(nt, uv):
+    """A smooth height field over the UVs: sin(12u)·cos(9v)."""
+    sep = node(nt, "ShaderNodeSeparateXYZ", {0: uv})
+    a = node(nt, "ShaderNodeMath", {0: sep.outputs[0], 1: 12.0}, operation="MULTIPLY")
+    b = node(nt, "ShaderNodeMath", {0: sep.outputs[1], 1: 9.0}, operation="MULTIPLY")
+    sa = node(nt, "ShaderNodeMath", {0: a.outputs[0]}, operation="SINE")
+    cb = node(nt, "ShaderNodeMath", {0: b.outputs[0]}, operation="COSINE")
+    return node(nt, "ShaderNodeMath", {0: sa.outputs[0], 1: cb.outputs[0]}, operation="MULTIPLY").outputs[0]
+
+
+def _bump(strength=1.0, distance=0.05, invert=False, normal=None):
+    def case(nt, uv):
+        inputs = {"Height": _height(nt, uv), "Strength": strength, "Distance": distance}
+        if normal is not None:
+            inputs["Normal"] = normal(nt, uv)
+        return node(nt, "ShaderNodeBump", inputs, invert=invert).outputs[0]
+    return case
+
+
+BUMP_CASES = [_bump(), _bump(0.5), _bump(distance=0.2, invert=True), _bump(normal=_normal_map()),
+              lambda nt, uv: node(nt, "ShaderNodeFresnel", {"IOR": 1.5, "Normal": _bump()(nt, uv)}).outputs[0]]
+
+
+@pytest.mark.parametrize("shape", ["plane", "sphere"])
+def test_bump_matches_cycles(tmp_path, shape):
+    """The Bump node's normal (Cycles differentiates the height over ray differentials, DRT over
+    a small step along the triangle's edges: the same derivative of a smooth height field)."""
+    cycles, drt, res = render_tiles(BUMP_CASES, 3, tmp_path, shape=shape)
+    assert not res.warnings, res.warnings
+    for k in range(len(BUMP_CASES)):
+        diff = np.abs(tile(cycles, k, 3) - tile(drt, k, 3)).max(axis=-1)
+        assert int((diff > 3e-3).sum()) <= 6, (k, int((diff > 3e-3).sum()), float(diff.max()))

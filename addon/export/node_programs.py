@@ -29,6 +29,7 @@ OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
 OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 92, 93, 94
 #: Object Info outputs → OP_OBJECT_INFO mode (Material Index is the material's constant)
+OP_BUMP_OFFSET, OP_BUMP = 95, 96
 OBJECT_INFO_OUTPUTS = {"Location": 0, "Color": 1, "Alpha": 2, "Object Index": 3, "Random": 4}
 # shading-point rows (drt.materials.program_format.POINT_*)
 POINT_P, POINT_N, POINT_NG, POINT_I = 3, 4, 5, 6
@@ -79,7 +80,7 @@ SUPPORTED_NODES = {
     "ShaderNodeSeparateXYZ", "ShaderNodeCombineXYZ", "ShaderNodeSeparateRGB",
     "ShaderNodeCombineRGB", "ShaderNodeSeparateColor", "ShaderNodeCombineColor",
     "ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry", "ShaderNodeLightPath",
-    "ShaderNodeNormalMap", "ShaderNodeObjectInfo",
+    "ShaderNodeNormalMap", "ShaderNodeObjectInfo", "ShaderNodeBump",
 }
 
 
@@ -241,6 +242,7 @@ class ProgramBuilder:
         self._geometry: dict = {}
         self.problems: list[str] = []
         self.material_pass_index = 0  # the Object Info node's Material Index
+        self._variant = 0  # 0: at the hit; 1, 2: a Bump node's offset evaluations (own caches)
 
     # --- registers ---------------------------------------------------------------------------
     def new_reg(self) -> int:
@@ -306,7 +308,7 @@ class ProgramBuilder:
         """The Value of a node's output socket; a node is compiled once per group context (a
         node with several outputs — a texture's Color and Fac — emits one operation)."""
         node = out_sock.node
-        key = (node.as_pointer(), tuple(n.as_pointer() for n in ctx))
+        key = (node.as_pointer(), tuple(n.as_pointer() for n in ctx), self._variant)
         outs = self._cache.setdefault(key, {})
         hit = outs.get(out_sock.identifier)
         if hit is None:
@@ -326,7 +328,7 @@ class ProgramBuilder:
         if name not in self.attributes:
             self.attributes.append(name)
         idx = self.attributes.index(name)
-        key = ("attr", idx)
+        key = ("attr", idx, self._variant)
         hit = self._geometry.get(key)
         if hit is None:
             hit = self._geometry[key] = self.emit(OP_ATTRIBUTE, 0, [], param=idx)
@@ -334,9 +336,10 @@ class ProgramBuilder:
 
     def geometry(self, opcode) -> Value:
         """A geometry input (UV, Generated, Object), read once per program."""
-        hit = self._geometry.get(opcode)
+        key = (opcode, self._variant)
+        hit = self._geometry.get(key)
         if hit is None:
-            hit = self._geometry[opcode] = self.emit(opcode, 0, [])
+            hit = self._geometry[key] = self.emit(opcode, 0, [])
         return hit
 
     # --- nodes -------------------------------------------------------------------------------
@@ -365,11 +368,13 @@ class ProgramBuilder:
                 return Value(self, const=float(self.material_pass_index))
             if oname not in OBJECT_INFO_OUTPUTS:
                 raise Unsupported(node)
-            key = ("object_info", oname)
+            key = ("object_info", oname, self._variant)
             hit = self._geometry.get(key)
             if hit is None:
                 hit = self._geometry[key] = self.emit(OP_OBJECT_INFO, OBJECT_INFO_OUTPUTS[oname], [])
             return hit
+        if k == "ShaderNodeBump":
+            return self._bump(node, ctx)
         if k in ("ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry",
                  "ShaderNodeLightPath", "ShaderNodeNormalMap"):
             return self._shading_point_node(node, out, ctx)
@@ -502,9 +507,39 @@ class ProgramBuilder:
             ins += [self.attribute("tangent:" + uv), self.attribute("tangent_sign:" + uv)]
         return self.emit(OP_NORMAL_MAP, NORMAL_MAP_SPACES.index(space), ins)
 
+    def _bump(self, node, ctx):
+        """The Bump node (Cycles's ``svm_node_set_bump``): its Height sub-graph is compiled
+        three times — at the hit and after ``OP_BUMP_OFFSET`` moves the shading point one step
+        along each triangle edge (every coordinate input moves with it) — then ``OP_BUMP``
+        forms the perturbed normal."""
+        normal_in = self._linked_or_none(node, "Normal", ctx)
+        hsock = socket(node.inputs, "Height")
+        if resolve(hsock, ctx)[0] is None or self._variant:
+            if self._variant:  # a Bump inside another Bump's height: not supported
+                raise Unsupported(node)
+            return normal_in if normal_in is not None else self.point(POINT_N, -1)
+        h_c = self.input(node, hsock, ctx, "float")
+        if h_c.is_const:  # a constant height does not bend the normal
+            return normal_in if normal_in is not None else self.point(POINT_N, -1)
+        heights = [h_c]
+        fsock = node.inputs.get("Filter Width")
+        fw = self.input(node, fsock, ctx, "float") if fsock is not None else Value(self, const=0.1)
+        for variant in (1, 2):
+            self.emit(OP_BUMP_OFFSET, variant, [fw])
+            self._variant = variant
+            try:
+                heights.append(self.input(node, hsock, ctx, "float"))
+            finally:
+                self._variant = 0
+        self.emit(OP_BUMP_OFFSET, 0, [])
+        ins = heights + [self.inp(node, "Strength", ctx, "float"), self.inp(node, "Distance", ctx, "float"),
+                         normal_in]
+        # param: 2 × the filter width's register + invert (OP_BUMP has no seventh input)
+        return self.emit(OP_BUMP, 0, ins, param=2 * self.reg_of(fw) + int(bool(getattr(node, "invert", False))))
+
     def point(self, row: int, component: int) -> Value:
         """A shading-point input (row of the point array, one component or −1: the vector)."""
-        key = ("point", row, component)
+        key = ("point", row, component, self._variant)
         hit = self._geometry.get(key)
         if hit is None:
             hit = self._geometry[key] = self.emit(OP_POINT, row, [], param=component)

@@ -201,6 +201,20 @@ class Camera:
             matrix=_f64(m).copy(), moving=self.motion is not None,
             motion=self.motion.data if self.motion is not None else static_motion_data())
 
+    def pixel_footprint(self) -> np.ndarray:
+        """(4, 3) float64 world vectors [right abs, right rel, up abs, up rel]: one pixel's step
+        to the right / up at a point at ray length t is abs + t·rel (orthographic: abs only;
+        perspective: rel only) — the ray differentials the Bump node needs (at shutter open)."""
+        cd = self.data
+        m = np.asarray(cd.matrix, np.float64)
+        right = m[:3, 0] / max(np.linalg.norm(m[:3, 0]), 1e-300)
+        up = m[:3, 1] / max(np.linalg.norm(m[:3, 1]), 1e-300)
+        px, py = cd.plane_w / cd.width, cd.plane_h / cd.height
+        ortho = cd.projection == PROJECTION_ORTHO
+        z = np.zeros(3)
+        return np.array([right * px if ortho else z, z if ortho else right * px,
+                         up * py if ortho else z, z if ortho else up * py], np.float64)
+
     def lens_offsets(self, u: np.ndarray) -> np.ndarray:
         """(n, 2) points on the aperture (camera-space x, y, metres) from (n, 2) uniforms."""
         u = _f64(np.asarray(u, dtype=np.float64).reshape(-1, 2))

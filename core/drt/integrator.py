@@ -105,7 +105,10 @@ class Integrator:
         # material programs (textures): a thread rewrites its own copy of the material data
         self.programs = materials.program_data(geom.uvs, getattr(geom, "corner_attrs", None),
                                               getattr(geom, "origin_shift", None),
-                                              getattr(geom, "object_of", None), getattr(geom, "object_info", None))
+                                              getattr(geom, "object_of", None), getattr(geom, "object_info", None),
+                                              getattr(geom, "static_positions", None),
+                                              getattr(geom, "static_triangles", None),
+                                              camera.pixel_footprint())
         self.n_registers = int(max((m["program"]["registers"] for m in materials.program_source[0]
                                     if m.get("program")), default=0)) if self.programs.prog_of.shape[0] else 0
         normals = geom.normals if geom.normals is not None else np.zeros((0, 3, 3), np.float32)

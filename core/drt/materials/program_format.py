@@ -33,7 +33,8 @@ OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
 # shading-point inputs of surface hits (docs/materials.md, "Shading-point inputs")
 OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 92, 93, 94
-OPCODES = {OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
+OP_BUMP_OFFSET, OP_BUMP = 95, 96
+OPCODES = {OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_BUMP_OFFSET, OP_BUMP, OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
            OP_CHECKER, OP_GRADIENT, OP_RAMP, OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA,
            OP_BRIGHT_CONTRAST, OP_HSV, OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE,
            OP_RGB_TO_HSV, OP_HSV_TO_RGB}
@@ -87,6 +88,10 @@ ProgramData = namedtuple("ProgramData", [
     "origin",           # (3,) float64 Blender world position of the renderer's origin (P rows)
     "object_of",        # (T,) int32 object of each global triangle ((0,): no Object Info)
     "object_info",      # (O, 9) float64 [location xyz, colour rgb, alpha, pass index, random]
+    "positions",        # (V, 3) float32 static world-space vertices (the Bump node's tangents)
+    "triangles",        # (S, 3) int32 static triangles (global ids < S)
+    "footprint",        # (4, 3) float64 a pixel's right/up extent at a hit: abs + t·rel rows
+                        # [right abs, right rel, up abs, up rel] (Bump's ray differentials)
 ])
 
 
@@ -122,6 +127,13 @@ def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> 
             raise ValueError(f"{where}.ops[{k}]: shading-point row/component out of range")
         if row[0] == OP_NORMAL_MAP and not (0 <= row[1] < len(NORMAL_MAP_SPACES) and min(row[4], row[5]) >= 0):
             raise ValueError(f"{where}.ops[{k}]: normal map space or inputs out of range")
+        if row[0] == OP_BUMP_OFFSET and not 0 <= row[1] <= 2:
+            raise ValueError(f"{where}.ops[{k}]: bump offset mode out of range")
+        if row[0] == OP_BUMP and (min(row[4], row[5], row[6], row[7], row[8]) < 0
+                                  or not 0 <= row[10] // 2 < n):
+            raise ValueError(f"{where}.ops[{k}]: missing input")
+        if row[0] == OP_BUMP_OFFSET and row[1] and row[4] < 0:
+            raise ValueError(f"{where}.ops[{k}]: missing filter width")
         if row[0] == OP_OBJECT_INFO and not 0 <= row[1] < 5:
             raise ValueError(f"{where}.ops[{k}]: object info output out of range")
         if row[0] in (OP_FRESNEL, OP_LAYER_WEIGHT) and row[4] < 0 or row[0] == OP_LAYER_WEIGHT and row[3] < 0:
@@ -145,12 +157,13 @@ def _reg(v, n, where):
 
 
 #: opcodes that read the shading-point rows a surface hit fills
-POINT_OPS = frozenset({OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP})
+POINT_OPS = frozenset({OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_BUMP_OFFSET, OP_BUMP})
 
 
 def build_program_data(materials: list[dict], table, images: list[tuple[dict, np.ndarray]],
                        uv, generated, objco, cutoff: float, attrs=None, origin=None,
-                       object_of=None, object_info=None) -> ProgramData | None:
+                       object_of=None, object_info=None, positions=None, triangles=None,
+                       footprint=None) -> ProgramData | None:
     """ProgramData for the validated ``materials`` (scene.py) and their ``MaterialTable``; None
     when no material has a program. Lobes are matched to table slots with the table's own rule
     (a lobe whose colour's mean is below ``cutoff`` was dropped)."""
@@ -223,7 +236,9 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         objco=arr(objco, np.float32, (0, 3, 3)), attrs=arr(attrs, np.float32, (0, 0, 3, 3)),
         reads_point=reads_point, normal_reg=normal_reg,
         origin=np.asarray(origin if origin is not None else np.zeros(3), np.float64).reshape(3),
-        object_of=arr(object_of, np.int32, (0,)), object_info=arr(object_info, np.float64, (0, 9)))
+        object_of=arr(object_of, np.int32, (0,)), object_info=arr(object_info, np.float64, (0, 9)),
+        positions=arr(positions, np.float32, (0, 3)), triangles=arr(triangles, np.int32, (0, 3)),
+        footprint=arr(footprint, np.float64, (0, 3)))
 
 
 def empty_program_data() -> ProgramData:
@@ -239,4 +254,6 @@ def empty_program_data() -> ProgramData:
                        generated=np.zeros((0, 3, 3), np.float32),
                        objco=np.zeros((0, 3, 3), np.float32), attrs=np.zeros((0, 0, 3, 3), np.float32),
                        reads_point=np.zeros(0, bool), normal_reg=z, origin=np.zeros(3),
-                       object_of=np.zeros(0, np.int32), object_info=np.zeros((0, 9)))
+                       object_of=np.zeros(0, np.int32), object_info=np.zeros((0, 9)),
+                       positions=np.zeros((0, 3), np.float32), triangles=np.zeros((0, 3), np.int32),
+                       footprint=np.zeros((0, 3)))

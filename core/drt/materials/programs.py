@@ -37,9 +37,9 @@ import numpy as np
 from ..kernels import inline_kernel, kernel
 from .dielectric import IOR_ONE_EPS
 from .ggx import ALPHA_SQ_SINGULAR
-from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, POINT_N, POINT_NSMOOTH,
+from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
                              POINT_OBJECT, POINT_UV, POINT_XFORM, OP_FRESNEL, OP_LAYER_WEIGHT,
-                             OP_NORMAL_MAP, OP_OBJECT_INFO, OP_POINT, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
+                             OP_BUMP, OP_BUMP_OFFSET, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_POINT, POINT_P, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
                              OP_COMBINE, OP_COMPONENT, OP_GAMMA, OP_GENERATED, OP_GRADIENT,
                              OP_HSV, OP_HSV_TO_RGB, OP_IMAGE, OP_INVERT, OP_MAP_RANGE,
                              OP_ATTRIBUTE, OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
@@ -747,6 +747,74 @@ def normal_map(space, strength, color, tangent, sign, point):
     return nm
 
 
+@kernel
+def make_orthonormals(n):
+    """Cycles's ``make_orthonormals``: tangents (a, b) of unit n, a = normalize((1,1,1) × n)
+    (or (−1,1,1) × n when n's components are equal), b = n × a."""
+    if n[0] != n[1] or n[0] != n[2]:
+        a = _normalize((n[2] - n[1], n[0] - n[2], n[1] - n[0]))
+    else:
+        a = _normalize((n[2] - n[1], n[0] + n[2], -n[1] - n[0]))
+    return a, (n[1] * a[2] - n[2] * a[1], n[2] * a[0] - n[0] * a[2], n[0] * a[1] - n[1] * a[0])
+
+
+@kernel
+def bump_step(pd, prim, mode, point, fw):
+    """(world offset, barycentric steps db1, db2) of the Bump node's evaluation ``mode`` (1, 2)
+    at a hit of static triangle ``prim``, as Cycles's compact ray differentials give it: a step
+    of fw × |dP| along ``make_orthonormals(Ng)``'s first (mode 1) or second (mode 2) tangent,
+    |dP| the pixel's footprint at the hit's ray length (mean of its right and up extents,
+    ``ProgramData.footprint``). Moving triangles (no vertex positions here) get no step."""
+    zero = ((0.0, 0.0, 0.0), 0.0, 0.0)
+    if prim < 0 or prim >= pd.triangles.shape[0] or pd.footprint.shape[0] < 4:
+        return zero
+    t = max(point[POINT_MISC, 1], 0.0)
+    f = pd.footprint
+    wx = _len((f[0, 0] + t * f[1, 0], f[0, 1] + t * f[1, 1], f[0, 2] + t * f[1, 2]))
+    wy = _len((f[2, 0] + t * f[3, 0], f[2, 1] + t * f[3, 1], f[2, 2] + t * f[3, 2]))
+    m = fw * 0.5 * (wx + wy)
+    ta, tb = make_orthonormals(_row(point, POINT_NG))
+    tv = ta if mode == 1 else tb
+    step = (tv[0] * m, tv[1] * m, tv[2] * m)
+    tri = pd.triangles[prim]
+    a = pd.positions[tri[0]]
+    b = pd.positions[tri[1]]
+    c = pd.positions[tri[2]]
+    e1 = (float(b[0]) - float(a[0]), float(b[1]) - float(a[1]), float(b[2]) - float(a[2]))
+    e2 = (float(c[0]) - float(a[0]), float(c[1]) - float(a[1]), float(c[2]) - float(a[2]))
+    g11, g12, g22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
+    det = g11 * g22 - g12 * g12
+    if not det > 0.0:
+        return zero
+    r1, r2 = _dot(step, e1), _dot(step, e2)
+    return step, (g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det
+
+
+@kernel
+def bump_normal(pd, prim, point, nin, h_c, h_x, h_y, strength, distance, invert, fw):
+    """Cycles's ``svm_node_set_bump``: the normal of the surface displaced by distance × height
+    along ``nin`` (world, on the side the ray came from), from the heights at the hit and one
+    step (``bump_step``) along each of two tangents; blended toward ``nin`` by strength. With steps of
+    fw·dP this is Cycles's formula (its fw·|det|·N − scale·sign(det)·∇h, both sides ÷ fw)."""
+    dx, _, _ = bump_step(pd, prim, 1, point, fw)
+    dy, _, _ = bump_step(pd, prim, 2, point, fw)
+    rx = (dy[1] * nin[2] - dy[2] * nin[1], dy[2] * nin[0] - dy[0] * nin[2], dy[0] * nin[1] - dy[1] * nin[0])
+    ry = (nin[1] * dx[2] - nin[2] * dx[1], nin[2] * dx[0] - nin[0] * dx[2], nin[0] * dx[1] - nin[1] * dx[0])
+    det = _dot(dx, rx)
+    scale = -distance if invert else distance
+    gx, gy = h_x - h_c, h_y - h_c
+    sg = 1.0 if det > 0.0 else (-1.0 if det < 0.0 else 0.0)
+    ad = abs(det)
+    out = _normalize((ad * nin[0] - scale * sg * (gx * rx[0] + gy * ry[0]),
+                      ad * nin[1] - scale * sg * (gx * rx[1] + gy * ry[1]),
+                      ad * nin[2] - scale * sg * (gx * rx[2] + gy * ry[2])))
+    if out[0] == 0.0 and out[1] == 0.0 and out[2] == 0.0:
+        return nin
+    st = max(strength, 0.0)
+    return _normalize((st * out[0] + (1.0 - st) * nin[0], st * out[1] + (1.0 - st) * nin[1],
+                       st * out[2] + (1.0 - st) * nin[2]))
+
+
 @inline_kernel
 def _reg(regs, r):
     return (regs[r, 0], regs[r, 1], regs[r, 2])
@@ -781,6 +849,8 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
     (rows ``POINT_GENERATED``, ``POINT_OBJECT``, ``POINT_UV``; filled by the caller); a
     surface hit never reads ``point``."""
     b0 = 1.0 - b1 - b2
+    b1_hit, b2_hit = b1, b2
+    p_hit = (0.0, 0.0, 0.0)
     for k in range(pd.const_start[prog], pd.const_start[prog + 1]):
         r = pd.const_reg[k]
         regs[r, 0] = pd.const_val[k, 0]
@@ -854,6 +924,25 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
             if nm[0] == 0.0 and nm[1] == 0.0 and nm[2] == 0.0:
                 nm = _row(point, POINT_N)
             _set(regs, o0, nm)
+        elif op == OP_BUMP_OFFSET:
+            # the Bump node's height sub-graph runs again at P + dP (mode 1: along the first
+            # edge, 2: the second; 0: back at the hit); every coordinate input moves with it
+            if mode == 0:
+                b1, b2 = b1_hit, b2_hit
+                _set(point, POINT_P, p_hit)
+            else:
+                if b1 == b1_hit and b2 == b2_hit:
+                    p_hit = _row(point, POINT_P)
+                e, db1, db2 = bump_step(pd, prim, mode, point, regs[i0, 0])
+                b1 = b1_hit + db1
+                b2 = b2_hit + db2
+                _set(point, POINT_P, (p_hit[0] + e[0], p_hit[1] + e[1], p_hit[2] + e[2]))
+            b0 = 1.0 - b1 - b2
+        elif op == OP_BUMP:
+            nin = _reg(regs, i5) if i5 >= 0 else _row(point, POINT_N)
+            # param = 2 × (filter width register) + invert
+            _set(regs, o0, bump_normal(pd, prim, point, nin, regs[i0, 0], regs[i1, 0], regs[i2, 0],
+                                       regs[i3, 0], regs[i4, 0], param % 2 != 0, regs[param // 2, 0]))
         elif op == OP_OBJECT_INFO:
             if prim >= 0 and pd.object_of.shape[0]:
                 info = pd.object_info[pd.object_of[prim]]
