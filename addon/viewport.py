@@ -23,21 +23,22 @@ import numpy as np
 
 from . import compat, denoising
 from .export import _instance_key, _instance_name, _is_rendered
-from .export.materials import MaterialExporter, constant_materials
+from .export.materials import MaterialExporter
 from .export.mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays
 from .export.scene_parts import camera_dict, light_dict, matrix_list, render_settings, world_dict
 
 _IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
 
 
-def _validated(scene, materials: list, lights: list, world: dict):
+def _validated(scene, materials: list, lights: list, world: dict, extra=None, arrays=None):
     """Render settings, materials, lights and world validated by the core like a scene file's
-    (the camera is a placeholder: the view supplies the real one)."""
+    (the camera is a placeholder: the view supplies the real one); ``extra`` header entries
+    (images, attributes) with their ``arrays``."""
     scene_mod = compat.core_module("scene")
     header = {"format": "drt-scene", "version": 1, "render": render_settings(scene, preview=True),
               "camera": {"type": "PERSP", "matrix_world": _IDENTITY}, "world": world,
-              "materials": materials, "lights": lights, "meshes": [], "objects": []}
-    return scene_mod.scene_from_dict(header, {})
+              "materials": materials, "lights": lights, "meshes": [], "objects": [], **(extra or {})}
+    return scene_mod.scene_from_dict(header, dict(arrays or {}))
 
 
 class ViewportSync:
@@ -57,6 +58,7 @@ class ViewportSync:
         self._materials = MaterialExporter()
         self._objects: dict = {}  # instance key -> (matrix (4,4) array, mesh key)
         self._mesh_keys: set = set()
+        self._mesh_reads: dict = {}  # mesh key -> geometry inputs its export carries
         self._lights: list = []
         self._world: dict | None = None
         self._settings = None
@@ -102,6 +104,9 @@ class ViewportSync:
                 lights = True
         if materials:
             self._update_materials(depsgraph.scene, materials)
+            # a program that now reads geometry inputs its meshes lack: export those again
+            geometry |= {key[0] for _, key in self._objects.values()
+                         if not set(self._materials.reads(key[1])) <= self._mesh_reads.get(key, set())}
         if objects or geometry:
             self._reconcile(depsgraph, geometry)
         if lights or objects:
@@ -138,6 +143,7 @@ class ViewportSync:
         return None
 
     def _update_materials(self, scene, materials) -> None:
+        """Convert edited materials again and send the list."""
         seen = set()
         for mat in materials:
             key = mat.original.as_pointer()
@@ -152,10 +158,14 @@ class ViewportSync:
         self._send_materials(scene)
 
     def _send_materials(self, scene) -> None:
-        # the viewport does not run material programs yet: textured inputs show their constants
-        materials = _validated(scene, constant_materials(self._materials.materials), [],
-                               {"color": [0, 0, 0]}).materials
-        self.session.edit(lambda live, m=materials: live.set_materials(m))
+        """The material list with its programs, the images and attribute names they read."""
+        mats = self._materials
+        extra = {"attributes": list(mats.attributes)} if mats.attributes else {}
+        if mats.images.images:
+            extra["images"] = mats.images.images
+        sc = _validated(scene, mats.materials, [], {"color": [0, 0, 0]}, extra, mats.images.arrays)
+        self.session.edit(lambda live, m=sc.materials, i=sc.images, a=sc.attributes:
+                          live.set_materials(m, i, a))
 
     def _reconcile(self, depsgraph, geometry: set) -> None:
         """Compare the object instances with what the session holds; send the differences.
@@ -182,7 +192,9 @@ class ViewportSync:
                 continue
             mesh = exported.get(mesh_key)
             if mesh is None:
-                data = evaluated_mesh_arrays(obj, np.array(slot_mats, dtype=np.int32))
+                reads = self._materials.reads(slot_mats)
+                data = evaluated_mesh_arrays(obj, np.array(slot_mats, dtype=np.int32), reads)
+                self._mesh_reads[mesh_key] = set(reads)
                 self.exports["meshes"] += 1
                 mesh = interactive_mesh(obj.name, data)
                 exported[mesh_key] = mesh
@@ -277,11 +289,13 @@ def interactive_mesh(name: str, data: dict | None):
     if data is None:
         return False
     scene_mod = compat.core_module("scene")
+    attrs = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in data.items()
+             if k in ("generated", "object_coords") or k.startswith("attr")}
     return scene_mod.MeshData(
         name, np.ascontiguousarray(data["positions"], dtype=np.float64),
         np.ascontiguousarray(data["triangles"], dtype=np.int64),
         np.ascontiguousarray(data["material_index"], dtype=np.int64),
-        data.get("normals"), data.get("uvs"), None)
+        data.get("normals"), data.get("uvs"), None, attrs)
 
 
 # ---------------------------------------------------------------------------- view → camera

@@ -623,25 +623,58 @@ def test_unknown_colour_space_warns_and_falls_back(fresh, tmp_path):
     assert len(res.warnings) == 1 and "ACEScg" in res.warnings[0] and "'Aces'" in res.warnings[0]
 
 
-def test_viewport_shows_textured_materials_at_their_constants():
-    """The viewport (drt.interactive) does not run programs yet: a textured scene renders there
-    with each textured input at its socket's value, as before programs existed."""
+def test_viewport_renders_textured_materials_like_the_final_render():
+    """The Rendered viewport runs the material programs: the textured scene's camera view
+    matches DRT's final render of the same view; a node edit that makes a program read a new
+    geometry input (UV → Generated) re-exports the meshes."""
     import os
 
     from addon import viewport
+    from addon.export import export_depsgraph
+    from drt.render import render
+    from drt.scene import scene_from_dict
     from test_addon import ensure_registered
     from test_viewport import camera_view_spec
 
     ensure_registered()
     bpy.ops.wm.open_mainfile(filepath=os.path.join(P.REPO, "blend_scenes", "textured.blend"))
+    sc = bpy.context.scene
     vp = viewport.ViewportSync(threads=1)
     try:
         dg = bpy.context.evaluated_depsgraph_get()
         vp.sync(dg)
-        vp.set_view(camera_view_spec(viewport, dg, 32, 24), 32, 24, 4)
-        frame = vp.session.wait(lambda f: f.divider == 1, 120)
+        w, h, spp = 48, 27, 32
+        vp.set_view(camera_view_spec(viewport, dg, w, h), w, h, spp)
+        frame = vp.session.wait(lambda f: f.divider == 1 and f.samples >= spp, 300)
         assert frame is not None, vp.session.error
         floor = next(m for m in vp.session.live.materials if m["name"] == "Floor")
-        assert "program" not in floor and floor["lobes"][0]["color"] == pytest.approx([0.8] * 3)
+        assert "program" in floor and vp.session.live.images
+        live = np.asarray(frame.rgba, np.float64)[::-1, :, :3]  # bottom row first → top first
+
+        sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = w, h, 100
+        sc.drt.samples = spp
+        res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
+        final = np.asarray(render(scene_from_dict(res.header, res.arrays), threads=1).combined,
+                           np.float64)[..., :3]
+        # 3×3 regions: means agree within Monte Carlo noise (32 spp)
+        for rows in np.array_split(np.arange(h), 3):
+            for cols in np.array_split(np.arange(w), 3):
+                a, b = live[np.ix_(rows, cols)].mean(), final[np.ix_(rows, cols)].mean()
+                assert abs(a - b) <= 0.1 * max(b, 0.02), (rows[0], cols[0], a, b)
+
+        def handler(scene, depsgraph):  # hands the sync depsgraph.updates, as view_update does
+            vp.sync(depsgraph)
+        bpy.app.handlers.depsgraph_update_post.append(handler)
+        try:
+            meshes_before = vp.exports["meshes"]
+            mat = bpy.data.materials["Floor"]
+            tex = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage")
+            coord = mat.node_tree.nodes.new("ShaderNodeTexCoord")
+            mat.node_tree.links.new(coord.outputs["Generated"], tex.inputs["Vector"])
+            bpy.context.evaluated_depsgraph_get()
+            assert vp.exports["meshes"] > meshes_before
+            assert vp.session.wait(lambda f: f.divider == 1, 120) is not None, vp.session.error
+        finally:
+            bpy.app.handlers.depsgraph_update_post.remove(handler)
     finally:
         assert vp.stop()

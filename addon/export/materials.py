@@ -73,21 +73,6 @@ def _representative(v: Value, floor: float) -> list:
     return [float(max(x, floor)) for x in np.broadcast_to(fb, 3)]
 
 
-def constant_materials(materials: list[dict]) -> list[dict]:
-    """The materials without their programs: every lobe at its representative constant (what
-    the material was before programs existed). For renderers that do not run programs yet."""
-    out = []
-    for m in materials:
-        if "program" not in m:
-            out.append(m)
-            continue
-        c = {k: v for k, v in m.items() if k not in ("program", "emission_reg")}
-        c["lobes"] = [{k: v for k, v in lb.items() if k not in ("color_reg", "roughness_reg")}
-                      for lb in m["lobes"]]
-        out.append(c)
-    return out
-
-
 class MaterialExporter:
     """Converts Blender materials to core material dicts, once each; collects warnings."""
 

@@ -141,6 +141,8 @@ class LiveScene:
         self.settings = settings or RenderSettings(width=64, height=64)
         self.objects: dict = {}
         self.materials = list(materials or [])
+        self.images: list = []       # (info dict, pixels) the material programs read
+        self.attributes: list = []   # names of the named per-corner attributes they read
         self.lights: list = []
         self.world_color = np.zeros(3)
         self.origin_shift = None if origin_shift is None else np.asarray(origin_shift, np.float64).reshape(3).copy()
@@ -150,6 +152,7 @@ class LiveScene:
         self._static_dirty = True
         self._instances: dict = {}  # key -> (_MovingObject, MovingMesh) of instance objects
         self._tables = None  # per-triangle tables of static set + instances, global ids
+        self._attr_tables: dict = {}  # per-corner program attributes, global ids
         self._tables_dirty = True
         self._tables_layout = None
         self._material_table = None
@@ -211,10 +214,18 @@ class LiveScene:
             if self._has_emission(obj):
                 self._lights_dirty = True
 
-    def set_materials(self, materials: list) -> None:
-        """Replace the material list (same indices; appended ones are new)."""
+    def set_materials(self, materials: list, images=None, attributes=None) -> None:
+        """Replace the material list (same indices; appended ones are new), with the images and
+        attribute names their programs read (``scene.images`` / ``scene.attributes`` of a
+        validated scene; meshes carry the attributes as ``MeshData.corner_attrs``)."""
         emission_before = self._emission_signature()
         self.materials = list(materials)
+        if images is not None:
+            self.images = list(images)
+        if attributes is not None:
+            if list(attributes) != self.attributes:
+                self._static_dirty = self._tables_dirty = True  # tangents are mapped per name
+            self.attributes = list(attributes)
         self._material_table = None
         if self._emission_signature() != emission_before:
             self._lights_dirty = True
@@ -260,7 +271,8 @@ class LiveScene:
         geom, tracer = self._geometry()
         if self._material_table is None:
             try:
-                self._material_table = MaterialTable.from_scene(self._materials_or_default())
+                self._material_table = MaterialTable.from_scene(self._materials_or_default(), self.images,
+                                                                self.attributes)
             except ValueError as e:
                 raise SceneError("materials", str(e)) from None
             self.counters.material_builds += 1
@@ -348,19 +360,19 @@ class LiveScene:
 
         static_changed = False
         if self._static_dirty or self._static is None:
-            pos, tri, tables = self._flatten_static()
+            pos, tri, tables, attrs = self._flatten_static()
             scene = ng = None
             if len(tri):
                 scene = rtcs.EmbreeScene()
                 TriangleMesh(scene, pos, tri)
                 ng = _unit_face_normals(pos, tri)
-            self._static = (pos, tri, tables, scene, ng)
+            self._static = (pos, tri, tables, scene, ng, attrs)
             self._static_dirty = False
             static_changed = True
             self.counters.static_builds += 1
             self.counters.static_triangles += len(tri)
             self._lights_dirty = True  # emissive triangles come from the static set
-        pos, tri, static_tables, static_scene, static_ng = self._static
+        pos, tri, static_tables, static_scene, static_ng, static_attrs = self._static
 
         # instances: build new ones, drop gone ones; ids follow the static set
         for key, obj in self.objects.items():
@@ -392,9 +404,12 @@ class LiveScene:
             offset += len(mm.triangles)
 
         layout = (len(tri), tuple((k, len(self._instances[k][1].triangles)) for k in keys))
-        if self._tables_dirty or self._tables is None or layout != self._tables_layout:
+        if (self._tables_dirty or self._tables is None or layout != self._tables_layout
+                or set(self._attr_tables) != set(self._attr_names())):
             parts = [static_tables] + [self._mesh_tables(self.objects[k].mesh, None) for k in keys]
             self._tables = tuple(np.concatenate([p[i] for p in parts]) for i in range(4))
+            self._attr_tables = self._corner_attr_tables(static_attrs, len(tri),
+                                                         [self.objects[k].mesh for k in keys])
             self._tables_dirty = False
             self._tables_layout = layout
         elif static_changed:
@@ -402,12 +417,15 @@ class LiveScene:
             # tables again (no render runs now: the session thread builds between renders)
             for table, rows in zip(self._tables, static_tables):
                 table[: len(tri)] = rows
+            for name, rows in static_attrs.items():
+                self._attr_tables[name][: len(tri)] = rows
         material, normals, has_normals, uvs = self._tables
 
         geom = SceneGeometry(origin_shift=self.origin_shift, static_positions=pos, static_triangles=tri,
                              moving=moving_meshes, material=material,
                              normals=normals if has_normals.any() else None,
-                             has_normals=has_normals, uvs=uvs, triangle_count=offset)
+                             has_normals=has_normals, uvs=uvs, triangle_count=offset,
+                             corner_attrs=self._attr_tables)
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
         if len(pos):
             lo, hi = pos.min(axis=0).astype(np.float64), pos.max(axis=0).astype(np.float64)
@@ -427,9 +445,30 @@ class LiveScene:
         return (np.asarray(mesh.material_index, dtype=np.int32), np.asarray(nrm, dtype=np.float32),
                 np.full(t, mesh.normals is not None), np.asarray(uv, dtype=np.float32))
 
+    def _attr_names(self) -> list:
+        """The per-corner attributes the programs read ("generated", "object_coords",
+        "attr<I>"), those some mesh has."""
+        return sorted({k for o in self.objects.values() for k in o.mesh.corner_attrs})
+
+    def _corner_attr_tables(self, static_attrs: dict, n_static: int, instance_meshes: list) -> dict:
+        """Global per-triangle corner attributes: the static rows, then each instance's (local:
+        instance tangents are mapped at the hit like their normals)."""
+        out = {}
+        for name in self._attr_names():
+            parts = [static_attrs.get(name, np.zeros((n_static, 3, 3), np.float32))]
+            parts += [np.asarray(m.corner_attrs.get(name, np.zeros((len(m.triangles), 3, 3))), np.float32)
+                      for m in instance_meshes]
+            out[name] = np.concatenate(parts)
+        return out
+
     def _flatten_static(self):
-        """World-space (shifted) positions and triangles of the static objects, and their
-        per-triangle tables."""
+        """World-space (shifted) positions and triangles of the static objects, their
+        per-triangle tables and corner attributes (tangents mapped to world space)."""
+        from .geometry import _transform_tangents
+
+        tangents = {f"attr{i}" for i, a in enumerate(self.attributes) if a.startswith("tangent:")}
+        names = self._attr_names()
+        attr_parts: dict = {n: [] for n in names}
         pos_parts, tri_parts, tables = [], [], []
         v_offset = 0
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
@@ -446,13 +485,18 @@ class LiveScene:
             v_offset += len(world)
             nw = _transform_normals(mesh.normals, m) if mesh.normals is not None else None
             tables.append(self._mesh_tables(mesh, nw))
+            for n in names:
+                a = mesh.corner_attrs.get(n)
+                a = np.zeros((len(mesh.triangles), 3, 3), np.float32) if a is None else np.asarray(a, np.float32)
+                attr_parts[n].append(_transform_tangents(a, m) if n in tangents else a)
         pos = np.concatenate(pos_parts) if pos_parts else np.zeros((0, 3), np.float32)
         tri = np.concatenate(tri_parts) if tri_parts else np.zeros((0, 3), np.int32)
         empty = (np.zeros(0, np.int32), np.zeros((0, 3, 3), np.float32), np.zeros(0, bool),
                  np.zeros((0, 3, 2), np.float32))
         static_tables = tuple(np.concatenate([t[i] for t in tables]) if tables else empty[i]
                               for i in range(4))
-        return pos, tri, static_tables
+        attrs = {n: np.concatenate(p) if p else np.zeros((0, 3, 3), np.float32) for n, p in attr_parts.items()}
+        return pos, tri, static_tables, attrs
 
 
 def _culling_box(radius: float, motion: RigidMotion) -> tuple[np.ndarray, np.ndarray]:
