@@ -31,7 +31,8 @@ material's *program*; the arithmetic above is written on ``Value``s, so a textur
 roughness, metallic, mix factor or emission gives lobes whose colour / roughness come from
 program registers (``color_reg`` / ``roughness_reg`` / ``emission_reg``), and constant inputs
 fold to today's constant lobes. Node groups, reroutes and muted nodes are followed at the
-shader level too. IOR, alpha, transmission, specular and coat stay constant-only (a linked one
+shader level too. Alpha and transmission may be textured (alpha cut-outs); IOR, specular and
+coat stay constant-only (a linked one
 warns and uses its socket's value).
 """
 
@@ -349,8 +350,8 @@ class MaterialExporter:
         rough = self._value(node, "Roughness", problems, 0.5, ctx)
         rough = rough if isinstance(rough, Value) else min(max(rough, 0.0), 1.0)
         ior = max(self._const_value(node, "IOR", problems, 1.5, ctx), 1.0)
-        alpha = min(max(self._const_value(node, "Alpha", problems, 1.0, ctx), 0.0), 1.0)
-        trans = min(max(self._const_value(node, "transmission", problems, 0.0, ctx), 0.0), 1.0)
+        alpha = clamp01(self._value(node, "Alpha", problems, 1.0, ctx))
+        trans = clamp01(self._value(node, "transmission", problems, 0.0, ctx))
         spec = max(self._const_value(node, "specular", problems, 0.5, ctx), 0.0)
         tint_sock = compat.find_input(node, "specular_tint")
         if tint_sock is not None and tint_sock.type == "RGBA":
@@ -376,7 +377,7 @@ class MaterialExporter:
         if maybe_positive(metallic):
             lobes.append({"type": "GLOSSY", "color": wa * metallic * base, "roughness": rough})
         dielectric = 1.0 - metallic
-        if trans > 0 and maybe_positive(dielectric):
+        if maybe_positive(trans) and maybe_positive(dielectric):
             lobes.append({"type": "GLASS", "color": wa * dielectric * trans * base,
                           "roughness": rough, "ior": ior})
         opaque = wa * dielectric * (1 - trans)
@@ -384,6 +385,6 @@ class MaterialExporter:
             lobes.append({"type": "DIFFUSE", "color": opaque * (1 - f_avg) * base})
             if f_avg > 0:
                 lobes.append({"type": "GLOSSY", "color": opaque * f_avg * tint, "roughness": rough})
-        if alpha < 1:
+        if maybe_positive(1 - alpha):  # transparency: straight through (a textured alpha: cut-outs)
             lobes.append({"type": "GLASS", "color": w * (1 - alpha), "roughness": 0.0, "ior": 1.0})
         return lobes, wa * em_col * em_strength
