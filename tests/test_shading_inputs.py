@@ -15,12 +15,14 @@ from node_parity import node, render_tiles, tile  # noqa: E402
 N = 4
 
 
-def _compare(cycles, drt, count, tol=2e-3, outliers=6):
-    """Per tile, all but a few silhouette pixels (a pixel centre within the sample jitter of the
-    sphere's edge) agree within tol."""
+def _compare(cycles, drt, count, tol=2e-3, outliers=6, n=N):
+    """Per tile of an n×n grid, all but a few silhouette pixels (a pixel centre within the
+    sample jitter of the sphere's edge) agree within tol."""
     bad = []
     for k in range(count):
-        diff = np.abs(tile(cycles, k, N) - tile(drt, k, N)).max(axis=-1)
+        a, b = tile(cycles, k, n), tile(drt, k, n)
+        assert a.shape == (16, 16, 3) and b.shape == a.shape
+        diff = np.abs(a - b).max(axis=-1)
         if int((diff > tol).sum()) > outliers:
             bad.append((k, int((diff > tol).sum()), float(diff.max())))
     assert not bad, f"tiles differing from Cycles (case, pixels, max diff): {bad}"
@@ -346,3 +348,27 @@ def test_textured_alpha_cuts_out_like_cycles(tmp_path):
     assert flat.sum() > 400
     diff = np.abs(cycles - drt).max(axis=-1)
     assert diff[flat].max() < 1e-3, diff[flat].max()
+
+
+def test_texture_coordinate_outputs_match_cycles(tmp_path):
+    """Texture Coordinate's Reflection, Camera, Window and Object-of-another-object outputs
+    (an empty, rotated and scaled), on spheres under the orthographic camera."""
+    empty = {}
+
+    def other_object(nt, uv):
+        if "ob" not in empty:
+            e = bpy.data.objects.new("controller", None)
+            e.location = (0.3, -0.2, 0.1)
+            e.rotation_euler = (0.3, 0.5, 0.7)
+            e.scale = (2.0, 0.5, 1.5)
+            bpy.context.scene.collection.objects.link(e)
+            bpy.context.view_layer.update()
+            empty["ob"] = e
+        tc = nt.nodes.new("ShaderNodeTexCoord")
+        tc.object = empty["ob"]
+        return tc.outputs["Object"]
+    cases = [(lambda name: lambda nt, uv: nt.nodes.new("ShaderNodeTexCoord").outputs[name])(n)
+             for n in ("Reflection", "Camera", "Window")] + [other_object]
+    cycles, drt, res = render_tiles(cases, 2, tmp_path, shape="sphere")
+    assert not res.warnings, res.warnings
+    _compare(cycles, drt, len(cases), n=2)

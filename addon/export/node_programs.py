@@ -29,7 +29,7 @@ OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
 OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 92, 93, 94
 #: Object Info outputs → OP_OBJECT_INFO mode (Material Index is the material's constant)
-OP_BUMP_OFFSET, OP_BUMP = 95, 96
+OP_BUMP_OFFSET, OP_BUMP, OP_CAMERA_COORDS = 95, 96, 97
 OBJECT_INFO_OUTPUTS = {"Location": 0, "Color": 1, "Alpha": 2, "Object Index": 3, "Random": 4}
 # shading-point rows (drt.materials.program_format.POINT_*)
 POINT_P, POINT_N, POINT_NG, POINT_I = 3, 4, 5, 6
@@ -351,12 +351,7 @@ class ProgramBuilder:
         if k == "ShaderNodeRGB":
             return Value(self, const=_vec3(out.default_value))
         if k == "ShaderNodeTexCoord":
-            if getattr(node, "object", None) is not None and oname == "Object":
-                raise Unsupported(node)  # coordinates of another object: phase 2
-            op = {"UV": OP_UV, "Generated": OP_GENERATED, "Object": OP_OBJECT}.get(oname)
-            if op is None:
-                raise Unsupported(node)
-            return self.geometry(op)
+            return self._tex_coord(node, oname)
         if k == "ShaderNodeUVMap":
             if getattr(node, "from_instancer", False):
                 raise Unsupported(node)
@@ -536,6 +531,33 @@ class ProgramBuilder:
                          normal_in]
         # param: 2 × the filter width's register + invert (OP_BUMP has no seventh input)
         return self.emit(OP_BUMP, 0, ins, param=2 * self.reg_of(fw) + int(bool(getattr(node, "invert", False))))
+
+    def _tex_coord(self, node, oname):
+        """Texture Coordinate outputs (Cycles's ``svm_node_tex_coord``)."""
+        other = getattr(node, "object", None)
+        if oname == "Object" and other is not None:
+            # another object's local space: its inverse world matrix on the world position
+            m = np.linalg.inv(np.array(other.matrix_world, np.float64))
+            p = self.point(POINT_P, -1)
+            comps = [self.emit(OP_COMPONENT, j, [p]) for j in range(3)]
+            out = Value(self, const=m[:3, 3])
+            for j in range(3):
+                out = out + comps[j] * Value(self, const=m[:3, j])
+            return out
+        op = {"UV": OP_UV, "Generated": OP_GENERATED, "Object": OP_OBJECT}.get(oname)
+        if op is not None:
+            return self.geometry(op)
+        if oname == "Reflection":  # the mirror direction of the incoming one about N, world
+            n, i = self.point(POINT_N, -1), self.point(POINT_I, -1)
+            d = self.emit(OP_VMATH, VMATH_OPS.index("DOT_PRODUCT"), [n, i])
+            return n * (d * 2.0) - i
+        if oname in ("Camera", "Window"):
+            key = ("camera", oname, self._variant)
+            hit = self._geometry.get(key)
+            if hit is None:
+                hit = self._geometry[key] = self.emit(OP_CAMERA_COORDS, int(oname == "Window"), [])
+            return hit
+        raise Unsupported(node)  # Normal (object space): needs the object's transform per hit
 
     def point(self, row: int, component: int) -> Value:
         """A shading-point input (row of the point array, one component or −1: the vector)."""

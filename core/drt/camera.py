@@ -158,6 +158,7 @@ class CameraRays:
 class Camera:
     def __init__(self, spec: CameraSpec, settings: RenderSettings, origin_shift: np.ndarray):
         self.spec = spec
+        self.origin_shift = np.asarray(origin_shift, np.float64).reshape(3).copy()
         w, h = settings.width, settings.height
         ax, ay = settings.pixel_aspect
         self.width, self.height = w, h
@@ -214,6 +215,22 @@ class Camera:
         z = np.zeros(3)
         return np.array([right * px if ortho else z, z if ortho else right * px,
                          up * py if ortho else z, z if ortho else up * py], np.float64)
+
+    def texture_space(self) -> np.ndarray:
+        """(5, 4) float64 for the Texture Coordinate node's Camera and Window outputs: rows 0–2
+        map a Blender-world point to camera space (scale removed, as Cycles does), row 3
+        [ortho, plane_w, plane_h, 0], row 4 [shift_x, shift_y, 0, 0] (see ``camera_ray``)."""
+        cd = self.data
+        m = np.array(cd.matrix, np.float64)
+        for j in range(3):
+            m[:3, j] /= max(np.linalg.norm(m[:3, j]), 1e-300)
+        m[:3, 3] += self.origin_shift  # the tracer's frame is shifted; programs see Blender's
+        inv = np.linalg.inv(m)
+        out = np.zeros((5, 4))
+        out[:3] = inv[:3]
+        out[3, :3] = (float(cd.projection == PROJECTION_ORTHO), cd.plane_w, cd.plane_h)
+        out[4, :2] = (cd.shift_x, cd.shift_y)
+        return out
 
     def lens_offsets(self, u: np.ndarray) -> np.ndarray:
         """(n, 2) points on the aperture (camera-space x, y, metres) from (n, 2) uniforms."""

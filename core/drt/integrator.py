@@ -108,7 +108,7 @@ class Integrator:
                                               getattr(geom, "object_of", None), getattr(geom, "object_info", None),
                                               getattr(geom, "static_positions", None),
                                               getattr(geom, "static_triangles", None),
-                                              camera.pixel_footprint())
+                                              camera.pixel_footprint(), camera.texture_space())
         self.n_registers = int(max((m["program"]["registers"] for m in materials.program_source[0]
                                     if m.get("program")), default=0)) if self.programs.prog_of.shape[0] else 0
         normals = geom.normals if geom.normals is not None else np.zeros((0, 3, 3), np.float32)

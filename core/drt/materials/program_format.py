@@ -33,8 +33,9 @@ OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
 # shading-point inputs of surface hits (docs/materials.md, "Shading-point inputs")
 OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 92, 93, 94
-OP_BUMP_OFFSET, OP_BUMP = 95, 96
-OPCODES = {OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_BUMP_OFFSET, OP_BUMP, OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
+OP_BUMP_OFFSET, OP_BUMP, OP_CAMERA_COORDS = 95, 96, 97
+OPCODES = {OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_BUMP_OFFSET, OP_BUMP,
+           OP_CAMERA_COORDS, OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
            OP_CHECKER, OP_GRADIENT, OP_RAMP, OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA,
            OP_BRIGHT_CONTRAST, OP_HSV, OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE,
            OP_RGB_TO_HSV, OP_HSV_TO_RGB}
@@ -92,6 +93,8 @@ ProgramData = namedtuple("ProgramData", [
     "triangles",        # (S, 3) int32 static triangles (global ids < S)
     "footprint",        # (4, 3) float64 a pixel's right/up extent at a hit: abs + t·rel rows
                         # [right abs, right rel, up abs, up rel] (Bump's ray differentials)
+    "camera",           # (5, 4) float64: rows 0–2 Blender world → camera (3×4, no scale),
+                        # row 3 [ortho, plane_w, plane_h, 0], row 4 [shift_x, shift_y, 0, 0]
 ])
 
 
@@ -134,6 +137,8 @@ def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> 
             raise ValueError(f"{where}.ops[{k}]: missing input")
         if row[0] == OP_BUMP_OFFSET and row[1] and row[4] < 0:
             raise ValueError(f"{where}.ops[{k}]: missing filter width")
+        if row[0] == OP_CAMERA_COORDS and not 0 <= row[1] <= 1:
+            raise ValueError(f"{where}.ops[{k}]: camera coordinate output out of range")
         if row[0] == OP_OBJECT_INFO and not 0 <= row[1] < 5:
             raise ValueError(f"{where}.ops[{k}]: object info output out of range")
         if row[0] in (OP_FRESNEL, OP_LAYER_WEIGHT) and row[4] < 0 or row[0] == OP_LAYER_WEIGHT and row[3] < 0:
@@ -157,13 +162,14 @@ def _reg(v, n, where):
 
 
 #: opcodes that read the shading-point rows a surface hit fills
-POINT_OPS = frozenset({OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_BUMP_OFFSET, OP_BUMP})
+POINT_OPS = frozenset({OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_BUMP_OFFSET, OP_BUMP,
+                       OP_CAMERA_COORDS})
 
 
 def build_program_data(materials: list[dict], table, images: list[tuple[dict, np.ndarray]],
                        uv, generated, objco, cutoff: float, attrs=None, origin=None,
                        object_of=None, object_info=None, positions=None, triangles=None,
-                       footprint=None) -> ProgramData | None:
+                       footprint=None, camera=None) -> ProgramData | None:
     """ProgramData for the validated ``materials`` (scene.py) and their ``MaterialTable``; None
     when no material has a program. Lobes are matched to table slots with the table's own rule
     (a lobe whose colour's mean is below ``cutoff`` was dropped)."""
@@ -238,7 +244,7 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         origin=np.asarray(origin if origin is not None else np.zeros(3), np.float64).reshape(3),
         object_of=arr(object_of, np.int32, (0,)), object_info=arr(object_info, np.float64, (0, 9)),
         positions=arr(positions, np.float32, (0, 3)), triangles=arr(triangles, np.int32, (0, 3)),
-        footprint=arr(footprint, np.float64, (0, 3)))
+        footprint=arr(footprint, np.float64, (0, 3)), camera=arr(camera, np.float64, (0, 4)))
 
 
 def empty_program_data() -> ProgramData:
@@ -256,4 +262,4 @@ def empty_program_data() -> ProgramData:
                        reads_point=np.zeros(0, bool), normal_reg=z, origin=np.zeros(3),
                        object_of=np.zeros(0, np.int32), object_info=np.zeros((0, 9)),
                        positions=np.zeros((0, 3), np.float32), triangles=np.zeros((0, 3), np.int32),
-                       footprint=np.zeros((0, 3)))
+                       footprint=np.zeros((0, 3)), camera=np.zeros((0, 4)))

@@ -39,7 +39,7 @@ from .dielectric import IOR_ONE_EPS
 from .ggx import ALPHA_SQ_SINGULAR
 from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
                              POINT_OBJECT, POINT_UV, POINT_XFORM, OP_FRESNEL, OP_LAYER_WEIGHT,
-                             OP_BUMP, OP_BUMP_OFFSET, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_POINT, POINT_P, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
+                             OP_BUMP, OP_BUMP_OFFSET, OP_CAMERA_COORDS, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_POINT, POINT_P, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
                              OP_COMBINE, OP_COMPONENT, OP_GAMMA, OP_GENERATED, OP_GRADIENT,
                              OP_HSV, OP_HSV_TO_RGB, OP_IMAGE, OP_INVERT, OP_MAP_RANGE,
                              OP_ATTRIBUTE, OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
@@ -815,6 +815,25 @@ def bump_normal(pd, prim, point, nin, h_c, h_x, h_y, strength, distance, invert,
                        st * out[2] + (1.0 - st) * nin[2]))
 
 
+@kernel
+def camera_coords(pd, window, p):
+    """Texture Coordinate's Camera output (camera space, +z forward as Cycles's) or Window
+    output (the image's [0, 1]² with (0, 0) bottom left, z 0) of Blender-world point p."""
+    if pd.camera.shape[0] < 5:
+        return (0.0, 0.0, 0.0)
+    c = pd.camera
+    x = c[0, 0] * p[0] + c[0, 1] * p[1] + c[0, 2] * p[2] + c[0, 3]
+    y = c[1, 0] * p[0] + c[1, 1] * p[1] + c[1, 2] * p[2] + c[1, 3]
+    z = -(c[2, 0] * p[0] + c[2, 1] * p[1] + c[2, 2] * p[2] + c[2, 3])
+    if not window:
+        return (x, y, z)
+    if c[3, 0] == 0.0:  # perspective: the point's position on the plane at distance 1
+        if z == 0.0:
+            return (0.0, 0.0, 0.0)
+        x, y = x / z, y / z
+    return ((x - c[4, 0]) / c[3, 1] + 0.5, (y - c[4, 1]) / c[3, 2] + 0.5, 0.0)
+
+
 @inline_kernel
 def _reg(regs, r):
     return (regs[r, 0], regs[r, 1], regs[r, 2])
@@ -943,6 +962,8 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
             # param = 2 × (filter width register) + invert
             _set(regs, o0, bump_normal(pd, prim, point, nin, regs[i0, 0], regs[i1, 0], regs[i2, 0],
                                        regs[i3, 0], regs[i4, 0], param % 2 != 0, regs[param // 2, 0]))
+        elif op == OP_CAMERA_COORDS:
+            _set(regs, o0, camera_coords(pd, mode, _row(point, POINT_P)))
         elif op == OP_OBJECT_INFO:
             if prim >= 0 and pd.object_of.shape[0]:
                 info = pd.object_info[pd.object_of[prim]]

@@ -437,7 +437,7 @@ class MaterialTable:
         return table
 
     def program_data(self, uv=None, corner_attrs=None, origin=None, object_of=None, object_info=None,
-                     positions=None, triangles=None, footprint=None):
+                     positions=None, triangles=None, footprint=None, camera=None):
         """The ``ProgramData`` of this scene's material programs (geometry inputs: the global
         per-triangle uv (T, 3, 2) and ``corner_attrs`` of ``SceneGeometry``); zero-size arrays
         when no material has a program."""
@@ -458,7 +458,7 @@ class MaterialTable:
                         named[i] = attrs[f"attr{i}"]
         return build_program_data(src[0], self, src[1], uv, attrs.get("generated"),
                                   attrs.get("object_coords"), CLOSURE_WEIGHT_CUTOFF, named, origin,
-                                  object_of, object_info, positions, triangles, footprint)
+                                  object_of, object_info, positions, triangles, footprint, camera)
 
     # ------------------------------------------------------------------ queries
     def _mat_rows(self, mat) -> np.ndarray:
