@@ -156,25 +156,68 @@ def active_uvs(mesh) -> np.ndarray | None:
     return uv_layer_values(mesh, layer)
 
 
-def corner_tangents(mesh, uv_name: str):
+def triangle_tangents(mesh, uv_name: str, tri_corners: np.ndarray):
     """MikkTSpace tangents of a UV map (``""``: the active render map, as Cycles's Normal Map
-    default): ((L, 3) float32 tangents, (L,) float32 bitangent signs), or None when the mesh has
-    no such map or Blender cannot compute them (n-gons)."""
+    default) at each triangle corner: ((T, 3, 3) float32 tangents, (T, 3) float32 bitangent
+    signs), or None when the mesh has no such map. Blender computes tangents only on triangles
+    and quads; a mesh with n-gons gets them from a copy made of its loop triangles (what the
+    renderer draws)."""
     layer = (mesh.uv_layers.get(uv_name) if uv_name else
              next((uv for uv in mesh.uv_layers if uv.active_render), None) or mesh.uv_layers.active)
     if layer is None:
         return None
     try:
         mesh.calc_tangents(uvmap=layer.name)
-    except RuntimeError:
-        return None
+    except RuntimeError:  # n-gons
+        return _tangents_of_triangles(mesh, layer, tri_corners)
     n = len(mesh.loops)
     tangent = np.empty(n * 3, np.float32)
     sign = np.empty(n, np.float32)
     mesh.loops.foreach_get("tangent", tangent)
     mesh.loops.foreach_get("bitangent_sign", sign)
     mesh.free_tangents()
-    return tangent.reshape(n, 3), sign
+    return tangent.reshape(n, 3)[tri_corners], sign[tri_corners]
+
+
+def _tangents_of_triangles(mesh, layer, tri_corners: np.ndarray):
+    """``triangle_tangents`` through a temporary mesh whose faces are ``mesh``'s loop
+    triangles (same vertices, UVs and smooth flags)."""
+    import bpy
+
+    t = len(tri_corners)
+    tri_verts = corner_verts(mesh)[tri_corners]
+    pos = positions(mesh)
+    uv = uv_layer_values(mesh, layer)[tri_corners].reshape(-1, 2)
+    smooth = np.zeros(len(mesh.polygons), bool)
+    mesh.polygons.foreach_get("use_smooth", smooth)
+    if hasattr(mesh, "loop_triangle_polygons"):
+        poly = np.empty(t, np.int32)
+        mesh.loop_triangle_polygons.foreach_get("value", poly)
+    else:
+        poly = np.empty(t, np.int32)
+        mesh.loop_triangles.foreach_get("polygon_index", poly)
+    tmp = bpy.data.meshes.new("drt_tangents")
+    try:
+        tmp.vertices.add(len(pos))
+        tmp.vertices.foreach_set("co", np.ascontiguousarray(pos, np.float32).reshape(-1))
+        tmp.loops.add(3 * t)
+        tmp.loops.foreach_set("vertex_index", tri_verts.astype(np.int32).reshape(-1))
+        tmp.polygons.add(t)
+        tmp.polygons.foreach_set("loop_start", np.arange(0, 3 * t, 3, dtype=np.int32))
+        tmp.polygons.foreach_set("use_smooth", smooth[poly])
+        tmp.update()
+        tl = tmp.uv_layers.new(name="uv")
+        tl.data.foreach_set("uv", np.ascontiguousarray(uv, np.float32).reshape(-1))
+        tmp.calc_tangents(uvmap="uv")
+        tangent = np.empty(9 * t, np.float32)
+        sign = np.empty(3 * t, np.float32)
+        tmp.loops.foreach_get("tangent", tangent)
+        tmp.loops.foreach_get("bitangent_sign", sign)
+        return tangent.reshape(t, 3, 3), sign.reshape(t, 3)
+    except RuntimeError:
+        return None
+    finally:
+        bpy.data.meshes.remove(tmp)
 
 
 def uv_layer_values(mesh, layer) -> np.ndarray:

@@ -110,7 +110,11 @@ def setup_scene(n):
 
 def _add_shape(shape, size, loc):
     """One tile's object: a plane (UV 0..1), a smooth UV sphere (normals and incoming
-    directions vary over it) or a plane seen from its back (backfacing)."""
+    directions vary over it), a plane seen from its back (backfacing) or an n-gon cap."""
+    if shape == "ngon":  # an octagonal prism seen along its axis: the cap is an n-gon
+        bpy.ops.mesh.primitive_cylinder_add(vertices=8, radius=0.45 * size, depth=0.1 * size, location=loc,
+                                            end_fill_type="NGON", calc_uvs=True, rotation=(0, 0, 0.3))
+        return
     if shape == "sphere":
         bpy.ops.mesh.primitive_uv_sphere_add(radius=0.45 * size, location=loc, segments=48, ring_count=24,
                                              rotation=(0.4, 0.3, 0.2))

@@ -372,3 +372,13 @@ def test_texture_coordinate_outputs_match_cycles(tmp_path):
     cycles, drt, res = render_tiles(cases, 2, tmp_path, shape="sphere")
     assert not res.warnings, res.warnings
     _compare(cycles, drt, len(cases), n=2)
+
+
+def test_normal_map_on_ngons_matches_cycles(tmp_path):
+    """Blender computes tangents only for triangles and quads: an n-gon mesh gets them from its
+    loop triangles (Cycles's tangents on the same faces)."""
+    cases = [_normal_map(), _normal_map(strength=0.5)]
+    cycles, drt, res = render_tiles(cases, 2, tmp_path, shape="ngon")
+    assert not res.warnings, res.warnings
+    assert np.abs(tile(drt, 0, 2) - tile(drt, 3, 2)).max() > 0.05  # the map bends the normal
+    _compare(cycles, drt, len(cases), n=2, outliers=10)

@@ -51,11 +51,11 @@ def mesh_arrays(mesh, slot_materials: np.ndarray, attrs=frozenset()) -> dict | N
         if name.startswith(("tangent:", "tangent_sign:")) and idx is not None:
             uv = name.split(":", 1)[1]
             if uv not in tangents:
-                tangents[uv] = compat.corner_tangents(mesh, uv)
+                tangents[uv] = compat.triangle_tangents(mesh, uv, tri_corners)
             if tangents[uv] is not None:  # else zeros: the Normal Map keeps the mesh normal
                 t, sign = tangents[uv]
-                corner = t if name.startswith("tangent:") else np.repeat(sign[:, None], 3, axis=1)
-                out[f"attr{idx}"] = np.ascontiguousarray(corner[tri_corners], np.float32)
+                corner = t if name.startswith("tangent:") else np.repeat(sign[..., None], 3, axis=-1)
+                out[f"attr{idx}"] = np.ascontiguousarray(corner, np.float32)
         if name.startswith("uv:") and idx is not None:
             layer = mesh.uv_layers.get(name[3:])
             if layer is not None:  # a mesh without the map reads zeros, as in Cycles
