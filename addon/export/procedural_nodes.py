@@ -131,11 +131,8 @@ def curves(b, node, out, ctx):
     kind = {"ShaderNodeRGBCurve": "RGB", "ShaderNodeVectorCurve": "VECTOR", "ShaderNodeFloatCurve": "FLOAT"}[k]
     off = len(b.data)
     b.data += _curve_table(node.mapping, kind)
-    fac = b.inp(node, "Fac", ctx, "float")
-    if kind == "FLOAT":
-        val = b.inp(node, "Value", ctx, "float")
-    else:
-        val = b.input(node, node.inputs[1], ctx)
+    fac = b.input(node, node.inputs[0], ctx, "float")  # "Fac" ("Factor" on the Float Curve)
+    val = b.input(node, node.inputs[1], ctx, "float" if kind == "FLOAT" else None)
     return b.emit(OP_CURVES, int(kind == "FLOAT"), [fac, val], param=off)
 
 

@@ -834,45 +834,61 @@ def wave(kind, bands_dir, rings_dir, profile, x, y, z, distortion, detail, dscal
     return abs(n - math.floor(n + 0.5)) * 2.0
 
 
+@inline_kernel
+def _s(x):
+    """sinf of a float32 argument, rounded to float32 (glibc's sinf is correctly rounded in
+    practice: float64 sin then one rounding gives the same float)."""
+    return f32(math.sin(x))
+
+
+@inline_kernel
+def _c(x):
+    return f32(math.cos(x))
+
+
 @kernel
 def magic(x, y, z, scale, depth, distortion):
-    """Cycles 5.0's svm_magic (the periodic reduction before the scale, as 5.0 does)."""
+    """Cycles 5.0's svm_magic (the periodic reduction before the scale, as 5.0 does), in
+    emulated float32: every operation rounds to float32 like Cycles's, because at high depth and
+    distortion (> 1) the iteration is chaotic and float64 would drift to another value."""
     tau = 6.2831854820251465  # M_2PI_F
-    px = np.fmod(f32(x), tau)
-    py = np.fmod(f32(y), tau)
-    pz = np.fmod(f32(z), tau)
-    a = math.sin((px + py + pz) * 5.0 * scale)
-    b = math.cos((-px + py - pz) * 5.0 * scale)
-    c = -math.cos((-px - py + pz) * 5.0 * scale)
-    d = distortion
+    px = f32(np.fmod(f32(x), tau))
+    py = f32(np.fmod(f32(y), tau))
+    pz = f32(np.fmod(f32(z), tau))
+    s5 = f32(5.0)
+    scale = f32(scale)
+    d = f32(distortion)
+    a = _s(f32(f32(f32(f32(px + py) + pz) * s5) * scale))
+    b = _c(f32(f32(f32(f32(-px + py) - pz) * s5) * scale))
+    c = -_c(f32(f32(f32(f32(-px - py) + pz) * s5) * scale))
     if depth > 0:
-        a *= d
-        b *= d
-        c *= d
-        b = -math.cos(a - b + c) * d
+        a = f32(a * d)
+        b = f32(b * d)
+        c = f32(c * d)
+        b = f32(-_c(f32(f32(a - b) + c)) * d)
         if depth > 1:
-            a = math.cos(a - b - c) * d
+            a = f32(_c(f32(f32(a - b) - c)) * d)
             if depth > 2:
-                c = math.sin(-a - b - c) * d
+                c = f32(_s(f32(f32(-a - b) - c)) * d)
                 if depth > 3:
-                    a = -math.cos(-a + b - c) * d
+                    a = f32(-_c(f32(f32(-a + b) - c)) * d)
                     if depth > 4:
-                        b = -math.sin(-a + b + c) * d
+                        b = f32(-_s(f32(f32(-a + b) + c)) * d)
                         if depth > 5:
-                            b = -math.cos(-a + b + c) * d
+                            b = f32(-_c(f32(f32(-a + b) + c)) * d)
                             if depth > 6:
-                                a = math.cos(a + b + c) * d
+                                a = f32(_c(f32(f32(a + b) + c)) * d)
                                 if depth > 7:
-                                    c = math.sin(a + b - c) * d
+                                    c = f32(_s(f32(f32(a + b) - c)) * d)
                                     if depth > 8:
-                                        a = -math.cos(-a - b + c) * d
+                                        a = f32(-_c(f32(f32(-a - b) + c)) * d)
                                         if depth > 9:
-                                            b = -math.sin(a - b + c) * d
+                                            b = f32(-_s(f32(f32(a - b) + c)) * d)
     if d != 0.0:
-        d *= 2.0
-        a /= d
-        b /= d
-        c /= d
+        d2 = f32(d * 2.0)
+        a = f32(a / d2)
+        b = f32(b / d2)
+        c = f32(c / d2)
     return 0.5 - a, 0.5 - b, 0.5 - c
 
 
