@@ -137,8 +137,10 @@ def curves(b, node, out, ctx):
 
 
 def color_attribute(b, node, out, ctx):
-    name = node.layer_name
-    return {"Color": b.attribute("attr:" + name), "Alpha": b.attribute("alpha:" + name)}
+    """Color Attribute node: the named colour attribute (empty: the render colour attribute);
+    each output is its own attribute array, stored only if used."""
+    kind = "alpha:" if out.identifier == "Alpha" else "attr:"
+    return b.attribute(kind + node.layer_name)
 
 
 def attribute(b, node, out, ctx):
