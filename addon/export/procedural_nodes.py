@@ -65,13 +65,15 @@ def voronoi(b, node, out, ctx):
     col, scalars = b.emit(OP_VORONOI, mode, [vec, b.pack(w, scale, detail), b.pack(rough, lac, smooth),
                                              b.pack(expo, rnd)], param=pos_reg, outputs=2)
     zero = Value(b, const=0.0)
-    dist = b.emit(OP_COMPONENT, 0, [scalars])
     radius_mode = node.feature == "N_SPHERE_RADIUS"
+    used = _linked(node, "Radius" if radius_mode else "Distance") or out.identifier in ("Distance", "Radius")
+    dist = b.emit(OP_COMPONENT, 0, [scalars]) if used else zero
+    w_out = b.emit(OP_COMPONENT, 1, [scalars]) if feature <= 2 and (_linked(node, "W") or out.identifier == "W") else zero
     return {"Distance": zero if radius_mode else dist,
             "Radius": dist if radius_mode else zero,
             "Color": col if feature <= 2 else zero,
             "Position": Value(b, reg=pos_reg) if pos_reg >= 0 and feature <= 2 else zero,
-            "W": b.emit(OP_COMPONENT, 1, [scalars]) if feature <= 2 else zero}
+            "W": w_out}
 
 
 def wave(b, node, out, ctx):

@@ -250,67 +250,116 @@ def _fade(t):
     return t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
 
 
+def _gradient_tables():
+    """Cycles's grad1/2/3/4 as coefficient tables over the hash's low bits (a dot product with
+    coefficients in {0, ±1, ±2}: exactly the same sums, without data-dependent branches, which
+    mispredict on random hashes — measured 3× slower Perlin noise)."""
+    g1 = np.array([(-1.0 if h & 8 else 1.0) * (1 + (h & 7)) for h in range(16)])
+    g2 = np.zeros((8, 2))
+    for h in range(8):
+        u, v = (0, 1) if h < 4 else (1, 0)
+        g2[h, u] += -1.0 if h & 1 else 1.0
+        g2[h, v] += -2.0 if h & 2 else 2.0
+    g3 = np.zeros((16, 3))
+    for h in range(16):
+        u = 0 if h < 8 else 1
+        v = 1 if h < 4 else (0 if h in (12, 14) else 2)
+        g3[h, u] += -1.0 if h & 1 else 1.0
+        g3[h, v] += -1.0 if h & 2 else 1.0
+    g4 = np.zeros((32, 4))
+    for h in range(32):
+        u, v, s = (0 if h < 24 else 1), (1 if h < 16 else 2), (2 if h < 8 else 3)
+        g4[h, u] += -1.0 if h & 1 else 1.0
+        g4[h, v] += -1.0 if h & 2 else 1.0
+        g4[h, s] += -1.0 if h & 4 else 1.0
+    return g1, g2, g3, g4
+
+
+GRAD1, GRAD2, GRAD3, GRAD4 = _gradient_tables()
+
+
 @inline_kernel
-def _neg(v, cond):
-    return -v if cond else v
-
-
-@kernel
 def _grad(dim, h, x, y, z, w):
     if dim == 1:
-        h &= 15
-        return _neg(1.0 + (h & 7), h & 8) * w
+        return GRAD1[h & 15] * w
     if dim == 2:
-        h &= 7
-        u = x if h < 4 else y
-        v = 2.0 * (y if h < 4 else x)
-        return _neg(u, h & 1) + _neg(v, h & 2)
+        k = h & 7
+        return GRAD2[k, 0] * x + GRAD2[k, 1] * y
     if dim == 3:
-        h &= 15
-        u = x if h < 8 else y
-        vt = x if (h == 12 or h == 14) else z
-        v = y if h < 4 else vt
-        return _neg(u, h & 1) + _neg(v, h & 2)
-    h &= 31
-    u = x if h < 24 else y
-    v = y if h < 16 else z
-    s = z if h < 8 else w
-    return _neg(u, h & 1) + _neg(v, h & 2) + _neg(s, h & 4)
+        k = h & 15
+        return GRAD3[k, 0] * x + GRAD3[k, 1] * y + GRAD3[k, 2] * z
+    k = h & 31
+    return GRAD4[k, 0] * x + GRAD4[k, 1] * y + GRAD4[k, 2] * z + GRAD4[k, 3] * w
+
+
+@inline_kernel
+def _lerp(a, b, t):
+    return (1.0 - t) * a + t * b
 
 
 @kernel
 def perlin(dim, x, y, z, w):
     """Cycles's perlin_{1,2,3,4}d (unscaled): gradients at the 2^dim lattice corners around the
-    point, blended with the quintic fade."""
-    fx, fy, fz, fw = math.floor(x), math.floor(y), math.floor(z), math.floor(w)
-    X, Y, Z, W = int(fx), int(fy), int(fz), int(fw)
-    rx, ry, rz, rw = x - fx, y - fy, z - fz, w - fw
-    u, v, t, s = _fade(rx), _fade(ry), _fade(rz), _fade(rw)
+    point, blended with the quintic fade (bi/tri/quad_mix)."""
+    if dim == 1:
+        fw = math.floor(w)
+        W = int(fw)
+        rw = w - fw
+        return _lerp(_grad(1, hash_uint(W), 0.0, 0.0, 0.0, rw),
+                     _grad(1, hash_uint(W + 1), 0.0, 0.0, 0.0, rw - 1.0), _fade(rw))
+    fx, fy = math.floor(x), math.floor(y)
+    X, Y = int(fx), int(fy)
+    rx, ry = x - fx, y - fy
+    u, v = _fade(rx), _fade(ry)
+    if dim == 2:
+        return _lerp(_lerp(_grad(2, hash_uint2(X, Y), rx, ry, 0.0, 0.0),
+                           _grad(2, hash_uint2(X + 1, Y), rx - 1.0, ry, 0.0, 0.0), u),
+                     _lerp(_grad(2, hash_uint2(X, Y + 1), rx, ry - 1.0, 0.0, 0.0),
+                           _grad(2, hash_uint2(X + 1, Y + 1), rx - 1.0, ry - 1.0, 0.0, 0.0), u), v)
+    fz = math.floor(z)
+    Z = int(fz)
+    rz = z - fz
+    t = _fade(rz)
+    if dim == 3:
+        return _lerp(
+            _lerp(_lerp(_grad(3, hash_uint3(X, Y, Z), rx, ry, rz, 0.0),
+                        _grad(3, hash_uint3(X + 1, Y, Z), rx - 1.0, ry, rz, 0.0), u),
+                  _lerp(_grad(3, hash_uint3(X, Y + 1, Z), rx, ry - 1.0, rz, 0.0),
+                        _grad(3, hash_uint3(X + 1, Y + 1, Z), rx - 1.0, ry - 1.0, rz, 0.0), u), v),
+            _lerp(_lerp(_grad(3, hash_uint3(X, Y, Z + 1), rx, ry, rz - 1.0, 0.0),
+                        _grad(3, hash_uint3(X + 1, Y, Z + 1), rx - 1.0, ry, rz - 1.0, 0.0), u),
+                  _lerp(_grad(3, hash_uint3(X, Y + 1, Z + 1), rx, ry - 1.0, rz - 1.0, 0.0),
+                        _grad(3, hash_uint3(X + 1, Y + 1, Z + 1), rx - 1.0, ry - 1.0, rz - 1.0, 0.0), u), v),
+            t)
+    fw = math.floor(w)
+    W = int(fw)
+    rw = w - fw
+    s = _fade(rw)
     total = 0.0
-    for c in range(1 << dim):
-        if dim == 1:
-            cw = c & 1
-            h = hash_uint(W + cw)
-            wt = s if cw else 1.0 - s
-            total += wt * _grad(1, h, 0.0, 0.0, 0.0, rw - cw)
-            continue
-        cx, cy, cz, cw = c & 1, (c >> 1) & 1, (c >> 2) & 1, (c >> 3) & 1
-        wt = (u if cx else 1.0 - u) * (v if cy else 1.0 - v)
-        if dim == 2:
-            h = hash_uint2(X + cx, Y + cy)
-        elif dim == 3:
-            h = hash_uint3(X + cx, Y + cy, Z + cz)
-            wt *= t if cz else 1.0 - t
-        else:
-            h = hash_uint4(X + cx, Y + cy, Z + cz, W + cw)
-            wt *= (t if cz else 1.0 - t) * (s if cw else 1.0 - s)
-        total += wt * _grad(dim, h, rx - cx, ry - cy, rz - cz, rw - cw)
+    for cw in range(2):
+        gw = rw - cw
+        Wc = W + cw
+        a = _lerp(
+            _lerp(_lerp(_grad(4, hash_uint4(X, Y, Z, Wc), rx, ry, rz, gw),
+                        _grad(4, hash_uint4(X + 1, Y, Z, Wc), rx - 1.0, ry, rz, gw), u),
+                  _lerp(_grad(4, hash_uint4(X, Y + 1, Z, Wc), rx, ry - 1.0, rz, gw),
+                        _grad(4, hash_uint4(X + 1, Y + 1, Z, Wc), rx - 1.0, ry - 1.0, rz, gw), u), v),
+            _lerp(_lerp(_grad(4, hash_uint4(X, Y, Z + 1, Wc), rx, ry, rz - 1.0, gw),
+                        _grad(4, hash_uint4(X + 1, Y, Z + 1, Wc), rx - 1.0, ry, rz - 1.0, gw), u),
+                  _lerp(_grad(4, hash_uint4(X, Y + 1, Z + 1, Wc), rx, ry - 1.0, rz - 1.0, gw),
+                        _grad(4, hash_uint4(X + 1, Y + 1, Z + 1, Wc), rx - 1.0, ry - 1.0, rz - 1.0, gw), u), v),
+            t)
+        total += a * (s if cw else 1.0 - s)
     return total
 
 
 @inline_kernel
 def _wrap_coord(p):
-    """Cycles's snoise wrapping: fmod(p, 100000) + 0.5 when |p| ≥ 1e6 (float32)."""
+    """Cycles's snoise wrapping: fmod(p, 100000) + 0.5 when |p| ≥ 1e6 (float32); the identity
+    below 100000 (fmod is slow: skipped there)."""
+    p = f32(p)
+    if abs(p) < 100000.0:
+        return p
     corr = 0.5 if abs(p) >= 1000000.0 else 0.0
     return f32(np.fmod(p, 100000.0) + corr)
 
@@ -318,7 +367,11 @@ def _wrap_coord(p):
 @kernel
 def snoise(dim, x, y, z, w):
     """Signed noise in about [−1, 1]: Cycles's snoise_{1,2,3,4}d (scaled perlin)."""
-    x, y, z, w = _wrap_coord(f32(x)), _wrap_coord(f32(y)), _wrap_coord(f32(z)), _wrap_coord(f32(w))
+    w = _wrap_coord(w)
+    if dim > 1:
+        x, y = _wrap_coord(x), _wrap_coord(y)
+        if dim > 2:
+            z = _wrap_coord(z)
     r = perlin(dim, x, y, z, w)
     if dim == 1:
         return 0.25 * r
