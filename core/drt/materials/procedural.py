@@ -14,6 +14,7 @@ Conventions:
   So coordinates are rounded to float32 (``f32``) wherever Cycles forms them (scale products,
   offsets, octave scaling), and the hashes take float32 bit patterns (``float_bits``); the
   smooth arithmetic between cells runs in float64 (differences ~1e-7 relative).
+- Float bit patterns come from an LLVM bitcast (``_bitcast_f32``, a numba intrinsic).
 - Integer hashes work on int64 values masked to 32 bits (numba has no wrapping uint32):
   ``hash_uint*`` is Bob Jenkins's lookup3 (seed 0xdeadbeef + (n << 2) + 13), ``pcg*`` the
   signed PCG hashes Voronoi uses in 2–4D since Blender 5.0.
@@ -24,6 +25,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
 
 from ..kernels import inline_kernel, kernel
 from .program_format import RAMP_TABLE_SIZE
@@ -47,24 +51,22 @@ def f32(x):
     return float(np.float32(x))
 
 
+@intrinsic
+def _bitcast_f32(typingctx, x):
+    """The bits of a float32 as a uint32 (an LLVM bitcast: Cycles's ``__float_as_uint``)."""
+    if x != types.float32:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(32))
+    return types.uint32(types.float32), codegen
+
+
 @kernel
 def float_bits(x):
-    """The IEEE-754 bit pattern (uint32 as int64) of x rounded to float32 (Cycles's
-    ``__float_as_uint``), without a bit cast: from frexp."""
-    x = f32(x)
-    if x != x:
-        return 0x7FC00000
-    sign = 0x80000000 if (x < 0.0 or (x == 0.0 and math.copysign(1.0, x) < 0.0)) else 0
-    a = abs(x)
-    if a == 0.0:
-        return sign
-    if a > 3.4028234663852886e38:
-        return sign | 0x7F800000
-    m, e = math.frexp(a)  # a = m·2^e, m in [0.5, 1)
-    biased = e + 126
-    if biased <= 0:  # subnormal
-        return sign | int(a * 2.0 ** 149)
-    return sign | (biased << 23) | int((m * 2.0 - 1.0) * 8388608.0)
+    """The IEEE-754 bit pattern (uint32, as int64) of x rounded to float32 (Cycles's
+    ``__float_as_uint``)."""
+    return np.int64(_bitcast_f32(np.float32(x)))
 
 
 # --- Jenkins lookup3 ----------------------------------------------------------------------------
@@ -367,7 +369,8 @@ def _wrap_coord(p):
 @kernel
 def snoise(dim, x, y, z, w):
     """Signed noise in about [−1, 1]: Cycles's snoise_{1,2,3,4}d (scaled perlin)."""
-    w = _wrap_coord(w)
+    if dim == 1 or dim == 4:
+        w = _wrap_coord(w)
     if dim > 1:
         x, y = _wrap_coord(x), _wrap_coord(y)
         if dim > 2:
@@ -589,6 +592,13 @@ def _span(dim, axis, r):
     return r if used else 0
 
 
+@inline_kernel
+def _gap(o, local, randomness):
+    """Distance along one axis from ``local`` to the span [o, o + randomness] of a neighbour
+    cell's feature point (0 inside)."""
+    return max(0.0, o - local, local - (o + randomness))
+
+
 @kernel
 def voronoi_octave(dim, feature, metric, exponent, randomness, smoothness, x, y, z, w):
     """One octave (F1, F2 or smooth F1) at the point: (distance, colour r, g, b, position x, y,
@@ -634,10 +644,20 @@ def voronoi_octave(dim, feature, metric, exponent, randomness, smoothness, x, y,
     o2 = (0, 0, 0, 0)
     p1 = (0.0, 0.0, 0.0, 0.0)
     p2 = (0.0, 0.0, 0.0, 0.0)
+    # F1 prunes: a cell whose nearest possible point (its points lie in [o, o + randomness] per
+    # axis) is farther than the centre cell's point cannot hold the minimum, and skipping it does
+    # not change which cell first reaches the minimum (Cycles's strict '<' scan order)
+    limit = FLT_MAX
+    if bound:
+        p = _cell_point(dim, cx, cy, cz, cw, randomness)
+        limit = _vdist(dim, metric, exponent, p[0] - lx, p[1] - ly, p[2] - lz, p[3] - lw, True)
     for ow in range(-_span(dim, 3, 1), _span(dim, 3, 1) + 1):
         for oz in range(-_span(dim, 2, 1), _span(dim, 2, 1) + 1):
             for oy in range(-_span(dim, 1, 1), _span(dim, 1, 1) + 1):
                 for ox in range(-_span(dim, 0, 1), _span(dim, 0, 1) + 1):
+                    if bound and _vdist(dim, metric, exponent, _gap(ox, lx, randomness), _gap(oy, ly, randomness),
+                                        _gap(oz, lz, randomness), _gap(ow, lw, randomness), True) > limit:
+                        continue
                     p = _cell_point(dim, cx + ox, cy + oy, cz + oz, cw + ow, randomness)
                     pp = (ox + p[0], oy + p[1], oz + p[2], ow + p[3])
                     d = _vdist(dim, metric, exponent, pp[0] - lx, pp[1] - ly, pp[2] - lz, pp[3] - lw, bound)
