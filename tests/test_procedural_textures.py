@@ -195,13 +195,20 @@ def color_attribute(domain, dtype, name="Col", node_kind="ShaderNodeVertexColor"
     return case
 
 
-def float_attribute(kind, out):
-    """A generic FLOAT / FLOAT2 / FLOAT_VECTOR point attribute read by the Attribute node."""
+def float_attribute(kind, out, domain="POINT"):
+    """A generic FLOAT / FLOAT2 / FLOAT_VECTOR attribute read by the Attribute node."""
     def case(nt, uv):
         return node(nt, "ShaderNodeAttribute", attribute_name="gen").outputs[out]
 
     def setup(mesh):
-        attr = mesh.attributes.new("gen", kind, "POINT")
+        if domain == "FACE":  # several faces: a plane has one
+            import bmesh
+            bm = bmesh.new()
+            bm.from_mesh(mesh)
+            bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=2, use_grid_fill=True)
+            bm.to_mesh(mesh)
+            bm.free()
+        attr = mesh.attributes.new("gen", kind, domain)
         width = {"FLOAT": 1, "FLOAT2": 2, "FLOAT_VECTOR": 3}[kind]
         key = "value" if kind == "FLOAT" else "vector"
         vals = np.random.default_rng(5).uniform(-1, 2, len(attr.data) * width).astype(np.float32)
@@ -228,7 +235,9 @@ def test_procedural_representative_match_cycles(tmp_path):
              "rgb curves extrapolated", "float curve", "colour attribute corner byte",
              "colour attribute point float (render)", "attribute float2 fac"]
     res = _check(cases, names, tmp_path, "procedural")
-    assert {"attr:Col", "alpha:Col"} <= set(res.header["attributes"]) or "attr:Col" in res.header["attributes"]
+    # attribute arrays are exported for the outputs used only (no Alpha here)
+    assert {"attr:Col", "attr:", "fac:gen"} <= set(res.header["attributes"])
+    assert not any(a.startswith("alpha:") for a in res.header["attributes"])
 
 
 # --- slow sweeps: every mode and dimension ----------------------------------------------------
@@ -298,4 +307,6 @@ def test_other_textures_sweep_match_cycles(tmp_path):
     names += [f"attribute node {o}" for o in ("Color", "Vector", "Fac", "Alpha")]
     cases += [float_attribute(k, o) for k in ("FLOAT", "FLOAT2", "FLOAT_VECTOR") for o in ("Vector", "Fac")]
     names += [f"attribute {k} {o}" for k in ("FLOAT", "FLOAT2", "FLOAT_VECTOR") for o in ("Vector", "Fac")]
+    cases += [float_attribute("FLOAT_VECTOR", "Color", "FACE")]
+    names += ["attribute face domain*"]
     _check(cases, names, tmp_path, "other_sweep")
