@@ -590,10 +590,6 @@ class ProgramBuilder:
             return Value(self, const=[float(v.const[0]) for v in vals])
         return self.emit(OP_COMBINE, 0, vals)
 
-    def floats(self, node, names, ctx):
-        """The float Values of the inputs ``names`` of ``node``."""
-        return [self.inp(node, n, ctx, "float") for n in names]
-
     def _tex_vector(self, node, ctx, default):
         sock = socket(node.inputs, "Vector")
         src, sctx = resolve(sock, ctx)

@@ -23,6 +23,24 @@ def _linked(node, name) -> bool:
         return False
 
 
+#: inputs older Blenders lack, with the value those versions used (Noise and Voronoi before 4.0
+#: had no Lacunarity/Roughness/Detail controls of these kinds; 4.1 added Offset/Gain to Noise)
+_OLD_DEFAULTS = {"Lacunarity": 2.0, "Roughness": 0.5, "Detail": 0.0, "Offset": 0.0, "Gain": 1.0,
+                 "Distortion": 0.0, "W": 0.0, "Smoothness": 1.0, "Exponent": 0.5, "Randomness": 1.0}
+
+
+def _floats(b, node, names, ctx):
+    """Float inputs by name; an input this Blender's node lacks takes the value older versions
+    used (so files from 3.x/4.0 export instead of failing)."""
+    out = []
+    for n in names:
+        try:
+            out.append(b.inp(node, n, ctx, "float"))
+        except KeyError:
+            out.append(Value(b, const=_OLD_DEFAULTS.get(n, 0.0)))
+    return out
+
+
 def _vector(b, node, ctx):
     """The node's Vector input; unlinked: Generated coordinates (Cycles's texture default)."""
     from .node_programs import resolve
@@ -35,10 +53,12 @@ def _vector(b, node, ctx):
 
 def noise(b, node, out, ctx):
     dim = DIMENSIONS.index(node.noise_dimensions) + 1
-    w, scale, detail, rough, lac, offs, gain, dist = b.floats(
-        node, ["W", "Scale", "Detail", "Roughness", "Lacunarity", "Offset", "Gain", "Distortion"], ctx)
+    w, scale, detail, rough, lac, offs, gain, dist = _floats(
+        b, node, ["W", "Scale", "Detail", "Roughness", "Lacunarity", "Offset", "Gain", "Distortion"], ctx)
     want_color = _linked(node, "Color")
-    mode = (dim - 1) | NOISE_TYPES[node.noise_type] << 2 | int(node.normalize) << 5 | int(want_color) << 6
+    # before 4.1 the Noise node was fBM only, normalized
+    kind = NOISE_TYPES[getattr(node, "noise_type", "FBM")]
+    mode = (dim - 1) | kind << 2 | int(getattr(node, "normalize", True)) << 5 | int(want_color) << 6
     vec = _vector(b, node, ctx) if dim > 1 else Value(b, const=0.0)
     fac, col = b.emit(OP_NOISE, mode, [vec, b.pack(w, scale, detail), b.pack(rough, lac, offs),
                                        b.pack(gain, dist)], outputs=2)
@@ -56,9 +76,9 @@ def voronoi(b, node, out, ctx):
     dim = DIMENSIONS.index(node.voronoi_dimensions) + 1
     feature = VORONOI_FEATURES.index(node.feature)
     mode = ((dim - 1) | feature << 2 | VORONOI_METRICS.index(node.distance) << 5
-            | int(node.normalize) << 7)
-    w, scale, detail, rough, lac, smooth, expo, rnd = b.floats(
-        node, ["W", "Scale", "Detail", "Roughness", "Lacunarity", "Smoothness", "Exponent",
+            | int(getattr(node, "normalize", False)) << 7)
+    w, scale, detail, rough, lac, smooth, expo, rnd = _floats(
+        b, node, ["W", "Scale", "Detail", "Roughness", "Lacunarity", "Smoothness", "Exponent",
                "Randomness"], ctx)
     vec = _vector(b, node, ctx) if dim > 1 else Value(b, const=0.0)
     pos_reg = b.new_reg() if _linked(node, "Position") else -1
@@ -79,15 +99,15 @@ def voronoi(b, node, out, ctx):
 def wave(b, node, out, ctx):
     mode = (int(node.wave_type == "RINGS") | WAVE_BANDS.index(node.bands_direction) << 1
             | WAVE_RINGS.index(node.rings_direction) << 3 | WAVE_PROFILES.index(node.wave_profile) << 5)
-    scale, dist, detail, dscale, drough, phase = b.floats(
-        node, ["Scale", "Distortion", "Detail", "Detail Scale", "Detail Roughness", "Phase Offset"], ctx)
+    scale, dist, detail, dscale, drough, phase = _floats(
+        b, node, ["Scale", "Distortion", "Detail", "Detail Scale", "Detail Roughness", "Phase Offset"], ctx)
     col, fac = b.emit(OP_WAVE, mode, [_vector(b, node, ctx), b.pack(scale, dist, detail),
                                       b.pack(dscale, drough, phase)], outputs=2)
     return {"Color": col, "Fac": fac}
 
 
 def magic(b, node, out, ctx):
-    scale, dist = b.floats(node, ["Scale", "Distortion"], ctx)
+    scale, dist = _floats(b, node, ["Scale", "Distortion"], ctx)
     col, fac = b.emit(OP_MAGIC, int(node.turbulence_depth), [_vector(b, node, ctx), b.pack(scale, dist)],
                       outputs=2)
     return {"Color": col, "Fac": fac}
@@ -95,8 +115,8 @@ def magic(b, node, out, ctx):
 
 def brick(b, node, out, ctx):
     c1, c2, mortar = (b.inp(node, n, ctx) for n in ("Color1", "Color2", "Mortar"))
-    scale, msize, msmooth, bias, bw, rh = b.floats(
-        node, ["Scale", "Mortar Size", "Mortar Smooth", "Bias", "Brick Width", "Row Height"], ctx)
+    scale, msize, msmooth, bias, bw, rh = _floats(
+        b, node, ["Scale", "Mortar Size", "Mortar Smooth", "Bias", "Brick Width", "Row Height"], ctx)
     off = len(b.data)
     b.data += [float(node.offset), float(node.offset_frequency), float(node.squash),
                float(node.squash_frequency)]
