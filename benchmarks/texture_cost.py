@@ -1,13 +1,16 @@
 """Cost of material programs: render time of a scene whose every surface runs a 20-node texture
 graph against the same scene with constant materials (issue 11's acceptance: < 2×).
 
-    python benchmarks/texture_cost.py [--spp 32] [--resolution 160x120]
+    python benchmarks/texture_cost.py [--spp 32] [--resolution 160x120] [--procedural]
 
 Builds, with bpy, the shipped blend_scenes/textured scene, gives every material a Principled
 base colour from a chain of 20 texture/converter nodes (checker, gradient, image, ramp, mapping,
 math, mix, hue/saturation, ...), exports it, and renders it on one thread with DRT: once as is,
 once with the programs stripped (each lobe keeps its representative constant). Best of three
-each. Prints both times and the ratio; asserts nothing.
+each, in process CPU time (wall time on the shared 2-vCPU machine mostly measured its
+neighbours). Prints both times and the ratio; asserts nothing. ``--procedural``: the 20 nodes are
+procedural textures instead (noise, Voronoi, wave, magic, brick, white noise, curves, ...);
+``--scene X.npz``: a shipped scene as is against its programs stripped.
 """
 
 from __future__ import annotations
@@ -62,7 +65,47 @@ def twenty_node_chain(nt, img):
     return [o for o in mix3.outputs if o.enabled][0]
 
 
-def build(spp, w, h):
+def twenty_procedural_nodes(nt, img=None):
+    """Base colour from 20 procedural nodes (the issue's "20 texture nodes" as a procedural
+    material is built: noise, Voronoi, wave, magic, brick, white noise, curves, ramps, maths)."""
+    from node_parity import mapping, node
+
+    tc = nt.nodes.new("ShaderNodeTexCoord")                                                        # 1
+    m = mapping(nt, tc.outputs["Object"], scale=(2, 2, 2), rot=(0, 0, 0.3))                         # 2
+    nz = node(nt, "ShaderNodeTexNoise", {"Vector": m, "Scale": 3.0, "Detail": 2.0})                 # 3
+    vo = node(nt, "ShaderNodeTexVoronoi", {"Vector": m, "Scale": 4.0})                              # 4
+    wv = node(nt, "ShaderNodeTexWave", {"Vector": nz.outputs["Color"], "Distortion": 2.0})          # 5
+    mg = node(nt, "ShaderNodeTexMagic", {"Vector": m, "Scale": 2.0}, turbulence_depth=2)            # 6
+    bk = node(nt, "ShaderNodeTexBrick", {"Vector": m, "Scale": 2.0})                                # 7
+    fl = node(nt, "ShaderNodeVectorMath", {0: m, 3: 20.0}, operation="SCALE")                       # 8
+    fl2 = node(nt, "ShaderNodeVectorMath", {0: fl.outputs[0]}, operation="FLOOR")                   # 9
+    wn = node(nt, "ShaderNodeTexWhiteNoise", {"Vector": fl2.outputs[0]})                            # 10
+    ramp = node(nt, "ShaderNodeValToRGB", {0: wv.outputs["Fac"]})                                   # 11
+    mix1 = node(nt, "ShaderNodeMix", {"Factor": vo.outputs["Distance"]}, data_type="RGBA")          # 12
+    socks = [s for s in mix1.inputs if s.enabled]
+    nt.links.new(ramp.outputs["Color"], socks[1])
+    nt.links.new(vo.outputs["Color"], socks[2])
+    mix2 = node(nt, "ShaderNodeMix", {"Factor": 0.3}, data_type="RGBA", blend_type="OVERLAY")       # 13
+    socks = [s for s in mix2.inputs if s.enabled]
+    nt.links.new([o for o in mix1.outputs if o.enabled][0], socks[1])
+    nt.links.new(mg.outputs["Color"], socks[2])
+    mix3 = node(nt, "ShaderNodeMix", {"Factor": 0.4}, data_type="RGBA", blend_type="MULTIPLY")      # 14
+    socks = [s for s in mix3.inputs if s.enabled]
+    nt.links.new([o for o in mix2.outputs if o.enabled][0], socks[1])
+    nt.links.new(bk.outputs["Color"], socks[2])
+    curves = node(nt, "ShaderNodeRGBCurve", {"Color": [o for o in mix3.outputs if o.enabled][0]})  # 15
+    fc = node(nt, "ShaderNodeFloatCurve", {"Value": wn.outputs["Value"]})                           # 16
+    mr = node(nt, "ShaderNodeMapRange", {"Value": fc.outputs[0], "To Min": 0.8})                   # 17
+    hsv = node(nt, "ShaderNodeHueSaturation", {"Color": curves.outputs[0], "Value": 1.1})          # 18
+    mth = node(nt, "ShaderNodeMath", {0: mr.outputs[0], 1: nz.outputs["Fac"]}, operation="MULTIPLY")  # 19
+    mix4 = node(nt, "ShaderNodeMix", {"Factor": mth.outputs[0]}, data_type="RGBA")                  # 20
+    socks = [s for s in mix4.inputs if s.enabled]
+    nt.links.new(hsv.outputs[0], socks[1])
+    nt.links.new(curves.outputs[0], socks[2])
+    return [o for o in mix4.outputs if o.enabled][0]
+
+
+def build(spp, w, h, chain=None):
     import bpy
     import textured
     from addon.export import export_depsgraph
@@ -74,7 +117,7 @@ def build(spp, w, h):
     img = bpy.data.images["planks"]
     for mat in bpy.data.materials:
         p = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
-        mat.node_tree.links.new(twenty_node_chain(mat.node_tree, img), p.inputs["Base Color"])
+        mat.node_tree.links.new((chain or twenty_node_chain)(mat.node_tree, img), p.inputs["Base Color"])
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = w, h, 100
     scene.drt.samples = spp
     res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
@@ -102,9 +145,10 @@ def best_time(header, arrays, spp, runs=3):
     render(scene, spp=1, threads=1, context=ctx)  # warm: kernels loaded
     best = float("inf")
     for _ in range(runs):
-        t0 = time.perf_counter()
+        # process CPU time: on a shared machine wall time mostly measures the neighbours
+        t0 = time.process_time()
         render(scene, spp=spp, threads=1, context=ctx)
-        best = min(best, time.perf_counter() - t0)
+        best = min(best, time.process_time() - t0)
     return best
 
 
@@ -112,13 +156,26 @@ def main(argv=None):
     p = argparse.ArgumentParser()
     p.add_argument("--spp", type=int, default=32)
     p.add_argument("--resolution", default="160x120")
+    p.add_argument("--procedural", action="store_true", help="20 procedural texture nodes instead")
+    p.add_argument("--scene", help="instead: a scene file (.npz) as is vs its programs stripped")
     o = p.parse_args(argv)
     w, h = (int(x) for x in o.resolution.split("x"))
-    header, arrays = build(o.spp, w, h)
+    if o.scene:
+        from drt.scene_file import read_scene_arrays
+
+        header, arrays = read_scene_arrays(o.scene)
+        header["render"]["resolution"] = [w, h]
+        textured_t = best_time(header, arrays, o.spp)
+        plain_t = best_time(strip(header), arrays, o.spp)
+        print(f"{o.scene} at {w}x{h}, {o.spp} spp, one thread: constant {plain_t:.3f} s, programs "
+              f"{textured_t:.3f} s ({textured_t / plain_t:.2f}x)")
+        return 0
+    header, arrays = build(o.spp, w, h, twenty_procedural_nodes if o.procedural else None)
     n_ops = max(len(m["program"]["ops"]) for m in header["materials"] if "program" in m)
     textured_t = best_time(header, arrays, o.spp)
     plain_t = best_time(strip(header), arrays, o.spp)
-    print(f"{w}x{h} at {o.spp} spp, one thread; every material: 20 nodes -> {n_ops} operations")
+    kind = "procedural " if o.procedural else ""
+    print(f"{w}x{h} at {o.spp} spp, one thread; every material: 20 {kind}nodes -> {n_ops} operations")
     print(f"  constant materials : {plain_t:.3f} s")
     print(f"  20-node textures   : {textured_t:.3f} s  ({textured_t / plain_t:.2f}x)")
     return 0

@@ -8,7 +8,8 @@ filter and one sample (no noise: only emission, no bounces) and returns the two 
 images, top row first. A case is ``fn(nt, uv) -> socket``: it builds its nodes in the material
 tree ``nt`` (``uv`` is a Texture Coordinate UV output) and returns the socket to show; every
 component v is shown as atan(v)·0.3 + 0.5 so that any real value lands in (0, 1) and stays
-comparable.
+comparable. A case with a ``setup(mesh)`` attribute gets its plane's mesh to add data to
+(colour attributes).
 """
 
 from __future__ import annotations
@@ -140,6 +141,8 @@ def render_tiles(cases, n, tmp_path, tag="tiles", shader=False, sun=None, shape=
         r, c = divmod(k, n)
         _add_shape(shape, size, (-1 + (c + 0.5) * size, 1 - (r + 0.5) * size, 0))
         bpy.context.object.data.materials.append(_material(f"case{k}", case, shader))
+        if hasattr(case, "setup"):  # a case that needs mesh data (colour attributes, ...)
+            case.setup(bpy.context.object.data)
     if sun is not None:
         light = bpy.data.lights.new("sun", "SUN")
         light.energy, light.angle = sun[0], 0.0

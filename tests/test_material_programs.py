@@ -512,15 +512,15 @@ def test_muted_node_passes_through_and_reroutes_vanish(fresh):
 def test_unsupported_texture_warns_and_falls_back(fresh):
     mat, nodes, out = _mat("Noisy")
     nt = mat.node_tree
-    noise = nt.nodes.new("ShaderNodeTexNoise")
+    noise = nt.nodes.new("ShaderNodeTexGabor")  # not compiled (yet)
     p = node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.3, 0.2, 0.1, 1)})
-    nt.links.new(noise.outputs["Color"], p.inputs["Color"])
+    nt.links.new(noise.outputs["Value"], p.inputs["Color"])
     nt.links.new(p.outputs[0], out.inputs[0])
     _plane(mat)
     res = _export()
     d = _material_dict(res, "Noisy")
     assert "program" not in d and d["lobes"][0]["color"] == pytest.approx([0.3, 0.2, 0.1])
-    assert len(res.warnings) == 1 and "'Noisy'" in res.warnings[0] and "ShaderNodeTexNoise" in res.warnings[0]
+    assert len(res.warnings) == 1 and "'Noisy'" in res.warnings[0] and "ShaderNodeTexGabor" in res.warnings[0]
 
 
 def test_images_stored_once_as_bytes(fresh, tmp_path):

@@ -62,7 +62,65 @@ def mesh_arrays(mesh, slot_materials: np.ndarray, attrs=frozenset()) -> dict | N
                 corner = np.zeros((len(mesh.loops), 3), np.float32)
                 corner[:, :2] = compat.uv_layer_values(mesh, layer)
                 out[f"attr{idx}"] = corner[tri_corners]
+        elif idx is not None and name.split(":", 1)[0] in ("attr", "fac", "alpha"):
+            values = named_attribute(mesh, name, tri_corners, tri_verts)
+            if values is not None:
+                out[f"attr{idx}"] = values
     return out
+
+
+#: attribute data types → (foreach_get key, components)
+_ATTR_KINDS = {"FLOAT": ("value", 1), "INT": ("value", 1), "INT8": ("value", 1),
+               "BOOLEAN": ("value", 1), "FLOAT2": ("vector", 2), "INT32_2D": ("value", 2),
+               "FLOAT_VECTOR": ("vector", 3), "FLOAT_COLOR": ("color", 4),
+               "BYTE_COLOR": ("color", 4)}
+
+
+def named_attribute(mesh, name: str, tri_corners, tri_verts) -> np.ndarray | None:
+    """A mesh attribute as the programs read it, (T, 3, 3) float32 per triangle corner, or None
+    when the mesh lacks it (zeros, as Cycles). ``name`` is "attr:<n>" (colour rgb / vector /
+    float2 as (x, y, 0) / float replicated), "fac:<n>" (float, x of a float2, average of a vector
+    or colour: Cycles's Fac output) or "alpha:<n>" (a colour's alpha, 1 otherwise); an empty
+    <n> is the render colour attribute (the Color Attribute node's default). Point, corner and
+    face domains; byte colours read as Blender's linear values (Cycles decodes them to linear
+    before interpolating)."""
+    kind, _, attr_name = name.partition(":")
+    if not attr_name:
+        ca = getattr(mesh, "color_attributes", None)
+        if ca is None or len(ca) == 0:
+            return None
+        idx = getattr(ca, "render_color_index", 0)
+        attr = ca[idx if 0 <= idx < len(ca) else 0]
+    else:
+        attr = mesh.attributes.get(attr_name)
+    if attr is None or attr.data_type not in _ATTR_KINDS or attr.domain not in ("POINT", "CORNER", "FACE"):
+        return None
+    key, width = _ATTR_KINDS[attr.data_type]
+    n = len(attr.data)
+    raw = np.empty(n * width, np.float32 if key != "value" or attr.data_type == "FLOAT" else np.int32)
+    if attr.data_type == "BOOLEAN":
+        raw = np.empty(n, bool)
+    attr.data.foreach_get(key, raw)
+    vals = raw.astype(np.float32).reshape(n, width)
+    if kind == "fac":
+        one = vals[:, :1] if width <= 2 else vals[:, :3].mean(axis=1, keepdims=True)
+        vals = np.repeat(one, 3, axis=1)
+    elif kind == "alpha":
+        vals = vals[:, 3:4] if width == 4 else np.ones((n, 1), np.float32)
+        vals = np.repeat(vals, 3, axis=1)
+    elif width == 1:
+        vals = np.repeat(vals, 3, axis=1)
+    elif width == 2:
+        vals = np.concatenate([vals, np.zeros((n, 1), np.float32)], axis=1)
+    else:
+        vals = vals[:, :3]
+    if attr.domain == "POINT":
+        return np.ascontiguousarray(vals[tri_verts], np.float32)
+    if attr.domain == "CORNER":
+        return np.ascontiguousarray(vals[tri_corners], np.float32)
+    poly = np.empty(len(mesh.loop_triangles), np.int32)
+    mesh.loop_triangles.foreach_get("polygon_index", poly)
+    return np.ascontiguousarray(np.repeat(vals[poly][:, None, :], 3, axis=1), np.float32)
 
 
 def generated_coords(mesh, positions: np.ndarray) -> np.ndarray:

@@ -46,6 +46,7 @@ LIGHT_PATH_OUTPUTS = {
     "Glossy Depth": (POINT_DEPTH, 2), "Transmission Depth": (POINT_MISC, 0), "Ray Length": (POINT_MISC, 1),
     "Is Shadow Ray": None, "Is Volume Scatter Ray": None, "Transparent Depth": None, "Portal Depth": None,
 }
+OP_NOISE, OP_WHITE_NOISE, OP_VORONOI, OP_WAVE, OP_MAGIC, OP_BRICK, OP_CURVES = 50, 51, 52, 53, 54, 55, 56
 
 MATH_OPS = ["ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM", "SQRT",
             "INVERSE_SQRT", "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM", "LESS_THAN",
@@ -66,6 +67,15 @@ GRADIENT_TYPES = ["LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "SPHERICAL", "QUA
 MAP_RANGE_TYPES = ["LINEAR", "STEPPED", "SMOOTHSTEP", "SMOOTHERSTEP"]
 INTERPOLATIONS = ["Closest", "Linear", "Cubic", "Smart"]
 EXTENSIONS = ["REPEAT", "EXTEND", "CLIP", "MIRROR"]
+DIMENSIONS = ["1D", "2D", "3D", "4D"]
+# procedural modes: drt.materials.procedural's numbering of Blender's enums
+NOISE_TYPES = {"MULTIFRACTAL": 0, "FBM": 1, "HYBRID_MULTIFRACTAL": 2, "RIDGED_MULTIFRACTAL": 3,
+               "HETERO_TERRAIN": 4}
+VORONOI_FEATURES = ["F1", "F2", "SMOOTH_F1", "DISTANCE_TO_EDGE", "N_SPHERE_RADIUS"]
+VORONOI_METRICS = ["EUCLIDEAN", "MANHATTAN", "CHEBYCHEV", "MINKOWSKI"]
+WAVE_BANDS = ["X", "Y", "Z", "DIAGONAL"]
+WAVE_RINGS = ["X", "Y", "Z", "SPHERICAL"]
+WAVE_PROFILES = ["SIN", "SAW", "TRI"]
 VMATH_VALUE_OUT = {"DOT_PRODUCT", "DISTANCE", "LENGTH"}
 RAMP_TABLE_SIZE = 256  # Cycles bakes colour ramps into this many entries (RAMP_TABLE_SIZE)
 #: Rec.709 luminance (Blender 5's default working space): Cycles's colour → float conversion
@@ -81,6 +91,9 @@ SUPPORTED_NODES = {
     "ShaderNodeCombineRGB", "ShaderNodeSeparateColor", "ShaderNodeCombineColor",
     "ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry", "ShaderNodeLightPath",
     "ShaderNodeNormalMap", "ShaderNodeObjectInfo", "ShaderNodeBump",
+    "ShaderNodeTexNoise", "ShaderNodeTexWhiteNoise", "ShaderNodeTexVoronoi", "ShaderNodeTexWave",
+    "ShaderNodeTexMagic", "ShaderNodeTexBrick", "ShaderNodeRGBCurve", "ShaderNodeVectorCurve",
+    "ShaderNodeFloatCurve", "ShaderNodeVertexColor", "ShaderNodeAttribute",
 }
 
 
@@ -458,6 +471,8 @@ class ProgramBuilder:
                     raise Unsupported(node)
                 res = self.emit(OP_HSV_TO_RGB, 0, [res])
             return res
+        if k in PROCEDURAL_COMPILERS:
+            return PROCEDURAL_COMPILERS[k](self, node, out, ctx)
         raise Unsupported(node)
 
     def _linked_or_none(self, node, key, ctx):
@@ -566,6 +581,14 @@ class ProgramBuilder:
         if hit is None:
             hit = self._geometry[key] = self.emit(OP_POINT, row, [], param=component)
         return hit
+
+    def pack(self, a, b, c=0.0) -> Value:
+        """Three float Values in one register (x, y, z), for the procedural operations' packed
+        inputs: a constant when all three are."""
+        vals = [v if isinstance(v, Value) else Value(self, const=float(v)) for v in (a, b, c)]
+        if all(v.is_const for v in vals):
+            return Value(self, const=[float(v.const[0]) for v in vals])
+        return self.emit(OP_COMBINE, 0, vals)
 
     def _tex_vector(self, node, ctx, default):
         sock = socket(node.inputs, "Vector")
@@ -730,3 +753,6 @@ class ImageTable:
                             "array": name})
         self._index[key] = idx
         return idx
+
+
+from .procedural_nodes import PROCEDURAL_COMPILERS  # noqa: E402  (it imports this module's names)

@@ -7,13 +7,18 @@ A material's ``program`` (header JSON):
     {"registers": R,                      # register count (each three float64)
      "constants": [[reg, x, y, z], ...],  # registers loaded before the first operation
      "ops": [[opcode, mode, out0, out1, in0, in1, in2, in3, in4, in5, param], ...],
-     "data": [float, ...]}                # colour-ramp tables (RAMP_TABLE_SIZE × RGBA each)
+     "data": [float, ...]}                # colour-ramp tables (RAMP_TABLE_SIZE × RGBA each),
+                                          # curve tables ([min_x, max_x, extrapolate, 0] + table),
+                                          # brick parameters (4 floats)
 
 and its lobes may carry ``color_reg`` / ``roughness_reg`` (the register that gives the lobe's
 weight colour / Blender roughness at a shading point; the lobe's ``color`` and ``roughness``
 are then representative values used for light-selection hints), the material
 ``emission_reg``. ``OP_ATTRIBUTE`` reads the per-corner attribute ``param`` of the header's
-``attributes`` list (names like ``"uv:UVMap.001"``; arrays ``mesh<K>.attr<I>`` (T, 3, 3)
+``attributes`` list (names like ``"uv:UVMap.001"``, ``"attr:Col"`` (a mesh attribute's
+colour/vector, float → replicated), ``"fac:Col"`` (its Fac: float, x of a float2, average of a
+vector/colour), ``"alpha:Col"`` (a colour's alpha, 1 for other types); ``"attr:"`` with an empty
+name is the render colour attribute); arrays ``mesh<K>.attr<I>`` (T, 3, 3)
 float32; zero on meshes without it, as Cycles's missing attributes). Images are a header list ``images`` of {"name", "width", "height", "srgb",
 "array"} whose array is (height, width, 4) uint8 or float16, bottom row first; ``srgb``:
 the values are sRGB-encoded and decoded to linear after interpolation (byte images, and float
@@ -26,6 +31,7 @@ from collections import namedtuple
 
 import numpy as np
 
+RAMP_TABLE_SIZE = 256
 OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE = 1, 2, 3, 4
 OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING = 10, 11, 12, 13
 OP_IMAGE, OP_CHECKER, OP_GRADIENT, OP_RAMP = 20, 21, 22, 23
@@ -34,7 +40,13 @@ OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB =
 # shading-point inputs of surface hits (docs/materials.md, "Shading-point inputs")
 OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 92, 93, 94
 OP_BUMP_OFFSET, OP_BUMP, OP_CAMERA_COORDS = 95, 96, 97
-OPCODES = {OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_BUMP_OFFSET, OP_BUMP,
+# procedural textures and curves (issue 11 phase 2; kernels in drt.materials.procedural). Scalar
+# inputs travel packed three to a register (the compiler's COMBINE), see programs.run_program.
+OP_NOISE, OP_WHITE_NOISE, OP_VORONOI, OP_WAVE, OP_MAGIC, OP_BRICK, OP_CURVES = 50, 51, 52, 53, 54, 55, 56
+PROCEDURAL_OPCODES = {OP_NOISE, OP_WHITE_NOISE, OP_VORONOI, OP_WAVE, OP_MAGIC, OP_BRICK, OP_CURVES}
+#: opcodes whose ``param`` is an offset into ``data`` and how many floats they read there
+DATA_OPS = {OP_RAMP: 4 * RAMP_TABLE_SIZE, OP_BRICK: 4, OP_CURVES: 4 + 4 * RAMP_TABLE_SIZE}
+OPCODES = PROCEDURAL_OPCODES | {OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_BUMP_OFFSET, OP_BUMP,
            OP_CAMERA_COORDS, OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
            OP_CHECKER, OP_GRADIENT, OP_RAMP, OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA,
            OP_BRIGHT_CONTRAST, OP_HSV, OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE,
@@ -61,7 +73,6 @@ POINT_XFORM = 12   # rows 12..14
 POINT_ROWS = 15
 #: Normal Map spaces (Blender's enum order)
 NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD")
-RAMP_TABLE_SIZE = 256
 #: Rec.709 luminance weights (Blender's default working space): Cycles's colour → float
 LUMINANCE = (0.2126729, 0.7151522, 0.0721750)
 MAX_REGISTERS = 4096
@@ -143,8 +154,10 @@ def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> 
             raise ValueError(f"{where}.ops[{k}]: object info output out of range")
         if row[0] in (OP_FRESNEL, OP_LAYER_WEIGHT) and row[4] < 0 or row[0] == OP_LAYER_WEIGHT and row[3] < 0:
             raise ValueError(f"{where}.ops[{k}]: missing input or output")
-        if row[0] == OP_RAMP and not 0 <= row[10] <= len(data) - 4 * RAMP_TABLE_SIZE:
-            raise ValueError(f"{where}.ops[{k}]: ramp table out of range")
+        if int(row[0]) in DATA_OPS and not 0 <= row[10] <= len(data) - DATA_OPS[int(row[0])]:
+            raise ValueError(f"{where}.ops[{k}]: data table out of range")
+        if row[0] == OP_VORONOI and not -1 <= row[10] < n:  # param: the Position register
+            raise ValueError(f"{where}.ops[{k}]: register out of range")
     return {"registers": n, "constants": consts, "ops": ops, "data": data}
 
 
@@ -192,8 +205,8 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         where = f"material {mat['name']!r}"
         prog_of[i] = len(op_start) - 1
         ops = prog["ops"].copy()
-        ramp = ops[:, 0] == OP_RAMP
-        ops[ramp, 10] += sum(len(d) for d in data)
+        uses_data = np.isin(ops[:, 0], list(DATA_OPS))
+        ops[uses_data, 10] += sum(len(d) for d in data)
         op_rows.append(ops)
         const_rows.append(prog["constants"])
         data.append(prog["data"])

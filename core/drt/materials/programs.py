@@ -37,6 +37,7 @@ import numpy as np
 from ..kernels import inline_kernel, kernel
 from .dielectric import IOR_ONE_EPS
 from .ggx import ALPHA_SQ_SINGULAR
+from .procedural import procedural_op
 from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
                              POINT_OBJECT, POINT_UV, POINT_XFORM, OP_FRESNEL, OP_LAYER_WEIGHT,
                              OP_BUMP, OP_BUMP_OFFSET, OP_CAMERA_COORDS, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_POINT, POINT_P, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
@@ -1056,6 +1057,8 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
             _set(regs, o0, rgb_to_hsv(_reg(regs, i0)))
         elif op == OP_HSV_TO_RGB:
             _set(regs, o0, hsv_to_rgb(_reg(regs, i0)))
+        elif 50 <= op < 70:  # procedural textures and curves (drt.materials.procedural)
+            procedural_op(regs, pd.data, op, mode, o0, o1, i0, i1, i2, i3, i4, i5, param)
 
 
 @inline_kernel

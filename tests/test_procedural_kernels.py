@@ -1,0 +1,79 @@
+"""Procedural texture kernels without Blender (drt.materials.procedural): the integer emulation
+of Cycles's float32 bit casts and wrapping 32-bit hashes against numpy's own float32/uint32/
+int32 arithmetic (an independent implementation: numpy wraps natively), and statistical
+properties of the noises. Values against Cycles: tests/test_procedural_textures.py."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from drt.materials import procedural as P
+
+
+def test_float_bits_equal_numpy_view():
+    rng = np.random.default_rng(3)
+    xs = np.concatenate([rng.normal(0, 10, 200), rng.normal(0, 1e-39, 20), [0.0, -0.0, 1.0, -2.5, 1e30, 3.4e38,
+                                                                              1.17549435e-38, 1e-45]])
+    want = xs.astype(np.float32).view(np.uint32).astype(np.int64)
+    got = np.array([P.float_bits(float(x)) for x in xs])
+    np.testing.assert_array_equal(got, want)
+
+
+def _rot(x, k):
+    return (x << np.uint32(k)) | (x >> np.uint32(32 - k))
+
+
+def _lookup3_numpy(keys):
+    """Jenkins lookup3 hash_uint{1,2,3} on uint32 arrays (numpy wraps)."""
+    n = len(keys)
+    a, b, c = (np.full(keys[0].shape, 0xDEADBEEF + (n << 2) + 13, np.uint32) for _ in range(3))
+    with np.errstate(over="ignore"):
+        if n == 3:
+            c = c + keys[2]
+        if n >= 2:
+            b = b + keys[1]
+        a = a + keys[0]
+        c ^= b; c -= _rot(b, 14); a ^= c; a -= _rot(c, 11); b ^= a; b -= _rot(a, 25)  # noqa: E702
+        c ^= b; c -= _rot(b, 16); a ^= c; a -= _rot(c, 4); b ^= a; b -= _rot(a, 14)  # noqa: E702
+        c ^= b; c -= _rot(b, 24)  # noqa: E702
+    return c
+
+
+def test_lookup3_matches_wrapping_uint32():
+    rng = np.random.default_rng(4)
+    k = rng.integers(-2**31, 2**31, (3, 300)).astype(np.int64)
+    ku = (k & 0xFFFFFFFF).astype(np.uint32)
+    np.testing.assert_array_equal([P.hash_uint(int(x)) for x in k[0]], _lookup3_numpy([ku[0]]))
+    np.testing.assert_array_equal([P.hash_uint2(int(x), int(y)) for x, y in k[:2].T], _lookup3_numpy([ku[0], ku[1]]))
+    np.testing.assert_array_equal([P.hash_uint3(*map(int, v)) for v in k.T], _lookup3_numpy(list(ku)))
+
+
+def test_pcg3d_matches_wrapping_int32():
+    rng = np.random.default_rng(5)
+    v = rng.integers(-1000, 1000, (3, 200)).astype(np.int32)
+    with np.errstate(over="ignore"):
+        x, y, z = (c * np.int32(1664525) + np.int32(1013904223) for c in v)
+        for rnd in range(2):
+            x = x + y * z
+            y = y + z * x
+            z = z + x * y
+            if rnd == 0:
+                x, y, z = x ^ (x >> 16), y ^ (y >> 16), z ^ (z >> 16)
+    want = np.stack([x, y, z]) & np.int32(0x7FFFFFFF)
+    want = want.astype(np.float32).astype(np.float64) * 2.0 ** -31
+    got = np.array([P.pcg(3, int(a), int(b), int(c), 0)[:3] for a, b, c in v.T]).T
+    np.testing.assert_array_equal(got, want)
+
+
+def test_white_noise_is_uniform_and_perlin_in_range():
+    rng = np.random.default_rng(6)
+    pts = rng.uniform(-50, 50, (4000, 4))
+    h = np.array([P.hash_to_float(3, *p) for p in pts])
+    counts = np.histogram(h, bins=20, range=(0, 1))[0]
+    chi2 = float(((counts - 200.0) ** 2 / 200.0).sum())
+    assert chi2 < 43.8  # 19 dof, p = 0.001
+    for dim in (1, 2, 3, 4):
+        n = np.array([P.snoise(dim, *p) for p in pts[:1500]])
+        assert np.all(np.abs(n) <= 1.05) and abs(n.mean()) < 0.05 and n.std() > 0.1
+        # the lattice: perlin is 0 at integer points
+        assert P.perlin(dim, 3.0, -2.0, 5.0, 7.0) == 0.0
