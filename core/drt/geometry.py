@@ -60,6 +60,8 @@ class SceneGeometry:
     corner_attrs: dict = field(default_factory=dict)
     triangle_count: int = 0
     scene_radius: float = 1.0  # radius of the bounding sphere of all geometry (scene units)
+    #: (T_all,) int32 index into scene.objects of each global triangle (volume stack keys)
+    object_id: np.ndarray = None
 
     @property
     def static_count(self) -> int:
@@ -204,6 +206,8 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         geom.object_info = np.array([np.concatenate([np.asarray(o.matrix, np.float64)[:3, 3],
                                                      o.info if o.info is not None else [1, 1, 1, 1, 0, 0]])
                                      for o in scene.objects], np.float64).reshape(-1, 9)
+    if any(isinstance(m, dict) and m.get("volume") for m in scene.materials):
+        geom.object_id = cat(obj_static + obj_moving, np.zeros(0, np.int32))  # volume stack keys
     names = getattr(scene, "attributes", [])
     tangents = {f"attr{i}" for i, a in enumerate(names) if a.startswith("tangent:")}
 

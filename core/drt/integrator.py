@@ -36,6 +36,9 @@ from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
 from .scene import RenderSettings
 from .trace import Tracer
+from .volumes.media import STACK_SIZE, MediumData, build_medium_data
+from .volumes.stack import camera_stack
+from .volumes.stage import add_transmitted, shadow_step
 
 DIRECT_STRATEGIES = scene_module.DIRECT_STRATEGIES
 INDIRECT_STRATEGIES = scene_module.INDIRECT_STRATEGIES
@@ -52,12 +55,15 @@ def _paths(n: int) -> stages.Paths:
         prev_mat=np.empty(n, dtype=np.int64), counts=np.empty((n, 4), dtype=np.int32),
         terminate=np.empty(n, dtype=bool), slot=np.empty(n, dtype=np.int64),
         pixel=np.empty(n, dtype=np.int64), index=np.empty(n, dtype=np.int64),
-        prev_flags=np.empty(n, dtype=np.int32))
+        prev_flags=np.empty(n, dtype=np.int32),
+        vstack=np.empty((n, STACK_SIZE), dtype=np.int64), vcount=np.empty(n, dtype=np.int32),
+        vseg=np.empty(n, dtype=np.int32))
 
 
 def _shadow_rays(n: int) -> stages.ShadowRays:
     return stages.ShadowRays(o=np.empty((n, 3)), d=np.empty((n, 3)), tmax=np.empty(n), tau=np.empty(n),
-                             contrib=np.empty((n, 3)), slot=np.empty(n, dtype=np.int64))
+                             contrib=np.empty((n, 3)), slot=np.empty(n, dtype=np.int64),
+                             vstack=np.empty((n, STACK_SIZE), dtype=np.int64))
 
 
 class Integrator:
@@ -76,6 +82,7 @@ class Integrator:
         pixel_filter: PixelFilter,
         direct: str = "MIS_POWER",
         indirect: str = "BSDF",
+        media: MediumData | None = None,
     ):
         if direct not in DIRECT_STRATEGIES:
             raise ValueError(f"unknown direct-light strategy {direct!r} (choose from {', '.join(DIRECT_STRATEGIES)})")
@@ -100,7 +107,8 @@ class Integrator:
             transmission_bounces=int(settings.transmission_bounces),
             clamp_direct=float(settings.clamp_direct), clamp_indirect=float(settings.clamp_indirect),
             direct=DIRECT_STRATEGIES.index(direct), indirect=INDIRECT_STRATEGIES.index(indirect),
-            film_transparent=bool(settings.film_transparent), motion=self.motion)
+            film_transparent=bool(settings.film_transparent), motion=self.motion,
+            volume_bounces=int(getattr(settings, "volume_bounces", 0)))
         self._workspaces = threading.local()
         # material programs (textures): a thread rewrites its own copy of the material data
         self.programs = materials.program_data(geom.uvs, getattr(geom, "corner_attrs", None),
@@ -116,6 +124,13 @@ class Integrator:
             material=np.ascontiguousarray(geom.material, dtype=np.int32),
             normals=np.ascontiguousarray(normals, dtype=np.float32),
             has_normals=np.ascontiguousarray(geom.has_normals, dtype=bool))
+        # participating media (drt.volumes): a disabled MediumData costs the kernels one flag test
+        if media is None:
+            media = build_medium_data([], None)
+        if media.enabled and media.camera_stack[0] < 0:
+            media = media._replace(camera_stack=camera_stack(media, tracer))
+        self.media = media
+        self.loop_limit = self.max_depth + 1 + (stages.VOLUME_BOUNDS_MAX if media.enabled else 0)
 
     def _hit_arrays(self, hits) -> stages.HitArrays:
         if hits.moving_linear is not None:
@@ -150,6 +165,25 @@ class Integrator:
         paths, shadow = ws
         return (stages.Paths(*(a[:n] for a in paths)), stages.ShadowRays(*(a[:n] for a in shadow)))
 
+    def _shadows_through_media(self, shadow, count, radiance):
+        """Shadow rays in a scene with media: closest hits, repeatedly, so that rays attenuate
+        by exp(−∫σt) and pass volume-only boundaries (updating their stacks) until they reach
+        their light, an opaque surface, or VOLUME_BOUNDS_MAX boundaries."""
+        trans = np.ones((count, 3))
+        blocked = np.zeros(count, dtype=bool)
+        active = np.arange(count, dtype=np.int64)
+        n_active = count
+        o, d, tmax = shadow.o[:count], shadow.d[:count], shadow.tmax[:count]
+        for _ in range(stages.VOLUME_BOUNDS_MAX):
+            if n_active == 0:
+                break
+            rows = active[:n_active]
+            hits = self.tracer.intersect(o[rows], d[rows], shadow.tau[:count][rows], tmax[rows])
+            n_active = shadow_step(self.media, self.surfaces.material, active, n_active, hits.prim, hits.t,
+                                   hits.ng, o, d, tmax, shadow.vstack, trans, blocked)
+        blocked[active[:n_active]] = True  # still crossing boundaries: give up (as Cycles)
+        add_transmitted(shadow, count, blocked, trans, radiance)
+
     def render_batch(self, x: np.ndarray, row: np.ndarray, index: np.ndarray) -> SampleBatch:
         """Trace one camera path per entry. x: (n,) pixel column from the left; row: (n,) pixel
         row from the TOP; index: (n,) sample number within the pixel. Returns per-path results."""
@@ -163,14 +197,21 @@ class Integrator:
         stages.camera_stage(sd, self.filter.data, self.camera.data, self.stage_settings,
                             np.ascontiguousarray(x, dtype=np.int64), np.ascontiguousarray(row, dtype=np.int64),
                             np.ascontiguousarray(index, dtype=np.int64), paths, out)
+        vd = self.media
+        if vd.enabled:
+            paths.vstack[:] = vd.camera_stack
+            paths.vcount[:] = 0
+            paths.vseg[:] = 0
         live = n
-        for depth_i in range(self.max_depth + 1):
+        for depth_i in range(self.loop_limit):
             if live == 0:
                 break
             hits = self.tracer.intersect(paths.o[:live], paths.d[:live], paths.tau[:live], paths.tmax[:live])
             live, n_shadow = stages.shade(sd, md, self.programs, regs, point, ld, self.surfaces, self.stage_settings, depth_i, live,
-                                          paths, self._hit_arrays(hits), out, shadow)
-            if n_shadow:
+                                          paths, self._hit_arrays(hits), out, shadow, vd)
+            if n_shadow and vd.enabled:
+                self._shadows_through_media(shadow, n_shadow, out.radiance)
+            elif n_shadow:
                 blocked = self.tracer.occluded(shadow.o[:n_shadow], shadow.d[:n_shadow],
                                                shadow.tmax[:n_shadow], shadow.tau[:n_shadow])
                 stages.add_unoccluded(shadow, n_shadow, blocked, out.radiance)

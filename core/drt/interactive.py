@@ -45,6 +45,7 @@ import numpy as np
 
 from .camera import Camera
 from .geometry import MovingMesh, SceneGeometry, _points_to_world, _transform_normals
+from .volumes.media import media_for_scene
 from .integrator import Integrator
 from .lights import LightSet
 from .materials import MaterialTable
@@ -291,7 +292,8 @@ class LiveScene:
         cam = Camera(camera, settings, geom.origin_shift)
         integ = Integrator(settings, geom, tracer, self._material_table, self._light_set, cam,
                            Sampler(settings.sampler, settings.seed, settings.spp), self._filter,
-                           direct=settings.direct, indirect=settings.indirect)
+                           direct=settings.direct, indirect=settings.indirect,
+                           media=media_for_scene(self.materials, None, geom))
         scene = Scene(settings, camera, self.world_color, self.materials, self.lights, [], [])
         return scene, RenderContext(scene, integ, tracer)
 

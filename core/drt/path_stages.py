@@ -54,8 +54,14 @@ from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_5d
 from .sampling.warps import cosine_hemisphere, uniform_hemisphere
 from .trace import offset_point
+from .volumes.phase import hg_sample
+from .volumes.stack import stack_copy, stack_cross
+from .volumes.stage import D_VOLUME0, VOLUME_DIMS, pass_factor, volume_segment
 
 D_PIXEL, D_LENS, D_TIME, D_BOUNCE0, DIMS_PER_BOUNCE = 0, 1, 2, 3, 4
+#: ray segments a path may cross volume-only boundaries on without a bounce (Cycles's
+#: VOLUME_BOUNDS_MAX guards the same self-intersection loop)
+VOLUME_BOUNDS_MAX = 64
 RR_START_BOUNCE = 3
 SHADOW_EPSILON = 1e-4  # relative shortening of shadow rays so they stop before the light's surface
 # largest radiance a sample may carry: its square (the variance pass) still fits float32
@@ -72,6 +78,7 @@ StageSettings = namedtuple("StageSettings", [
     "direct", "indirect",                 # DIRECT_* / INDIRECT_* codes
     "film_transparent",                   # camera rays that miss get alpha 0
     "motion",                             # anything moves: draw a shutter time per sample
+    "volume_bounces",                     # scatter events a path may have in media (Cycles's)
 ])
 
 Paths = namedtuple("Paths", [
@@ -83,6 +90,9 @@ Paths = namedtuple("Paths", [
     "terminate",                          # (n,) bool: collect emission at the next hit, then stop
     "slot", "pixel", "index",             # batch row, flat pixel id, sample number
     "prev_flags",                         # (n,) int32 RAY_* bits of how the ray was scattered
+    "vstack",                             # (n, STACK_SIZE) int64 volume stack (drt.volumes.stack)
+    "vcount",                             # (n,) int32 volume scatter events so far
+    "vseg",                               # (n,) int32 ray segments so far (volume sample dims)
 ])
 
 # how a ray left its last vertex (Cycles's ray-type flags, for the Light Path node); 0: camera
@@ -90,7 +100,8 @@ RAY_DIFFUSE, RAY_GLOSSY, RAY_SINGULAR, RAY_TRANSMIT = 1, 2, 4, 8
 
 Outputs = namedtuple("Outputs", ["radiance", "alpha", "depth", "normal", "albedo", "eye", "forward"])
 
-ShadowRays = namedtuple("ShadowRays", ["o", "d", "tmax", "tau", "contrib", "slot"])
+ShadowRays = namedtuple("ShadowRays", ["o", "d", "tmax", "tau", "contrib", "slot",
+                                       "vstack"])  # (n, STACK_SIZE): the media the ray starts in
 
 Surfaces = namedtuple("Surfaces", [
     "material",       # (T,) int32 per global triangle
@@ -261,6 +272,32 @@ def valid_specular_normal(ng, wi, n):
 
 
 @kernel
+def copy_path(paths, i, j):
+    """Copy path row i to row j (every field; j ≤ i in compaction)."""
+    if i == j:
+        return
+    for a in (paths.o, paths.d, paths.throughput, paths.prev_p, paths.prev_n, paths.prev_wo):
+        for c in range(3):
+            a[j, c] = a[i, c]
+    paths.tmax[j] = paths.tmax[i]
+    paths.tau[j] = paths.tau[i]
+    paths.prev_pdf[j] = paths.prev_pdf[i]
+    paths.prev_delta[j] = paths.prev_delta[i]
+    paths.prev_mat[j] = paths.prev_mat[i]
+    for c in range(paths.counts.shape[1]):
+        paths.counts[j, c] = paths.counts[i, c]
+    paths.terminate[j] = paths.terminate[i]
+    paths.slot[j] = paths.slot[i]
+    paths.pixel[j] = paths.pixel[i]
+    paths.index[j] = paths.index[i]
+    paths.prev_flags[j] = paths.prev_flags[i]
+    for c in range(paths.vstack.shape[1]):
+        paths.vstack[j, c] = paths.vstack[i, c]
+    paths.vcount[j] = paths.vcount[i]
+    paths.vseg[j] = paths.vseg[i]
+
+
+@kernel
 def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
     """Primary rays for camera samples (x column from the left, row from the TOP, sample index);
     initialises the path state and the outputs of every batch row."""
@@ -303,15 +340,17 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
 
 
 @kernel
-def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hits, out, shadow):
+def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hits, out, shadow, vd):
     """One bounce for paths [0, live) (see the module docstring). Returns (paths still alive,
     now compacted to the front; shadow rays queued in ``shadow``). ``pd`` holds the material
     programs (``drt.materials.programs``; no programs: zero-size arrays); when there are any,
     ``md`` must be this thread's own copy of the material data and ``regs`` its register file,
     since a textured material's row is rewritten at each of its hits, and ``point`` its
-    (POINT_ROWS, 3) shading-point array."""
-    camera = depth_i == 0
-    base = D_BOUNCE0 + DIMS_PER_BOUNCE * depth_i
+    (POINT_ROWS, 3) shading-point array. ``vd``: the scene's media
+    (``drt.volumes.media.MediumData``; disabled: no media, nothing below touches them).
+
+    Camera rays and sample dimensions go by the path's bounce count, which equals ``depth_i``
+    unless a path crossed volume-only boundaries (those segments are not bounces)."""
     direct = settings.direct
     n_shadow = 0
     j = 0
@@ -325,21 +364,96 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         prev_p = load(paths.prev_p, i)
         prev_n = load(paths.prev_n, i)
         bounce = paths.counts[i, 0]
+        camera = bounce == 0
+        base = D_BOUNCE0 + DIMS_PER_BOUNCE * bounce
         prev_hint = material_hint(md, paths.prev_mat[i], prev_n, load(paths.prev_wo, i))
         prim = hits.prim[i]
         t_geom = hits.t[i] if prim >= 0 else np.inf
         deep = bounce > 1  # light reached through more than one vertex is "indirect"
         acc = (0.0, 0.0, 0.0)
+        pixel = paths.pixel[i]
+        idx = paths.index[i]
+
+        # --- the media the ray travels through (drt.volumes.stage)
+        in_medium = vd.enabled and paths.vstack[i, 0] >= 0
+        t_end = t_geom
+        v_mode = 0
+        v_sig_t = (0.0, 0.0, 0.0)
+        v_chp = (1.0, 0.0, 0.0)
+        v_g = 0.0
+        scattered = False
+        thr0 = thr
+        if in_medium:
+            length = t_geom if prim >= 0 else paths.tmax[i]
+            (v_acc, v_mode, v_sig_t, v_chp, v_g, scattered, t_s, thr, nee_ok, x, v_wi, v_dist, f_nee,
+             v_lpdf, v_ph, v_ldelta) = volume_segment(
+                sd, ld, vd, paths.vstack, i, o, d, length, thr0, paths.terminate[i], direct != DIRECT_BSDF,
+                pixel, idx, paths.vseg[i])
+            acc = add(acc, clamp(settings, v_acc, deep))
+            if scattered:
+                t_end = t_s
+            if nee_ok:
+                w = nee_weight(direct, v_ldelta, v_lpdf, v_ph)
+                store(shadow.o, n_shadow, x)
+                store(shadow.d, n_shadow, v_wi)
+                shadow.tmax[n_shadow] = v_dist * (1.0 - SHADOW_EPSILON) if math.isfinite(v_dist) else np.inf
+                shadow.tau[n_shadow] = paths.tau[i]
+                store(shadow.contrib, n_shadow, clamp(settings, scale(f_nee, w), bounce > 0))
+                shadow.slot[n_shadow] = slot
+                stack_copy(paths.vstack, i, shadow.vstack, n_shadow)
+                n_shadow += 1
 
         # --- emitters along the ray: light shapes (transparent), then a sun disk and the world
         for k in range(ld.n_shapes):
             t = shape_intersect(ld, k, o, d)
-            if t < t_geom:
+            if t < t_end:
                 light, le, lpdf = shape_emission(ld, k, o, d, t, prev_p, prev_hint)
                 if camera and ld.li[light, I_VISIBLE_CAMERA] == 0:
                     continue
+                if in_medium:
+                    le = mul(le, pass_factor(v_mode, v_sig_t, v_chp, t))
                 w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
-                acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
+                acc = add(acc, clamp(settings, scale(mul(thr0, le), w), deep))
+        if scattered:
+            # --- the path scatters in the medium: sample the phase function to continue
+            store(out.radiance, slot, add(load(out.radiance, slot), acc))
+            if paths.vseg[i] >= VOLUME_BOUNDS_MAX + settings.max_bounces:
+                continue
+            vbase = D_VOLUME0 + VOLUME_DIMS * paths.vseg[i]
+            x = (o[0] + d[0] * t_end, o[1] + d[1] * t_end, o[2] + d[2] * t_end)
+            up0, up1 = sample_2d(sd, pixel, idx, vbase + 3)
+            wi, ph = hg_sample(d, v_g, up0, up1)
+            n_bounce = bounce + 1
+            n_volume = paths.vcount[i] + 1
+            limit = n_bounce > settings.max_bounces or n_volume > settings.volume_bounces
+            alive = any_positive(thr)
+            if bounce + 1 >= RR_START_BOUNCE:
+                u_rr = sample_2d(sd, pixel, idx, vbase + 4)[0]
+                q = min(max(max(thr[0], max(thr[1], thr[2])), 0.0), 1.0)
+                if not u_rr < q:
+                    alive = False
+                elif q > 0.0:
+                    thr = scale(thr, 1.0 / q)
+            if not alive:
+                continue
+            copy_path(paths, i, j)
+            store(paths.o, j, x)
+            store(paths.d, j, wi)
+            paths.tmax[j] = np.inf
+            store(paths.throughput, j, thr)
+            paths.prev_pdf[j] = ph
+            paths.prev_delta[j] = False
+            store(paths.prev_p, j, x)
+            store(paths.prev_n, j, (0.0, 0.0, 0.0))
+            store(paths.prev_wo, j, neg(d))
+            paths.prev_mat[j] = -1
+            paths.prev_flags[j] = 0  # a volume scatter is none of the surface ray types
+            paths.counts[j, 0] = n_bounce
+            paths.vcount[j] = n_volume
+            paths.vseg[j] = paths.vseg[i] + 1
+            paths.terminate[j] = limit
+            j += 1
+            continue
         if prim < 0:
             sun = sun_in_cone(ld, d)
             if sun >= 0 and not (camera and ld.li[sun, I_VISIBLE_CAMERA] == 0):
@@ -358,6 +472,21 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
 
         # --- the surface hit: its emission (also for paths stopping here at a bounce limit)
         mat = surf.material[prim]
+        if vd.enabled and vd.pass_through[mat]:
+            # a volume-only mesh has no surface: cross it (update the stack), no bounce
+            store(out.radiance, slot, add(load(out.radiance, slot), acc))
+            if paths.vseg[i] >= VOLUME_BOUNDS_MAX + settings.max_bounces or not any_positive(thr):
+                continue
+            p = load(hits.p, i)
+            ng = load(hits.ng, i)
+            copy_path(paths, i, j)
+            stack_cross(vd, paths.vstack, j, prim, mat, d, ng)
+            store(paths.o, j, offset_point(p, ng, d))
+            paths.tmax[j] = paths.tmax[i] - t_geom
+            store(paths.throughput, j, thr)
+            paths.vseg[j] = paths.vseg[i] + 1
+            j += 1
+            continue
         p = load(hits.p, i)
         ng = load(hits.ng, i)
         ns = shading_normal(surf, hits, i, prim, ng)
@@ -391,8 +520,6 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             out.depth[slot] = max(dot(sub(p, load(out.eye, slot)), load(out.forward, slot)), 0.0)
             store(out.normal, slot, ns)
             store(out.albedo, slot, load(md.albedo, mat))
-        pixel = paths.pixel[i]
-        idx = paths.index[i]
         u_light_select, u_lobe = sample_2d(sd, pixel, idx, base)
         t_ax, b_ax = build_frame(ns)
         wo_l = to_local(wo, t_ax, b_ax, ns)
@@ -422,6 +549,10 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                     shadow.tau[n_shadow] = paths.tau[i]
                     store(shadow.contrib, n_shadow, c)
                     shadow.slot[n_shadow] = slot
+                    if vd.enabled:  # the shadow ray starts in the media on wi's side
+                        stack_copy(paths.vstack, i, shadow.vstack, n_shadow)
+                        if not same_geo:
+                            stack_cross(vd, shadow.vstack, n_shadow, prim, mat, wi, ng)
                     n_shadow += 1
 
         # --- continue the path by sampling the BSDF
@@ -453,7 +584,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         n_transmission = paths.counts[i, 3] + (1 if kind == LOBE_TRANSMISSION else 0)
         limit = (n_bounce > settings.max_bounces or n_diffuse > settings.diffuse_bounces
                  or n_glossy > settings.glossy_bounces or n_transmission > settings.transmission_bounces)
-        if depth_i + 1 >= RR_START_BOUNCE:
+        if bounce + 1 >= RR_START_BOUNCE:
             u_rr = sample_2d(sd, pixel, idx, base + 3)[0]
             q = min(max(max(thr[0], max(thr[1], thr[2])), 0.0), 1.0)
             if not u_rr < q:
@@ -464,6 +595,12 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             continue
 
         # --- write the continuing path to slot j ≤ i (compaction in place)
+        if vd.enabled:
+            stack_copy(paths.vstack, i, paths.vstack, j)
+            if not refl_geo:  # transmitted: the path enters or leaves the material's medium
+                stack_cross(vd, paths.vstack, j, prim, mat, wi, ng)
+            paths.vcount[j] = paths.vcount[i]
+            paths.vseg[j] = paths.vseg[i] + 1
         store(paths.o, j, offset_point(p, ng, wi))
         store(paths.d, j, wi)
         paths.tmax[j] = np.inf

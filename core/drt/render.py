@@ -35,6 +35,7 @@ from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
 from .scene import Scene, SceneError
 from .trace import Tracer
+from .volumes.media import media_for_scene
 
 BATCH_PATHS = 1 << 16
 MIN_BATCH_PATHS = 1 << 12
@@ -128,6 +129,7 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
         PixelFilter(settings.filter_type, settings.filter_width),
         direct=settings.direct,
         indirect=settings.indirect,
+        media=media_for_scene(scene.materials, scene.world_volume, geom),
     )
     ctx = RenderContext(scene, integ, tracer, time.perf_counter() - t0)
     if not scene.lights and not np.any(scene.world_color > 0) and emissive is None:

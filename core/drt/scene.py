@@ -192,6 +192,7 @@ class RenderSettings:
     indirect: str = "BSDF"  # continuation sampling (integrator.INDIRECT_STRATEGIES)
     adaptive_threshold: float = 0.0  # stop a pixel when its relative standard error falls below; 0 = off
     adaptive_min_samples: int = 0  # samples every pixel takes before it may stop; 0 = automatic
+    volume_bounces: int = 0  # scatter events in media a path may have beyond the first (Cycles's)
 
 
 @dataclass
@@ -261,6 +262,8 @@ class Scene:
     images: list = field(default_factory=list, repr=False)
     #: names of the named per-corner attributes programs read (e.g. "uv:UVMap.001")
     attributes: list = field(default_factory=list, repr=False)
+    #: the world's homogeneous medium (``drt.volumes.media``), None: none
+    world_volume: dict | None = None
 
     @property
     def has_motion(self) -> bool:
@@ -312,7 +315,8 @@ def _render_settings(h: dict) -> RenderSettings:
         shutter = (float(s[0]), float(s[1]))
     bounces = {
         k: _number(r, k, p, dflt, lo=0, hi=1024, integer=True)
-        for k, dflt in (("max_bounces", 12), ("diffuse_bounces", 4), ("glossy_bounces", 4), ("transmission_bounces", 12))
+        for k, dflt in (("max_bounces", 12), ("diffuse_bounces", 4), ("glossy_bounces", 4), ("transmission_bounces", 12),
+                        ("volume_bounces", 0))
     }
     return RenderSettings(
         width=w,
@@ -394,6 +398,11 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0) -> list[dict]:
             "lobes": clean,
             "emission": _vector(m, "emission", p, 3, default=[0, 0, 0], lo=0.0).tolist(),
         }
+        volume = _medium(m, p)
+        if volume is not None:
+            mat["volume"] = volume
+        if "surface" in m:
+            mat["surface"] = _bool(m, "surface", p)
         if m.get("program") is not None:
             try:
                 mat["program"] = validate_program(m["program"], n_images, f"{p}.program", n_attributes)
@@ -406,6 +415,19 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0) -> list[dict]:
                 mat["normal_reg"] = _number(m, "normal_reg", p, integer=True, lo=0)
         out.append(mat)
     return out
+
+
+def _medium(d: dict, path: str) -> dict | None:
+    """The optional ``volume`` of a material or the world (drt.volumes.media), validated."""
+    if d.get("volume") is None:
+        return None
+    from .volumes.media import validate_medium
+
+    try:
+        return validate_medium(d["volume"], f"{path}.volume")
+    except ValueError as e:  # "path.volume.field: problem"
+        where, _, problem = str(e).partition(": ")
+        raise SceneError(where, problem) from None
 
 
 def _images(h: dict, arrays: dict) -> list:
@@ -568,6 +590,7 @@ def scene_from_dict(header: dict, arrays: dict | None = None) -> Scene:
     camera = _camera(header)
     world = _get(header, "world", "", {"color": [0, 0, 0]})
     world_color = _vector(world, "color", "world", 3, default=[0, 0, 0], lo=0.0)
+    world_volume = _medium(world, "world")
     images = _images(header, arrays)
     attributes = _list(header, "attributes", "") if "attributes" in header else []
     if not all(isinstance(a, str) for a in attributes):
@@ -579,4 +602,5 @@ def scene_from_dict(header: dict, arrays: dict | None = None) -> Scene:
     if not materials and any(len(m.triangles) for m in meshes):
         # Geometry without materials renders as a neutral grey diffuse (Blender's default look).
         materials = [{"name": "default", "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}], "emission": [0, 0, 0]}]
-    return Scene(render, camera, world_color, materials, lights, meshes, objects, header, arrays, images, list(attributes))
+    return Scene(render, camera, world_color, materials, lights, meshes, objects, header, arrays, images, list(attributes),
+                 world_volume)

@@ -1,0 +1,184 @@
+"""The scene's participating media as arrays, their validation, and Blender's volume nodes as
+coefficients (Cycles's svm_node_principled_volume / svm_node_closure_volume, Blender 5.0).
+
+A medium is homogeneous and given per material (scene file: ``materials[i].volume``) and for
+the world (``world.volume``), in Cycles's units, per metre of scene length::
+
+    {"scatter": [r, g, b],      # σs (1/m)
+     "absorption": [r, g, b],   # σa (1/m); extinction σt = σs + σa
+     "emission": [r, g, b],     # emitted radiance per metre, W/(m³·sr) (added as σe·dt)
+     "anisotropy": g}           # Henyey-Greenstein g in [-1, 1]
+
+A material whose node tree has a Volume output but nothing on its Surface output has
+``"surface": false``: its triangles only bound the medium and rays pass through them (Cycles).
+
+``MediumData`` rows: one per material (zero coefficients for materials without a volume), then
+the world's row (index M). Kernels read the coefficients of a *stack key*
+``object * stride + row`` (``drt.volumes.stack``) through ``key % stride``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+
+#: Stefan-Boltzmann σ / π in Cycles's blackbody scale (W/(m²·sr·K⁴) × 1e-6: Cycles's constant)
+_BLACKBODY_SIGMA = 5.670373e-8 * 1e-6 / math.pi
+
+MediumData = namedtuple("MediumData", [
+    "enabled",        # bool: the scene has a medium (else kernels skip everything)
+    "sigma_s",        # (K, 3) f64 scattering coefficient 1/m (K = materials + 1, last: world)
+    "sigma_t",        # (K, 3) f64 extinction σs + σa, 1/m
+    "emission",       # (K, 3) f64 radiance per metre
+    "g",              # (K,) f64 HG anisotropy
+    "is_medium",      # (K,) bool: the row has any coefficient
+    "pass_through",   # (M,) bool: material without surface (rays cross its triangles)
+    "stride",         # int: rows per object in a stack key (K)
+    "world_key",      # int: stack key of the world medium, −1: none
+    "tri_object",     # (T,) int32 object index of each global triangle ((0,) when disabled)
+    "camera_stack",   # (VS,) int64: the stack of rays leaving the camera (−1: empty slot)
+])
+
+
+def _fail(where: str, msg: str) -> ValueError:
+    return ValueError(f"{where}: {msg}")
+
+
+def validate_medium(v, where: str) -> dict:
+    """A scene-file ``volume`` dict checked and normalised (raises ValueError naming the field)."""
+    if not isinstance(v, dict):
+        raise _fail(where, f"must be an object, got {type(v).__name__}")
+    unknown = set(v) - {"scatter", "absorption", "emission", "anisotropy"}
+    if unknown:
+        raise _fail(f"{where}.{sorted(unknown)[0]}", "unknown field")
+    out = {}
+    for key in ("scatter", "absorption", "emission"):
+        val = v.get(key, [0.0, 0.0, 0.0])
+        try:
+            a = np.asarray(val, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise _fail(f"{where}.{key}", "must be a list of 3 numbers") from None
+        if a.shape != (3,) or not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a > 1e30):
+            raise _fail(f"{where}.{key}", f"must be 3 finite numbers in [0, 1e30], got {val!r}")
+        out[key] = [float(x) for x in a]
+    g = v.get("anisotropy", 0.0)
+    if isinstance(g, bool) or not isinstance(g, (int, float)) or not -1.0 <= g <= 1.0:
+        raise _fail(f"{where}.anisotropy", f"must be a number in [-1, 1], got {g!r}")
+    out["anisotropy"] = float(g)
+    return out
+
+
+def has_any(medium: dict | None) -> bool:
+    return bool(medium) and any(max(medium[k]) > 0.0 for k in ("scatter", "absorption", "emission"))
+
+
+# --------------------------------------------------------------------- Blender's volume nodes
+
+def principled_volume(color, density, anisotropy=0.0, absorption_color=(0.0, 0.0, 0.0),
+                      emission_strength=0.0, emission_color=(1.0, 1.0, 1.0),
+                      blackbody_intensity=0.0, blackbody_tint=(1.0, 1.0, 1.0),
+                      temperature=1000.0, blackbody_rgb=None, weight=1.0) -> dict:
+    """Principled Volume → medium (Cycles 5.0 svm_node_principled_volume): σs = density·color,
+    σa = density·max(1 − color, 0)·max(1 − √absorption_color, 0), emission = strength·colour
+    (not scaled by density) + blackbody σ_SB/π·mix(1, T⁴, intensity)·tint·rgb(T).
+    ``blackbody_rgb``: the Rec.709 colour of temperature T (Cycles's table; the add-on passes
+    Blender's own); ``weight``: a Mix/Add shader factor."""
+    c = np.maximum(np.asarray(color, dtype=np.float64), 0.0)
+    dens = max(float(density), 0.0) * weight
+    ac = np.sqrt(np.maximum(np.asarray(absorption_color, dtype=np.float64), 0.0))
+    sigma_s = dens * c
+    sigma_a = dens * np.maximum(1.0 - c, 0.0) * np.maximum(1.0 - ac, 0.0)
+    emission = max(float(emission_strength), 0.0) * np.asarray(emission_color, dtype=np.float64) * weight
+    if blackbody_intensity > 0.0 and blackbody_rgb is not None:
+        t = max(float(temperature), 0.0)
+        intensity = _BLACKBODY_SIGMA * (1.0 + (t ** 4 - 1.0) * blackbody_intensity)
+        emission = emission + intensity * np.asarray(blackbody_tint, float) * np.asarray(blackbody_rgb, float) * weight
+    return {"scatter": sigma_s.tolist(), "absorption": sigma_a.tolist(),
+            "emission": np.maximum(emission, 0.0).tolist(), "anisotropy": float(anisotropy)}
+
+
+def volume_absorption(color, density, weight=1.0) -> dict:
+    """Volume Absorption → σa = density·(1 − color) (Cycles: the closure weight is 1 − color)."""
+    dens = max(float(density), 0.0) * weight
+    sigma_a = dens * np.maximum(1.0 - np.asarray(color, dtype=np.float64), 0.0)
+    return {"scatter": [0.0] * 3, "absorption": sigma_a.tolist(), "emission": [0.0] * 3, "anisotropy": 0.0}
+
+
+def volume_scatter(color, density, anisotropy=0.0, weight=1.0) -> dict:
+    """Volume Scatter (Henyey-Greenstein) → σs = density·color, no absorption."""
+    dens = max(float(density), 0.0) * weight
+    sigma_s = dens * np.maximum(np.asarray(color, dtype=np.float64), 0.0)
+    return {"scatter": sigma_s.tolist(), "absorption": [0.0] * 3, "emission": [0.0] * 3,
+            "anisotropy": float(anisotropy)}
+
+
+def add_media(a: dict | None, b: dict | None) -> dict | None:
+    """Add Shader of two media: coefficients add; g is the σs-weighted mean (one HG lobe: DRT
+    keeps one lobe per medium, exact when both g agree)."""
+    if not a:
+        return b
+    if not b:
+        return a
+    wa, wb = float(np.mean(a["scatter"])), float(np.mean(b["scatter"]))
+    g = (wa * a["anisotropy"] + wb * b["anisotropy"]) / (wa + wb) if wa + wb > 0 else 0.0
+    return {k: (np.asarray(a[k]) + np.asarray(b[k])).tolist() for k in ("scatter", "absorption", "emission")} | \
+        {"anisotropy": float(g)}
+
+
+def scale_medium(m: dict | None, w: float) -> dict | None:
+    """A medium times a Mix Shader factor w (all coefficients are linear in the closure weight)."""
+    if not m:
+        return m
+    return {k: (np.asarray(m[k]) * w).tolist() for k in ("scatter", "absorption", "emission")} | \
+        {"anisotropy": m["anisotropy"]}
+
+
+# --------------------------------------------------------------------- the arrays
+
+STACK_SIZE = 8  # volume stack slots per path (Cycles's default volume_stack_size is 4 + world)
+
+
+def build_medium_data(materials: list[dict], world_volume: dict | None, tri_material=None,
+                      tri_object=None, camera_stack=None) -> MediumData:
+    """The kernels' ``MediumData`` (disabled with zero-size arrays when nothing has a medium)."""
+    m = len(materials)
+    k = m + 1
+    sigma_s = np.zeros((k, 3))
+    sigma_a = np.zeros((k, 3))
+    emission = np.zeros((k, 3))
+    g = np.zeros(k)
+    rows = list(enumerate(mat.get("volume") for mat in materials)) + [(m, world_volume)]
+    for i, v in rows:
+        if has_any(v):
+            sigma_s[i], sigma_a[i], emission[i] = v["scatter"], v["absorption"], v["emission"]
+            g[i] = v["anisotropy"]
+    is_medium = np.any((sigma_s + sigma_a + emission) > 0.0, axis=1)
+    pass_through = np.array([mat.get("surface", True) is False for mat in materials], dtype=bool)
+    enabled = bool(is_medium.any() or pass_through.any())
+    world_key = m if is_medium[m] else -1
+    if camera_stack is None:
+        camera_stack = np.full(STACK_SIZE, -1, np.int64)
+        if world_key >= 0:
+            camera_stack[0] = world_key
+    return MediumData(
+        enabled=enabled, sigma_s=sigma_s, sigma_t=sigma_s + sigma_a, emission=emission, g=g,
+        is_medium=is_medium, pass_through=pass_through if m else np.zeros(1, bool), stride=k,
+        world_key=world_key,
+        tri_object=np.ascontiguousarray(tri_object if enabled and tri_object is not None
+                                        else np.zeros(0), dtype=np.int32),
+        camera_stack=np.ascontiguousarray(camera_stack, dtype=np.int64))
+
+
+def media_for_scene(materials: list[dict], world_volume: dict | None, geom) -> MediumData:
+    """``MediumData`` of a scene's (validated) material dicts, world medium and geometry
+    (``drt.geometry.SceneGeometry``); the camera's stack is filled by the ``Integrator``."""
+    obj = getattr(geom, "object_id", None)
+    if obj is None or len(obj) != len(geom.material):
+        obj = np.zeros(len(geom.material), np.int32)
+    md = build_medium_data(materials, world_volume, tri_object=obj)
+    if md.enabled:
+        # the camera stack is computed by the Integrator (it needs the tracer): mark it unknown
+        md = md._replace(camera_stack=np.full(STACK_SIZE, -1, np.int64))
+    return md

@@ -1,0 +1,250 @@
+"""What the path tracer does per ray segment inside media (called from ``drt.path_stages``), and
+the shadow-ray transmittance stage. Cycles 5.0's homogeneous integrator
+(kernel/integrator/shade_volume.h, volume_integrate_homogeneous) is the model:
+
+* **emission** of the segment [0, L) is integrated analytically: thr·σe·(1 − e^(−σt·L))/σt;
+* **indirect** (the path's next vertex): scatter inside the segment with probability 1 − T(L)
+  in a channel picked ∝ (albedo·(1 − T) + T)·throughput, at a distance drawn from that
+  channel's exponential; the weights divide by the channel-averaged pdf, so the estimator is
+  unbiased for every colour. Otherwise the path transmits to the segment's end with weight
+  T(L)/P(transmit);
+* **direct** (next-event estimation, decoupled from the indirect vertex as in Cycles): a second
+  point on the segment, by distance sampling or — when the light sample has a position —
+  equiangular sampling toward it, chosen with probability ½ each and weighted by the power
+  heuristic between the two densities (× 2 for the ½). The light is sampled again from that
+  point; its contribution is thr·σs·T(t)/pdf(t) · phase · Le / pdf_light.
+* a path that may not scatter any more (a bounce limit) or a medium that does not scatter only
+  attenuates (weight T(L)) and collects emission, like Cycles's PATH_RAY_TERMINATE paths.
+
+Emitters the ray passes before its end (light shapes, the sun, the world) are weighted by
+T(t)/P(the path gets past t) (``pass_factor``) so that all estimators stay unbiased.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..kernels import inline_kernel, kernel
+from ..kernels.vec3 import load, store
+from ..lights import light_sample
+from ..sampling.sequences import sample_2d
+from .distance import (channel_probs, equiangular_pdf, equiangular_sample, equiangular_setup, exp_pdf,
+                       exp_sample, pick_channel)
+from .phase import hg_pdf
+from .stack import stack_coefficients, stack_cross
+
+#: volume sample dimensions start far above the surface ones (3 + 4·bounce), so that scenes
+#: without media keep their sample pattern; per ray segment k of a path they are
+#: D_VOLUME0 + VOLUME_DIMS·k + (0: (scatter, channel), 1: (light select, direct method/distance),
+#: 2: light position, 3: phase direction, 4: (Russian roulette, unused))
+D_VOLUME0 = 1 << 20
+VOLUME_DIMS = 5
+
+MODE_NONE, MODE_ATTENUATE, MODE_SCATTER = 0, 1, 2
+
+_ZERO3 = (0.0, 0.0, 0.0)
+_NO_HINT = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
+
+
+@kernel
+def transmittance(sig_t, t):
+    """e^(−σt·t) per channel (t may be inf: 0 where σt > 0, 1 where σt = 0)."""
+    return (math.exp(-sig_t[0] * t) if sig_t[0] > 0.0 else 1.0,
+            math.exp(-sig_t[1] * t) if sig_t[1] > 0.0 else 1.0,
+            math.exp(-sig_t[2] * t) if sig_t[2] > 0.0 else 1.0)
+
+
+@kernel
+def segment_emission(sig_t, emis, length):
+    """∫_0^L T(s)·σe ds per channel (a channel with no extinction over an infinite segment
+    gives 0: such emission has no finite value, Cycles leaves it to its ray length)."""
+    out0 = out1 = out2 = 0.0
+    for c in range(3):
+        e = emis[c]
+        s = sig_t[c]
+        if e > 0.0:
+            if s > 0.0:
+                v = e * (-math.expm1(-s * length)) / s if math.isfinite(length) else e / s
+            else:
+                v = e * length if math.isfinite(length) else 0.0
+            if c == 0:
+                out0 = v
+            elif c == 1:
+                out1 = v
+            else:
+                out2 = v
+    return (out0, out1, out2)
+
+
+@kernel
+def pass_factor(mode, sig_t, chp, t):
+    """Weight of an emitter at distance t on the segment (see the module docstring)."""
+    tr = transmittance(sig_t, t)
+    if mode == MODE_ATTENUATE:
+        return tr
+    if mode == MODE_SCATTER:
+        surv = chp[0] * tr[0] + chp[1] * tr[1] + chp[2] * tr[2]
+        if not surv > 0.0:
+            return _ZERO3
+        return (tr[0] / surv, tr[1] / surv, tr[2] / surv)
+    return (1.0, 1.0, 1.0)
+
+
+@inline_kernel
+def volume_segment(sd, ld, vd, stack, i, o, d, length, thr, terminate, nee, pixel, idx, seg):
+    """One ray segment o + t·d, t ∈ [0, length), inside the media of stack row i.
+
+    Returns (emission collected (3-tuple, already × thr), mode, σt, channel probabilities, g,
+    scattered, t_scatter, thr after the segment (× T/P(transmit) or × σs·T/pdf at the scatter
+    point), nee_ok, x, wi, dist, f_nee (thr·σs·T/pdf · phase · Le / light pdf, no MIS weight),
+    light pdf, phase pdf, light is delta). ``nee``: next-event estimation wanted."""
+    sig_s, sig_t, emis, g = stack_coefficients(vd, stack, i)
+    em = segment_emission(sig_t, emis, length)
+    acc = (thr[0] * em[0], thr[1] * em[1], thr[2] * em[2])
+    tr = transmittance(sig_t, length)
+    no_chp = (1.0, 0.0, 0.0)
+    if terminate or not (sig_s[0] > 0.0 or sig_s[1] > 0.0 or sig_s[2] > 0.0):
+        thr_t = (thr[0] * tr[0], thr[1] * tr[1], thr[2] * tr[2])
+        return (acc, MODE_ATTENUATE, sig_t, no_chp, g, False, math.inf, thr_t,
+                False, o, d, 0.0, _ZERO3, 0.0, 0.0, False)
+    base = D_VOLUME0 + VOLUME_DIMS * seg
+    alb = (sig_s[0] / sig_t[0] if sig_t[0] > 0.0 else 0.0,
+           sig_s[1] / sig_t[1] if sig_t[1] > 0.0 else 0.0,
+           sig_s[2] / sig_t[2] if sig_t[2] > 0.0 else 0.0)
+
+    # --- indirect: scatter somewhere in the segment, or transmit through it
+    u_sc, u_ch = sample_2d(sd, pixel, idx, base)
+    chp = channel_probs((alb[0] * (1.0 - tr[0]) + tr[0]) * thr[0],
+                        (alb[1] * (1.0 - tr[1]) + tr[1]) * thr[1],
+                        (alb[2] * (1.0 - tr[2]) + tr[2]) * thr[2])
+    ch, _ = pick_channel(chp, u_ch)
+    p_sc = 1.0 - tr[ch]
+    scattered = False
+    t_s = math.inf
+    if u_sc < p_sc:
+        t_s = exp_sample(min(u_sc / p_sc, 1.0 - 1e-16), sig_t[ch], length)
+        # (1 − T_c)·truncated pdf_c = σt_c·e^(−σt_c·t): the channel mixture's scatter density
+        ts = transmittance(sig_t, t_s)
+        pdf = chp[0] * sig_t[0] * ts[0] + chp[1] * sig_t[1] * ts[1] + chp[2] * sig_t[2] * ts[2]
+        if pdf > 0.0 and t_s < length:
+            scattered = True
+            thr_n = (thr[0] * sig_s[0] * ts[0] / pdf, thr[1] * sig_s[1] * ts[1] / pdf,
+                     thr[2] * sig_s[2] * ts[2] / pdf)
+        else:
+            thr_n = _ZERO3
+    else:
+        pdf = chp[0] * tr[0] + chp[1] * tr[1] + chp[2] * tr[2]
+        thr_n = (thr[0] * tr[0] / pdf, thr[1] * tr[1] / pdf, thr[2] * tr[2] / pdf) if pdf > 0.0 else _ZERO3
+
+    # --- direct: a second point for next-event estimation
+    nee_ok = False
+    x = o
+    wi = d
+    dist = 0.0
+    f_nee = _ZERO3
+    lpdf = 0.0
+    ph = 0.0
+    l_delta = False
+    if nee and ld.n_strategies > 0:
+        u_sel, u_dir = sample_2d(sd, pixel, idx, base + 1)
+        ul0, ul1 = sample_2d(sd, pixel, idx, base + 2)
+        chd = channel_probs(alb[0] * (1.0 - tr[0]) * thr[0], alb[1] * (1.0 - tr[1]) * thr[1],
+                            alb[2] * (1.0 - tr[2]) * thr[2])
+        # equiangular sampling needs a light position: sample the light from the segment start
+        w0, dist0, _, _, _, valid0 = light_sample(ld, o, _ZERO3, _NO_HINT, u_sel, ul0, ul1)
+        delta = span_d = th_a = th_b = 0.0
+        equi = valid0 and math.isfinite(dist0)
+        if equi:
+            c = (o[0] + w0[0] * dist0, o[1] + w0[1] * dist0, o[2] + w0[2] * dist0)
+            delta, span_d, th_a, th_b = equiangular_setup(o, d, c, length)
+            equi = span_d > 1e-9 and th_b > th_a
+        use_equi = False
+        u = u_dir
+        if equi:
+            if u_dir < 0.5:
+                u = 2.0 * u_dir
+            else:
+                use_equi = True
+                u = 2.0 * u_dir - 1.0
+            u = min(u, 1.0 - 1e-16)
+        if use_equi:
+            t = equiangular_sample(u, delta, span_d, th_a, th_b)
+        else:
+            chn, u2 = pick_channel(chd, u)
+            t = exp_sample(u2, sig_t[chn], length)
+        p_dist = (chd[0] * exp_pdf(t, sig_t[0], length) + chd[1] * exp_pdf(t, sig_t[1], length)
+                  + chd[2] * exp_pdf(t, sig_t[2], length))
+        p_equi = equiangular_pdf(t, delta, span_d, th_a, th_b, length) if equi else 0.0
+        if equi:
+            a, b = (p_equi, p_dist) if use_equi else (p_dist, p_equi)
+            # one-sample MIS over the two strategies (probability ½ each), power heuristic
+            w_over_pdf = 2.0 * a / (a * a + b * b) if a > 0.0 else 0.0
+        else:
+            w_over_pdf = 1.0 / p_dist if p_dist > 0.0 else 0.0
+        if w_over_pdf > 0.0 and t < length:
+            x = (o[0] + d[0] * t, o[1] + d[1] * t, o[2] + d[2] * t)
+            wi, dist, le, lpdf, l_delta, l_valid = light_sample(ld, x, _ZERO3, _NO_HINT, u_sel, ul0, ul1)
+            if l_valid and lpdf > 0.0:
+                ph = hg_pdf(d[0] * wi[0] + d[1] * wi[1] + d[2] * wi[2], g)
+                tt = transmittance(sig_t, t)
+                k = w_over_pdf * ph / lpdf
+                f_nee = (thr[0] * sig_s[0] * tt[0] * le[0] * k, thr[1] * sig_s[1] * tt[1] * le[1] * k,
+                         thr[2] * sig_s[2] * tt[2] * le[2] * k)
+                nee_ok = f_nee[0] > 0.0 or f_nee[1] > 0.0 or f_nee[2] > 0.0
+    return (acc, MODE_SCATTER, sig_t, chp, g, scattered, t_s, thr_n,
+            nee_ok, x, wi, dist, f_nee, lpdf, ph, l_delta)
+
+
+# ---------------------------------------------------------------------- shadow rays in media
+
+@kernel
+def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, trans, blocked):
+    """One round of shadow rays through media: rows active[0:count] of the shadow arrays were
+    traced (closest hits prim/t/ng, row k of the hit arrays for active[k]). Attenuates each
+    by its stack's media up to the hit (or tmax), then: an opaque hit blocks, a pass-through
+    boundary updates the stack and moves the ray past it (stays active), no hit: done.
+    Returns the number of rows still active (compacted to the front of ``active``)."""
+    n_next = 0
+    for k in range(count):
+        s = active[k]
+        p = prim[k]
+        hit = p >= 0 and t[k] < tmax[s]
+        seg = t[k] if hit else tmax[s]
+        if vd.enabled and stack[s, 0] >= 0:
+            _, sig_t, _, _ = stack_coefficients(vd, stack, s)
+            tr = transmittance(sig_t, seg)
+            for c in range(3):
+                trans[s, c] *= tr[c]
+        if not hit:
+            continue
+        mat = material[p]
+        if not vd.pass_through[mat]:
+            blocked[s] = True
+            continue
+        if trans[s, 0] == 0.0 and trans[s, 1] == 0.0 and trans[s, 2] == 0.0:
+            continue  # nothing gets through: done (the contribution is 0)
+        dd = load(d, s)
+        n = load(ng, k)
+        stack_cross(vd, stack, s, p, mat, dd, n)
+        oo = load(o, s)
+        tk = t[k]
+        # restart just past the boundary along the ray (relative offset, as trace.offset_point)
+        eps = 1e-5 + 2e-6 * max(abs(oo[0] + dd[0] * tk), max(abs(oo[1] + dd[1] * tk), abs(oo[2] + dd[2] * tk)))
+        adv = tk + eps / max(abs(dd[0] * n[0] + dd[1] * n[1] + dd[2] * n[2]), 1e-3)
+        store(o, s, (oo[0] + dd[0] * adv, oo[1] + dd[1] * adv, oo[2] + dd[2] * adv))
+        tmax[s] = tmax[s] - adv
+        if tmax[s] > 0.0:
+            active[n_next] = s
+            n_next += 1
+    return n_next
+
+
+@kernel
+def add_transmitted(shadow, count, blocked, trans, radiance):
+    """Add every unblocked shadow ray's contribution × its transmittance."""
+    for s in range(count):
+        if not blocked[s]:
+            slot = shadow.slot[s]
+            c = load(shadow.contrib, s)
+            v = (c[0] * trans[s, 0], c[1] * trans[s, 1], c[2] * trans[s, 2])
+            store(radiance, slot, (radiance[slot, 0] + v[0], radiance[slot, 1] + v[1], radiance[slot, 2] + v[2]))
