@@ -81,6 +81,10 @@ class DRTSceneSettings(bpy.types.PropertyGroup):
     transmission_bounces: IntProperty(
         name="Transmission", description="Maximum number of transmission bounces",
         default=12, min=0, max=1024)
+    volume_bounces: IntProperty(
+        name="Volume", description="Maximum number of volume scattering events beyond the first "
+        "(Cycles's Volume bounces: 0 = single scattering)",
+        default=0, min=0, max=1024)
 
     clamp_direct: FloatProperty(
         name="Direct Light", description="Clamp the radiance of direct light samples (0 disables)",

@@ -39,6 +39,7 @@ warns and uses its socket's value).
 import numpy as np
 
 from .. import compat
+from .volumes import volume_medium
 from .node_programs import (VMATH_OPS, ImageTable, OP_VMATH, ProgramBuilder, Unsupported, Value, clamp01,
                             constant, maybe_positive, resolve)
 
@@ -140,7 +141,12 @@ class MaterialExporter:
                 lobes = []
             else:
                 lobes, emission = self._shader(src, ctx, 1.0, problems, material, depth=0)
+        medium = volume_medium(self, out, problems) if tree is not None else None
         result = {"name": material.name, "lobes": [], "emission": [0.0, 0.0, 0.0]}
+        if medium is not None:  # a Volume output: the mesh bounds a medium (drt.volumes)
+            result["volume"] = medium
+            if src is None:
+                result["surface"] = False  # no Surface shader: rays pass its faces (Cycles)
         for lb in lobes:
             entry = self._lobe(lb)
             if entry is not None:

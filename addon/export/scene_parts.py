@@ -64,7 +64,7 @@ def render_settings(scene, preview: bool = False) -> dict:
         "transmission_bounces": int(d.transmission_bounces),
         "clamp_direct": float(d.clamp_direct), "clamp_indirect": float(d.clamp_indirect),
         "shutter": shutter_interval(r),
-    }
+    } | ({"volume_bounces": int(d.volume_bounces)} if getattr(d, "volume_bounces", 0) else {})
 
 
 def camera_dict(cam_obj, matrix) -> dict:
@@ -136,6 +136,11 @@ def light_dict(obj, matrix, warnings: list) -> dict | None:
 
 
 def world_dict(world, warnings: list) -> dict:
+    """Constant background radiance: Background color × strength (+ the world's medium)."""
+    return _with_volume(world, warnings, _world_surface(world, warnings))
+
+
+def _world_surface(world, warnings: list) -> dict:
     """Constant background radiance: Background color × strength."""
     if world is None:
         return {"color": [0.0, 0.0, 0.0]}
@@ -164,3 +169,13 @@ def world_dict(world, warnings: list) -> dict:
     if str_sock.is_linked:
         warnings.append(f"World '{world.name}': linked strength unsupported, using its value")
     return {"color": (col * float(str_sock.default_value)).tolist()}
+
+
+def _with_volume(world, warnings: list, d: dict) -> dict:
+    """``d`` plus the world's medium (its Volume output, addon/export/volumes.py), if any."""
+    from .volumes import world_volume
+
+    medium = world_volume(world, warnings)
+    if medium is not None:
+        d["volume"] = medium
+    return d
