@@ -109,6 +109,23 @@ def mix(name, fac, a, b):
     return mat
 
 
+def volume_material(name, node="ShaderNodeVolumePrincipled", surface=None, **inputs):
+    """A material with a volume shader on its Volume output (and optionally a surface node
+    dict {"node": ..., input: value} on its Surface output; None: volume only)."""
+    mat, nodes, out = _new_material(name)
+    v = nodes.new(node)
+    for k, val in inputs.items():
+        v.inputs[k.replace("_", " ")].default_value = _rgba(val) if isinstance(val, tuple) and len(val) == 3 else val
+    mat.node_tree.links.new(v.outputs[0], out.inputs["Volume"])
+    if surface is not None:
+        s = nodes.new(surface["node"])
+        for k, val in surface.items():
+            if k != "node":
+                s.inputs[k].default_value = val
+        mat.node_tree.links.new(s.outputs[0], out.inputs["Surface"])
+    return mat
+
+
 def set_world(world, color, strength):
     if bpy.app.version < (5, 0, 0):
         world.use_nodes = True
@@ -206,6 +223,8 @@ def reference_settings(scene, samples=1024):
         c.use_adaptive_sampling = False
         c.filter_width = 1.5
         c.max_bounces, c.diffuse_bounces, c.glossy_bounces, c.transmission_bounces = 12, 4, 4, 12
+        # DRT's Volume bounces (Cycles's default 0 when the add-on is not registered)
+        c.volume_bounces = int(getattr(getattr(scene, "drt", None), "volume_bounces", 0))
         c.caustics_reflective = True
         c.caustics_refractive = True
         if hasattr(c, "use_light_tree"):

@@ -160,10 +160,12 @@ class Integrator:
         """This thread's path and shadow-ray arrays, at least n rows (views of the first n).
         Reused from batch to batch: fresh arrays would cost a page fault per 4 KB every batch."""
         ws = getattr(self._workspaces, "arrays", None)
-        if ws is None or len(ws[0].slot) < n:
-            ws = self._workspaces.arrays = (_paths(n), _shadow_rays(n))
+        # a path in a medium may queue two shadow rays per bounce (volume + surface NEE)
+        n_shadow = 2 * n if self.media.enabled else n
+        if ws is None or len(ws[0].slot) < n or len(ws[1].slot) < n_shadow:
+            ws = self._workspaces.arrays = (_paths(n), _shadow_rays(n_shadow))
         paths, shadow = ws
-        return (stages.Paths(*(a[:n] for a in paths)), stages.ShadowRays(*(a[:n] for a in shadow)))
+        return (stages.Paths(*(a[:n] for a in paths)), stages.ShadowRays(*(a[:n_shadow] for a in shadow)))
 
     def _shadows_through_media(self, shadow, count, radiance):
         """Shadow rays in a scene with media: closest hits, repeatedly, so that rays attenuate
