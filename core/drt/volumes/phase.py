@@ -51,3 +51,12 @@ def hg_sample(d, g, u0, u1):
     t_ax, b_ax = build_frame(d)
     wi = to_world((s * math.cos(phi), s * math.sin(phi), c), t_ax, b_ax, d)
     return wi, hg_pdf(c, g)
+
+
+@kernel
+def hg_sample_rows(d, g, u, wi, pdf):
+    """``hg_sample`` for rows (tests, diagnostics): d (n, 3), u (n, 2) → wi (n, 3), pdf (n,)."""
+    for k in range(d.shape[0]):
+        w, p = hg_sample((d[k, 0], d[k, 1], d[k, 2]), g, u[k, 0], u[k, 1])
+        wi[k, 0], wi[k, 1], wi[k, 2] = w[0], w[1], w[2]
+        pdf[k] = p

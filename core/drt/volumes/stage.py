@@ -248,3 +248,18 @@ def add_transmitted(shadow, count, blocked, trans, radiance):
             c = load(shadow.contrib, s)
             v = (c[0] * trans[s, 0], c[1] * trans[s, 1], c[2] * trans[s, 2])
             store(radiance, slot, (radiance[slot, 0] + v[0], radiance[slot, 1] + v[1], radiance[slot, 2] + v[2]))
+
+
+@kernel
+def transmit_rows(sd, ld, vd, stack, o, d, length, thr, out_transmit, out_scatter, out_t):
+    """The indirect decision of ``volume_segment`` for rows k = 0..n−1 (pixel k, sample 0) on
+    the same segment, for tests: out_transmit[k] = throughput after the segment if the path
+    transmitted (else 0), out_scatter[k] = throughput at the scatter point (else 0), out_t[k] =
+    the scatter distance (inf: transmitted)."""
+    for k in range(out_transmit.shape[0]):
+        res = volume_segment(sd, ld, vd, stack, 0, o, d, length, thr, False, False, k, 0, 0)
+        scattered, t_s, thr_n = res[5], res[6], res[7]
+        for c in range(3):
+            out_transmit[k, c] = 0.0 if scattered else thr_n[c]
+            out_scatter[k, c] = thr_n[c] if scattered else 0.0
+        out_t[k] = t_s
