@@ -151,9 +151,11 @@ def volume_segment(sd, ld, vd, stack, i, o, d, length, thr, terminate, nee, pixe
         chd = channel_probs(alb[0] * (1.0 - tr[0]) * thr[0], alb[1] * (1.0 - tr[1]) * thr[1],
                             alb[2] * (1.0 - tr[2]) * thr[2])
         # equiangular sampling needs a light position: sample the light from the segment start
-        w0, dist0, _, _, _, valid0 = light_sample(ld, o, _ZERO3, _NO_HINT, u_sel, ul0, ul1)
+        # (its position, even where it sends no light to o: a spot's cone may still reach the
+        # segment, as Cycles, which checks only that the sample has a position)
+        w0, dist0, _, _, _, _ = light_sample(ld, o, _ZERO3, _NO_HINT, u_sel, ul0, ul1)
         delta = span_d = th_a = th_b = 0.0
-        equi = valid0 and math.isfinite(dist0)
+        equi = math.isfinite(dist0) and dist0 > 0.0
         if equi:
             c = (o[0] + w0[0] * dist0, o[1] + w0[1] * dist0, o[2] + w0[2] * dist0)
             delta, span_d, th_a, th_b = equiangular_setup(o, d, c, length)
