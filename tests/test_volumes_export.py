@@ -92,3 +92,23 @@ def test_glass_with_absorption_mix_and_world_volume(fresh):
     sc = scene_from_dict(res.header, res.arrays)
     assert sc.world_volume["scatter"] == pytest.approx([0.025] * 3)
     assert sc.render.volume_bounces == 3
+
+
+def test_volume_emission_and_blackbody_match_cycles(fresh, tmp_path):
+    """A non-extinguishing Principled Volume with emission and blackbody (1500 K) seen through 1 m:
+    radiance = emission per metre × 1 m, against Cycles's render of the same file (exact paths)."""
+    sys.path.insert(0, os.path.join(REPO, "scripts"))
+    import compare_cycles as cc
+
+    scene = bpy.context.scene
+    C.set_world(scene.world or bpy.data.worlds.new("W"), (0, 0, 0), 0.0)
+    m = C.volume_material("Flame", Density=0.0, Emission_Strength=0.5, Emission_Color=(1.0, 0.5, 0.25),
+                          Blackbody_Intensity=0.7, Temperature=1500.0)
+    C.box("B", (1, 1, 1), (0, 0, 0), m)
+    C.camera((0, -5, 0), (0, 0, 0), lens=200.0)
+    scene.render.resolution_x = scene.render.resolution_y = 8
+    C.reference_settings(scene, 4)
+    cyc = cc.render(scene, "CYCLES", 4, str(tmp_path / "c.exr"))
+    drt = cc.render(scene, "DRT", 4, str(tmp_path / "d.exr"))
+    np.testing.assert_allclose(drt[4, 4], cyc[4, 4], rtol=1e-3)
+    assert cyc[4, 4, 0] > 0.5 and cyc[4, 4, 0] > 2 * cyc[4, 4, 1]  # the blackbody term is really there

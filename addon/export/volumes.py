@@ -53,9 +53,6 @@ def _medium(ex, sock, ctx, weight, problems, depth):
             s = node.inputs.get(name)
             if s is not None and s.is_linked:
                 problems.append(f"'{node.name}' {name} unsupported")
-        bb = ex._const_value(node, "Blackbody Intensity", problems, 0.0, ctx)
-        if bb > 0.0:
-            problems.append(f"'{node.name}' blackbody emission not supported yet, ignored")
         return principled_volume(
             color=ex._const_color(node, "Color", problems, (0.5, 0.5, 0.5), ctx),
             density=ex._const_value(node, "Density", problems, 1.0, ctx),
@@ -63,6 +60,9 @@ def _medium(ex, sock, ctx, weight, problems, depth):
             absorption_color=ex._const_color(node, "Absorption Color", problems, (0.0, 0.0, 0.0), ctx),
             emission_strength=ex._const_value(node, "Emission Strength", problems, 0.0, ctx),
             emission_color=ex._const_color(node, "Emission Color", problems, (1.0, 1.0, 1.0), ctx),
+            blackbody_intensity=ex._const_value(node, "Blackbody Intensity", problems, 0.0, ctx),
+            blackbody_tint=ex._const_color(node, "Blackbody Tint", problems, (1.0, 1.0, 1.0), ctx),
+            temperature=ex._const_value(node, "Temperature", problems, 1000.0, ctx),
             weight=weight)
     if kind == "ShaderNodeVolumeAbsorption":
         return volume_absorption(ex._const_color(node, "Color", problems, (0.8, 0.8, 0.8), ctx),

@@ -76,6 +76,39 @@ def has_any(medium: dict | None) -> bool:
 
 # --------------------------------------------------------------------- Blender's volume nodes
 
+# Cycles's fit of the blackbody colour in Rec.709 (kernel/tables.h, svm_math_blackbody_color_rec709):
+# R, G = a/T + b·T + c, B = ((a·T + b)·T + c)·T + d, piecewise over 800–12000 K
+_BB_EDGES = (965.0, 1167.0, 1449.0, 1902.0, 3315.0, 6365.0)
+_BB_R = ((1.61919106e+03, -2.05010916e-03, 5.02995757e+00), (2.48845471e+03, -1.11330907e-03, 3.22621544e+00),
+         (3.34143193e+03, -4.86551192e-04, 1.76486769e+00), (4.09461742e+03, -1.27446582e-04, 7.25731635e-01),
+         (4.67028036e+03, 2.91258199e-05, 1.26703442e-01), (4.59509185e+03, 2.87495649e-05, 1.50345020e-01),
+         (3.78717450e+03, 9.35907826e-06, 3.99075871e-01))
+_BB_G = ((-4.88999748e+02, 6.04330754e-04, -7.55807526e-02), (-7.55994277e+02, 3.16730098e-04, 4.78306139e-01),
+         (-1.02363977e+03, 1.20223470e-04, 9.36662319e-01), (-1.26571316e+03, 4.87340896e-06, 1.27054498e+00),
+         (-1.42529332e+03, -4.01150431e-05, 1.43972784e+00), (-1.17554822e+03, -2.16378048e-05, 1.30408023e+00),
+         (-5.00799571e+02, -4.59832026e-06, 1.09098763e+00))
+_BB_B = ((5.96945309e-11, -4.85742887e-08, -9.70622247e-05, -4.07936148e-03),
+         (2.40430366e-11, 5.55021075e-08, -1.98503712e-04, 2.89312858e-02),
+         (-1.40949732e-11, 1.89878968e-07, -3.56632824e-04, 9.10767778e-02),
+         (-3.61460868e-11, 2.84822009e-07, -4.93211319e-04, 1.56723440e-01),
+         (-1.97075738e-11, 1.75359352e-07, -2.50542825e-04, -2.22783266e-02),
+         (-1.61997957e-13, -1.64216008e-08, 3.86216271e-04, -7.38077418e-01),
+         (6.72650283e-13, -2.73078809e-08, 4.24098264e-04, -7.52335691e-01))
+
+
+def blackbody_rgb_of(t: float) -> np.ndarray:
+    """Rec.709 colour of a blackbody at t kelvin, Cycles's fit (may be negative: wide gamut;
+    Blender's default scene-linear space is Rec.709, so no further conversion)."""
+    if t >= 12000.0:
+        return np.array([0.8262954810464208, 0.9945080501520986, 1.566307710274283])
+    if t < 800.0:
+        return np.array([5.413294490189271, -0.20319390035873933, -0.0822535242887164])
+    i = sum(t >= e for e in _BB_EDGES)
+    r, g, b = _BB_R[i], _BB_G[i], _BB_B[i]
+    return np.array([r[0] / t + r[1] * t + r[2], g[0] / t + g[1] * t + g[2],
+                     ((b[0] * t + b[1]) * t + b[2]) * t + b[3]])
+
+
 def principled_volume(color, density, anisotropy=0.0, absorption_color=(0.0, 0.0, 0.0),
                       emission_strength=0.0, emission_color=(1.0, 1.0, 1.0),
                       blackbody_intensity=0.0, blackbody_tint=(1.0, 1.0, 1.0),
@@ -83,16 +116,18 @@ def principled_volume(color, density, anisotropy=0.0, absorption_color=(0.0, 0.0
     """Principled Volume → medium (Cycles 5.0 svm_node_principled_volume): σs = density·color,
     σa = density·max(1 − color, 0)·max(1 − √absorption_color, 0), emission = strength·colour
     (not scaled by density) + blackbody σ_SB/π·mix(1, T⁴, intensity)·tint·rgb(T).
-    ``blackbody_rgb``: the Rec.709 colour of temperature T (Cycles's table; the add-on passes
-    Blender's own); ``weight``: a Mix/Add shader factor."""
+    ``blackbody_rgb``: the Rec.709 colour of temperature T (None: ``blackbody_rgb(T)``,
+    Cycles's table by default); ``weight``: a Mix/Add shader factor."""
     c = np.maximum(np.asarray(color, dtype=np.float64), 0.0)
     dens = max(float(density), 0.0) * weight
     ac = np.sqrt(np.maximum(np.asarray(absorption_color, dtype=np.float64), 0.0))
     sigma_s = dens * c
     sigma_a = dens * np.maximum(1.0 - c, 0.0) * np.maximum(1.0 - ac, 0.0)
     emission = max(float(emission_strength), 0.0) * np.asarray(emission_color, dtype=np.float64) * weight
-    if blackbody_intensity > 0.0 and blackbody_rgb is not None:
+    if blackbody_intensity > 0.0:
         t = max(float(temperature), 0.0)
+        if blackbody_rgb is None:
+            blackbody_rgb = blackbody_rgb_of(t)
         intensity = _BLACKBODY_SIGMA * (1.0 + (t ** 4 - 1.0) * blackbody_intensity)
         emission = emission + intensity * np.asarray(blackbody_tint, float) * np.asarray(blackbody_rgb, float) * weight
     return {"scatter": sigma_s.tolist(), "absorption": sigma_a.tolist(),
