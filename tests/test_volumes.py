@@ -265,3 +265,35 @@ def test_node_conversions_follow_cycles():
     np.testing.assert_allclose(m["absorption"], 2 * (1 - c) * (1 - np.sqrt([0.25, 0.0, 1.0])))
     np.testing.assert_allclose(m["emission"], [3.0, 1.5, 0.0])
     np.testing.assert_allclose(volume_absorption((0.9, 0.3, 0.1), 4.0)["absorption"], 4 * np.array([0.1, 0.7, 0.9]))
+
+
+def test_spot_interval_is_the_part_of_the_ray_inside_the_enclosing_cone():
+    """The direct-light sub-segment for a spot light (Cycles's valid ray segment) against a
+    brute-force classification of points along random rays (sphere spots: apex moved back)."""
+    from drt.lights.common import L_COS_HALF, L_POS, L_RADIUS, L_SPOT_DIR
+    from drt.volumes.stage import spot_interval
+
+    rng = np.random.default_rng(0)
+    hits = 0
+    for _ in range(150):
+        m = np.eye(4)
+        q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        m[:3, :3] = q * np.sign(np.linalg.det(q))
+        m[:3, 3] = rng.normal(size=3)
+        ld = LightSet([{"type": "SPOT", "matrix_world": m.tolist(), "color": [1, 1, 1], "power": 10.0,
+                        "radius": float(rng.choice([0.0, 0.1])), "spot_size": float(rng.uniform(0.2, 2.8)),
+                        "spot_blend": 0.0}], np.zeros(3), None).data
+        o = rng.normal(size=3) * 2
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        a, b = spot_interval(ld, 0, tuple(o), tuple(d), 0.0, 10.0)
+        c, axis, ch = ld.lf[0, L_POS:L_POS + 3], ld.lf[0, L_SPOT_DIR:L_SPOT_DIR + 3], ld.lf[0, L_COS_HALF]
+        apex = c - axis * ld.lf[0, L_RADIUS] / math.sqrt(1 - ch * ch)
+        ts = np.linspace(0, 10.0, 10001)[:-1]
+        v = o + ts[:, None] * d - apex
+        av = v @ axis
+        inside = (av > 0) & (av ** 2 >= ch ** 2 * (v * v).sum(1))
+        got = (ts >= a) & (ts < b)
+        assert (inside != got).sum() <= 2  # grid points at the boundary may fall either way
+        hits += inside.any()
+    assert hits > 30  # enough rays actually cross a cone

@@ -26,7 +26,9 @@ import math
 
 from ..kernels import inline_kernel, kernel
 from ..kernels.vec3 import load, store
-from ..lights import light_sample
+from ..kernels.vec3 import load_col3
+from ..lights import light_sample, light_sample_full
+from ..lights.common import AREA, I_KIND, L_COS_HALF, L_NORMAL, L_POS, L_RADIUS, L_SPOT_DIR, SPOT
 from ..sampling.sequences import sample_2d
 from .distance import (channel_probs, equiangular_pdf, equiangular_sample, equiangular_setup, exp_pdf,
                        exp_sample, pick_channel)
@@ -88,6 +90,82 @@ def pass_factor(mode, sig_t, chp, t):
             return _ZERO3
         return (tr[0] / surv, tr[1] / surv, tr[2] / surv)
     return (1.0, 1.0, 1.0)
+
+
+@kernel
+def spot_interval(ld, i, o, d, t0, t1):
+    """[t0, t1) clipped to the part of the ray inside spot light i's cone (Cycles's
+    spot_light_valid_ray_segment: the cone's apex moved back by radius / sin(half angle) so that
+    it encloses the light from every point of its sphere); (t0, t0) when empty."""
+    c = load_col3(ld.lf, i, L_POS)
+    axis = load_col3(ld.lf, i, L_SPOT_DIR)
+    cos_h = ld.lf[i, L_COS_HALF]
+    sin_h = math.sqrt(max(1.0 - cos_h * cos_h, 0.0))
+    if cos_h <= 1e-2 or sin_h <= 0.0:
+        return t0, t1  # a (nearly) hemispherical cone: keep the segment
+    back = ld.lf[i, L_RADIUS] / sin_h
+    p = (o[0] - c[0] + axis[0] * back, o[1] - c[1] + axis[1] * back, o[2] - c[2] + axis[2] * back)
+    cos2 = cos_h * cos_h
+    ad = axis[0] * d[0] + axis[1] * d[1] + axis[2] * d[2]
+    ap = axis[0] * p[0] + axis[1] * p[1] + axis[2] * p[2]
+    dp = d[0] * p[0] + d[1] * p[1] + d[2] * p[2]
+    pp = p[0] * p[0] + p[1] * p[1] + p[2] * p[2]
+    qa = ad * ad - cos2
+    qb = 2.0 * (ad * ap - cos2 * dp)
+    qc = ap * ap - cos2 * pp
+    # points t with (axis·(p + t·d))² ≥ cos²·|p + t·d|² and axis·(p + t·d) > 0
+    lo, hi = -math.inf, math.inf
+    if abs(qa) < 1e-12:
+        if abs(qb) < 1e-300:
+            return (t0, t1) if qc >= 0.0 and ap > 0.0 else (t0, t0)
+        r = -qc / qb
+        lo, hi = (r, math.inf) if qb > 0.0 else (-math.inf, r)
+    else:
+        disc = qb * qb - 4.0 * qa * qc
+        if disc < 0.0:
+            if qa > 0.0:  # the quadratic is ≥ 0 everywhere: the whole double cone's... check side
+                lo, hi = -math.inf, math.inf
+            else:
+                return t0, t0
+        else:
+            sq = math.sqrt(disc)
+            r0 = (-qb - sq) / (2.0 * qa)
+            r1 = (-qb + sq) / (2.0 * qa)
+            if r0 > r1:
+                r0, r1 = r1, r0
+            if qa < 0.0:  # inside between the roots
+                lo, hi = r0, r1
+            else:  # inside outside the roots: keep the part on the cone's (forward) nappe
+                if ap + r1 * ad > 0.0 and ad > 0.0:
+                    lo, hi = r1, math.inf
+                elif ap + r0 * ad > 0.0 and ad < 0.0:
+                    lo, hi = -math.inf, r0
+                else:
+                    return t0, t0
+    # the interval must lie on the forward nappe (axis·(p + t·d) > 0)
+    if lo > -math.inf and ap + lo * ad < 0.0 and hi < math.inf and ap + hi * ad < 0.0:
+        return t0, t0
+    if lo == -math.inf and hi < math.inf and ap + hi * ad < 0.0:
+        return t0, t0
+    if hi == math.inf and lo > -math.inf and ap + lo * ad < 0.0:
+        return t0, t0
+    a = max(t0, lo)
+    b = min(t1, hi)
+    return (a, b) if b > a else (t0, t0)
+
+
+@kernel
+def area_interval(ld, i, o, d, t0, t1):
+    """[t0, t1) clipped to the half-space an area light emits into (in front of its plane)."""
+    c = load_col3(ld.lf, i, L_POS)
+    n = load_col3(ld.lf, i, L_NORMAL)
+    h = (o[0] - c[0]) * n[0] + (o[1] - c[1]) * n[1] + (o[2] - c[2]) * n[2]
+    dn = d[0] * n[0] + d[1] * n[1] + d[2] * n[2]
+    if dn == 0.0:
+        return (t0, t1) if h > 0.0 else (t0, t0)
+    r = -h / dn
+    a, b = (max(t0, r), t1) if dn > 0.0 else (t0, min(t1, r))
+    return (a, b) if b > a else (t0, t0)
 
 
 @inline_kernel
@@ -153,12 +231,23 @@ def volume_segment(sd, ld, vd, stack, i, o, d, length, thr, terminate, nee, pixe
         # equiangular sampling needs a light position: sample the light from the segment start
         # (its position, even where it sends no light to o: a spot's cone may still reach the
         # segment, as Cycles, which checks only that the sample has a position)
-        w0, dist0, _, _, _, _ = light_sample(ld, o, _ZERO3, _NO_HINT, u_sel, ul0, ul1)
+        w0, dist0, _, _, _, _, s0, _ = light_sample_full(ld, o, _ZERO3, _NO_HINT, u_sel, ul0, ul1)
+        # where the same light is picked at every point (selection not per point), sample only
+        # the part of the segment it can light (Cycles's volume_valid_direct_ray_segment)
+        ta, tb = 0.0, length
+        if (not ld.per_point or ld.n_strategies == 1) and 0 <= s0 < ld.n_lights:
+            if ld.li[s0, I_KIND] == SPOT:
+                ta, tb = spot_interval(ld, s0, o, d, ta, tb)
+            elif ld.li[s0, I_KIND] == AREA:
+                ta, tb = area_interval(ld, s0, o, d, ta, tb)
+        # sample on the sub-segment [ta, tb): positions relative to its start oa
+        oa = (o[0] + d[0] * ta, o[1] + d[1] * ta, o[2] + d[2] * ta)
+        la = tb - ta
         delta = span_d = th_a = th_b = 0.0
         equi = math.isfinite(dist0) and dist0 > 0.0
         if equi:
             c = (o[0] + w0[0] * dist0, o[1] + w0[1] * dist0, o[2] + w0[2] * dist0)
-            delta, span_d, th_a, th_b = equiangular_setup(o, d, c, length)
+            delta, span_d, th_a, th_b = equiangular_setup(oa, d, c, la)
             equi = span_d > 1e-9 and th_b > th_a
         use_equi = False
         u = u_dir
@@ -173,17 +262,19 @@ def volume_segment(sd, ld, vd, stack, i, o, d, length, thr, terminate, nee, pixe
             t = equiangular_sample(u, delta, span_d, th_a, th_b)
         else:
             chn, u2 = pick_channel(chd, u)
-            t = exp_sample(u2, sig_t[chn], length)
-        p_dist = (chd[0] * exp_pdf(t, sig_t[0], length) + chd[1] * exp_pdf(t, sig_t[1], length)
-                  + chd[2] * exp_pdf(t, sig_t[2], length))
-        p_equi = equiangular_pdf(t, delta, span_d, th_a, th_b, length) if equi else 0.0
+            t = exp_sample(u2, sig_t[chn], la)
+        p_dist = (chd[0] * exp_pdf(t, sig_t[0], la) + chd[1] * exp_pdf(t, sig_t[1], la)
+                  + chd[2] * exp_pdf(t, sig_t[2], la))
+        p_equi = equiangular_pdf(t, delta, span_d, th_a, th_b, la) if equi else 0.0
+        t_rel = t
+        t = ta + t_rel
         if equi:
             a, b = (p_equi, p_dist) if use_equi else (p_dist, p_equi)
             # one-sample MIS over the two strategies (probability ½ each), power heuristic
             w_over_pdf = 2.0 * a / (a * a + b * b) if a > 0.0 else 0.0
         else:
             w_over_pdf = 1.0 / p_dist if p_dist > 0.0 else 0.0
-        if w_over_pdf > 0.0 and t < length:
+        if w_over_pdf > 0.0 and t_rel < la and t < length:
             x = (o[0] + d[0] * t, o[1] + d[1] * t, o[2] + d[2] * t)
             wi, dist, le, lpdf, l_delta, l_valid = light_sample(ld, x, _ZERO3, _NO_HINT, u_sel, ul0, ul1)
             if l_valid and lpdf > 0.0:
