@@ -246,7 +246,7 @@ class ViewportSync:
         if force or world != self._world:
             self.exports["world"] += 1
             self._world = world
-            self.session.edit(lambda live, c=checked.world_color: live.set_world(c))
+            self.session.edit(lambda live, c=checked.world_color, v=checked.world_volume: live.set_world(c, v))
         if force or checked.render != self._settings:
             self.exports["settings"] += 1
             self._settings = checked.render

@@ -112,3 +112,26 @@ def test_volume_emission_and_blackbody_match_cycles(fresh, tmp_path):
     drt = cc.render(scene, "DRT", 4, str(tmp_path / "d.exr"))
     np.testing.assert_allclose(drt[4, 4], cyc[4, 4], rtol=1e-3)
     assert cyc[4, 4, 0] > 0.5 and cyc[4, 4, 0] > 2 * cyc[4, 4, 1]  # the blackbody term is really there
+
+
+def test_world_volume_ends_at_infinity_not_clip_end_as_cycles(fresh, tmp_path):
+    """An absorbing world medium swallows the world for camera rays that miss, also with a short
+    clip_end (Cycles renders black; a medium cut at clip_end would give e^(−σ·9.9) = 0.37)."""
+    sys.path.insert(0, os.path.join(REPO, "scripts"))
+    import compare_cycles as cc
+
+    scene = bpy.context.scene
+    world = scene.world or bpy.data.worlds.new("W")
+    scene.world = world
+    C.set_world(world, (1, 1, 1), 1.0)
+    out = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeOutputWorld")
+    a = world.node_tree.nodes.new("ShaderNodeVolumeAbsorption")
+    a.inputs["Color"].default_value = (0.9, 0.9, 0.9, 1)
+    world.node_tree.links.new(a.outputs[0], out.inputs["Volume"])
+    cam = C.camera((0, 0, 0), (0, 1, 0), lens=200.0)
+    cam.data.clip_start, cam.data.clip_end = 0.1, 10.0
+    scene.render.resolution_x = scene.render.resolution_y = 4
+    C.reference_settings(scene, 4)
+    cyc = cc.render(scene, "CYCLES", 4, str(tmp_path / "c.exr"))
+    drt = cc.render(scene, "DRT", 4, str(tmp_path / "d.exr"))
+    assert np.all(cyc == 0.0) and np.all(drt == 0.0)

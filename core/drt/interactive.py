@@ -146,6 +146,7 @@ class LiveScene:
         self.attributes: list = []   # names of the named per-corner attributes they read
         self.lights: list = []
         self.world_color = np.zeros(3)
+        self.world_volume = None  # the world medium (drt.volumes), set by set_world
         self.origin_shift = None if origin_shift is None else np.asarray(origin_shift, np.float64).reshape(3).copy()
         self.counters = BuildCounters()
         self.warnings: list[str] = []
@@ -243,10 +244,12 @@ class LiveScene:
         self.lights = _lights({"lights": list(lights)})
         self._lights_dirty = True
 
-    def set_world(self, color) -> None:
+    def set_world(self, color, volume: dict | None = None) -> None:
+        """The world's colour and its (validated, ``Scene.world_volume``) medium, if any."""
         c = np.asarray(color, dtype=np.float64).reshape(3)
         if not np.all(np.isfinite(c)) or np.any(c < 0):
             raise SceneError("world.color", f"must be finite and >= 0, got {c.tolist()}")
+        self.world_volume = volume  # read when the next context is built (media are per context)
         if not np.array_equal(c, self.world_color):
             self.world_color = c.copy()
             self._lights_dirty = True
@@ -293,7 +296,7 @@ class LiveScene:
         integ = Integrator(settings, geom, tracer, self._material_table, self._light_set, cam,
                            Sampler(settings.sampler, settings.seed, settings.spp), self._filter,
                            direct=settings.direct, indirect=settings.indirect,
-                           media=media_for_scene(self.materials, None, geom))
+                           media=media_for_scene(self.materials, getattr(self, "world_volume", None), geom))
         scene = Scene(settings, camera, self.world_color, self.materials, self.lights, [], [])
         return scene, RenderContext(scene, integ, tracer)
 

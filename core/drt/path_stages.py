@@ -384,7 +384,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         scattered = False
         thr0 = thr
         if in_medium:
-            length = t_geom if prim >= 0 else paths.tmax[i]
+            length = t_geom  # a miss runs to infinity through the media (Cycles: also past clip_end)
             (v_acc, v_mode, v_sig_t, v_chp, v_g, scattered, t_s, thr, nee_ok, x, v_wi, v_dist, f_nee,
              v_lpdf, v_ph, v_ldelta) = volume_segment(
                 sd, ld, vd, paths.vstack, i, o, d, length, thr0, paths.terminate[i], direct != DIRECT_BSDF,
