@@ -325,3 +325,15 @@ def test_viewport_live_scene_renders_media_and_world_volume():
     scene, ctx = live.context(cam, 8, 8, spp=2)
     img = render(scene, spp=2, context=ctx, threads=1).combined[..., :3]
     np.testing.assert_allclose(img.reshape(-1, 3), np.tile(np.exp(-SIGMA), (64, 1)), rtol=1e-4)
+
+
+def test_emissive_absorbing_medium_integrates_emission_analytically():
+    """A 1 m volume-only box emitting σe per metre with absorption σa, black world: radiance
+    σe·(1 − e^(−σa))/σa per channel (a channel without absorption: σe·1 m)."""
+    h = base_header(8, 8, 2, world=(0, 0, 0), camera=ortho_down(1.0))
+    a = {}
+    sigma_a = np.array([0.0, 1.0, 3.0])
+    h["materials"].append(dict(FOG_ONLY, volume={"absorption": sigma_a.tolist(), "emission": [2.0, 2.0, 2.0]}))
+    add_mesh(h, a, "slab", *box_mesh(2.0, 1.0), material=0, matrix=translation(0, 0, -0.5))
+    expected = np.array([2.0, 2.0 * (1 - math.exp(-1.0)), 2.0 * (1 - math.exp(-3.0)) / 3.0])
+    np.testing.assert_allclose(_render(h, a).reshape(-1, 3), np.tile(expected, (64, 1)), rtol=1e-4)
