@@ -81,6 +81,10 @@ class DRTSceneSettings(bpy.types.PropertyGroup):
     transmission_bounces: IntProperty(
         name="Transmission", description="Maximum number of transmission bounces",
         default=12, min=0, max=1024)
+    transparent_bounces: IntProperty(
+        name="Transparent", description="Maximum number of transparent surfaces (alpha, Transparent "
+        "BSDF) a ray passes; they do not count as bounces (Cycles's Transparent max bounces)",
+        default=8, min=0, max=1024)
     volume_bounces: IntProperty(
         name="Volume", description="Maximum number of volume scattering events beyond the first "
         "(Cycles's Volume bounces: 0 = single scattering)",

@@ -159,6 +159,7 @@ class DRT_RENDER_PT_light_paths(DRTRenderPanel, bpy.types.Panel):
         col.prop(d, "glossy_bounces")
         col.prop(d, "transmission_bounces")
         col.prop(d, "volume_bounces")
+        col.prop(d, "transparent_bounces")
         col = layout.column(align=True, heading="Clamping")
         col.prop(d, "clamp_direct")
         col.prop(d, "clamp_indirect")

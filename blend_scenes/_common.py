@@ -225,6 +225,7 @@ def reference_settings(scene, samples=1024):
         c.max_bounces, c.diffuse_bounces, c.glossy_bounces, c.transmission_bounces = 12, 4, 4, 12
         # DRT's Volume bounces (Cycles's default 0 when the add-on is not registered)
         c.volume_bounces = int(getattr(getattr(scene, "drt", None), "volume_bounces", 0))
+        c.transparent_max_bounces = int(getattr(getattr(scene, "drt", None), "transparent_bounces", 8))
         c.caustics_reflective = True
         c.caustics_refractive = True
         if hasattr(c, "use_light_tree"):

@@ -64,7 +64,9 @@ def render_settings(scene, preview: bool = False) -> dict:
         "transmission_bounces": int(d.transmission_bounces),
         "clamp_direct": float(d.clamp_direct), "clamp_indirect": float(d.clamp_indirect),
         "shutter": shutter_interval(r),
-    } | ({"volume_bounces": int(d.volume_bounces)} if getattr(d, "volume_bounces", 0) else {})
+    } | ({"volume_bounces": int(d.volume_bounces)} if getattr(d, "volume_bounces", 0) else {}) \
+      | ({"transparent_bounces": int(d.transparent_bounces)}
+         if getattr(d, "transparent_bounces", 8) != 8 else {})
 
 
 def camera_dict(cam_obj, matrix) -> dict:

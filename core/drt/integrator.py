@@ -108,7 +108,8 @@ class Integrator:
             clamp_direct=float(settings.clamp_direct), clamp_indirect=float(settings.clamp_indirect),
             direct=DIRECT_STRATEGIES.index(direct), indirect=INDIRECT_STRATEGIES.index(indirect),
             film_transparent=bool(settings.film_transparent), motion=self.motion,
-            volume_bounces=int(getattr(settings, "volume_bounces", 0)))
+            volume_bounces=int(getattr(settings, "volume_bounces", 0)),
+            transparent_bounces=int(getattr(settings, "transparent_bounces", 8)))
         self._workspaces = threading.local()
         # material programs (textures): a thread rewrites its own copy of the material data
         self.programs = materials.program_data(geom.uvs, getattr(geom, "corner_attrs", None),

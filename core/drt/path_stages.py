@@ -79,6 +79,7 @@ StageSettings = namedtuple("StageSettings", [
     "film_transparent",                   # camera rays that miss get alpha 0
     "motion",                             # anything moves: draw a shutter time per sample
     "volume_bounces",                     # scatter events a path may have in media (Cycles's)
+    "transparent_bounces",                # straight pass-throughs a path may make (Cycles's)
 ])
 
 Paths = namedtuple("Paths", [

@@ -193,6 +193,9 @@ class RenderSettings:
     adaptive_threshold: float = 0.0  # stop a pixel when its relative standard error falls below; 0 = off
     adaptive_min_samples: int = 0  # samples every pixel takes before it may stop; 0 = automatic
     volume_bounces: int = 0  # scatter events in media a path may have beyond the first (Cycles's)
+    #: surfaces a path may pass straight through (alpha, Transparent BSDF); not counted as
+    #: bounces, as Cycles's transparent bounces (default 8)
+    transparent_bounces: int = 8
 
 
 @dataclass
@@ -316,7 +319,7 @@ def _render_settings(h: dict) -> RenderSettings:
     bounces = {
         k: _number(r, k, p, dflt, lo=0, hi=1024, integer=True)
         for k, dflt in (("max_bounces", 12), ("diffuse_bounces", 4), ("glossy_bounces", 4), ("transmission_bounces", 12),
-                        ("volume_bounces", 0))
+                        ("volume_bounces", 0), ("transparent_bounces", 8))
     }
     return RenderSettings(
         width=w,
