@@ -1,4 +1,6 @@
-"""The world background: a constant radiance (color × strength) from every direction.
+"""The world background: a constant radiance (color × strength) from every direction, or a
+textured world (``drt.lights.world_map``: a program per direction, sampled from its importance
+map; `world_sample` / `world_pdf_dir` switch to the map when ``ld.wm_cond`` is not empty).
 
 Sampled cosine-weighted about the normal ``n`` the integrator passes (pdf cos θ/π, zero below
 the surface), or uniformly over the sphere when ``n`` is None — in the kernels, a zero normal
