@@ -60,7 +60,7 @@ def _world_image(w=16, h=8, seed=3, sun=None):
 
 
 def world_header(h, arrays, px, projection=S.EQUIRECTANGULAR, interpolation=0, strength=1.5,
-                 map_resolution=64):
+                 map_size=(64, 32)):
     """Adds the world (direction → Environment Texture × strength) and its image to a header."""
     img = len(h.setdefault("images", []))
     h["images"].append({"name": "env", "width": px.shape[1], "height": px.shape[0], "srgb": False,
@@ -72,7 +72,7 @@ def world_header(h, arrays, px, projection=S.EQUIRECTANGULAR, interpolation=0, s
                     [F.OP_ENVIRONMENT, mode, 1, 2, 0, -1, -1, -1, -1, -1, img],
                     [F.OP_VMATH, 2, 4, -1, 1, 3, -1, -1, -1, -1, 0]], "data": []}
     h["world"] = {"color": [0.5, 0.5, 0.5], "program": prog, "radiance_reg": 4,
-                  "map_resolution": map_resolution}
+                  "map_size": list(map_size)}
     return h
 
 
@@ -164,15 +164,16 @@ def _irradiance_up(px, strength):
     return strength * np.sum(row_w[:, None] * np.repeat(lum_rows, k, axis=0), axis=0)
 
 
-@pytest.mark.parametrize("direct", ["MIS_POWER", "LIGHT", "BSDF"])
-def test_diffuse_plane_converges_to_analytic_irradiance(direct):
+@pytest.mark.parametrize("direct, importance", [("MIS_POWER", True), ("LIGHT", True), ("BSDF", True),
+                                               ("MIS_POWER", False)])
+def test_diffuse_plane_converges_to_analytic_irradiance(direct, importance):
     px = _world_image(w=32, h=16, sun=(13, 9, 400.0))
     strength = 1.0
     h = B.base_header(width=8, height=8, spp=256, max_bounces=0, direct=direct,
                       camera={"type": "ORTHO", "matrix_world": B.translation(0, 0, 5), "ortho_scale": 1.0},
                       filter={"type": "BOX", "width": 0.01})
     a = {}
-    world_header(h, a, px, strength=strength, map_resolution=128)
+    world_header(h, a, px, strength=strength, map_size=(128, 64) if importance else (0, 0))
     B.add_material(h, "white", [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}])
     pos, tri = B.quad((0, 0, 0), (50, 0, 0), (0, 50, 0))
     B.add_mesh(h, a, "plane", pos, tri)
@@ -201,7 +202,8 @@ def test_camera_sees_the_world_and_film_transparent_clears_alpha():
 
 @pytest.mark.parametrize("change, field", [
     (lambda w: w.update(radiance_reg=9), "world.radiance_reg"),
-    (lambda w: w.update(map_resolution=1), "world.map_resolution"),
+    (lambda w: w.update(map_size=[4, 0]), "world.map_size"),
+    (lambda w: w.update(map_size=[4, -1]), "world.map_size"),
     (lambda w: w["program"]["ops"].append([F.OP_ENVIRONMENT, 0, 1, 2, 0, -1, -1, -1, -1, -1, 5]), "world.program.ops[3]"),
 ])
 def test_bad_world_programs_are_refused_by_name(change, field):
@@ -210,3 +212,26 @@ def test_bad_world_programs_are_refused_by_name(change, field):
     with pytest.raises(SceneError) as e:
         scene_from_dict(h, a)
     assert field in str(e.value)
+
+
+def test_map_weights_bound_radiance_over_pdf_next_to_a_sun():
+    """A map as fine as the image, a sun texel, bilinear lookups: pixels whose centre is dark
+    but whose edge sees the sun's interpolated radiance weigh their corners' radiance too, so
+    L/pdf stays bounded (with Cycles's centre-only weights it reached ~10⁴ × its mean here)."""
+    from drt.lights.world_map import build_world_map, shade_map, shade_map_corners
+    from drt.lights.common import build_light_data
+
+    px = _world_image(w=32, h=16, sun=(10, 9, 5000.0))
+    a = {}
+    h = world_header(B.base_header(width=4, height=4, spp=1), a, px, interpolation=1, map_size=(32, 16))
+    ctx = prepare(scene_from_dict(h, a))
+    pd, ld0 = ctx.integrator.programs, ctx.integrator.lights.data
+    ratios = {}
+    for corners in (False, True):
+        c = shade_map_corners(pd, ld0.world_prog, ld0.world_reg, 5, 32, 16) if corners else None
+        cond, marg, _ = build_world_map(shade_map(pd, ld0.world_prog, ld0.world_reg, 5, 32, 16), c)
+        ld = build_light_data([], None, np.ones(3), world_map=(cond, marg))
+        d, pdf = sample_map(ld, np.random.default_rng(7).random((100_000, 2)))
+        r = shade_directions(pd, ld0.world_prog, ld0.world_reg, 5, d).mean(axis=1) / pdf
+        ratios[corners] = r.max() / r.mean()
+    assert ratios[True] < 20 < 100 < ratios[False], ratios

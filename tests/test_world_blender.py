@@ -118,6 +118,7 @@ def test_environment_world_matches_cycles_per_pixel(tmp_path, name, view):
     sc = _scene(_env_world(str(tmp_path / "env.exr"), **CASES[name]), view)
     cycles, drt, res = _render_both(sc, tmp_path, "world")
     assert "program" in res.header["world"]
+    assert res.header["world"]["map_size"] == [24, 12]  # Automatic: the image's size, as Cycles
     rel = _relative_errors(cycles, drt)
     # Closest: a pixel within the jitter of a texel edge may differ; so may one by the singular
     # rim of a mirror ball (all of +Y's neighbourhood maps onto it)
@@ -155,3 +156,14 @@ def test_constant_world_exports_as_before(tmp_path):
     bg.inputs["Strength"].default_value = 2.0
     res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
     assert res.header["world"] == {"color": pytest.approx([0.4, 0.6, 0.8])}
+
+
+@pytest.mark.parametrize("method, size", [("AUTOMATIC", [24, 12]), ("MANUAL", [512, 256]), ("NONE", [0, 0])])
+def test_map_size_follows_cycles_world_sampling(tmp_path, method, size):
+    from addon.export import export_depsgraph
+
+    sc = _scene(_env_world(str(tmp_path / "env.exr")), (0, 0, 0))
+    sc.world.cycles.sampling_method = method
+    sc.world.cycles.sample_map_resolution = 512
+    res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
+    assert res.header["world"]["map_size"] == size

@@ -7,8 +7,8 @@ background closures. Color and Strength compile through the material compiler
 rotation in front of it), Texture Coordinate Generated/Object (= the ray direction), math and
 colour nodes. A world whose radiance folds to a constant exports exactly the old
 ``{"color": …}``; otherwise ``{"color": stand-in, "program": …, "radiance_reg": r,
-"map_resolution": R}`` with Cycles's importance-map resolution (World > Settings > Map
-Resolution; the core builds the map at load). The stand-in colour (viewport, light-selection
+"map_size": [W, H]}`` with Cycles's importance-map size (`map_size`; the core builds the map at
+load). The stand-in colour (viewport, light-selection
 fallbacks) is the radiance with each image replaced by its mean colour.
 """
 
@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .node_programs import ImageTable, ProgramBuilder, Unsupported, Value, clamp01, constant, resolve
+from .node_programs import (OP_ENVIRONMENT, ImageTable, ProgramBuilder, Unsupported, Value, clamp01, constant,
+                            resolve)
 
 #: Cycles's default importance-map resolution (World > Settings > Map Resolution)
 DEFAULT_MAP_RESOLUTION = 1024
@@ -38,10 +39,28 @@ def world_surface(world, surface_sock, images: ImageTable | None, warnings: list
     if not isinstance(radiance, Value):
         return {"color": [float(max(x, 0.0)) for x in np.broadcast_to(radiance, 3)]}
     fb = radiance.fallback if radiance.fallback is not None else np.asarray(world.color[:3])
-    cycles = getattr(world, "cycles", None)
-    res = int(getattr(cycles, "sample_map_resolution", DEFAULT_MAP_RESOLUTION) or DEFAULT_MAP_RESOLUTION)
     return {"color": [float(max(x, 0.0)) for x in np.broadcast_to(fb, 3)], "program": b.to_dict(),
-            "radiance_reg": b.reg_of(radiance), "map_resolution": max(res, 2)}
+            "radiance_reg": b.reg_of(radiance), "map_size": map_size(world, b)}
+
+
+def map_size(world, b: ProgramBuilder) -> list[int]:
+    """The importance map's [width, height] as Cycles chooses it (World > Settings > Sampling):
+    None → [0, 0] (not sampled: BSDF rays only); Manual → Map Resolution R × R/2; Automatic
+    (the default) → the largest Environment Texture image the program reads (each side's
+    maximum), else 1024 × 512."""
+    cycles = getattr(world, "cycles", None)
+    method = getattr(cycles, "sampling_method", "AUTOMATIC")
+    if method == "NONE":
+        return [0, 0]
+    if method == "MANUAL":
+        r = max(int(getattr(cycles, "sample_map_resolution", DEFAULT_MAP_RESOLUTION)), 2)
+        return [r, r // 2]
+    w = h = 0
+    for op in b.ops:
+        if op[0] == OP_ENVIRONMENT:
+            img = b.images.images[op[10]]
+            w, h = max(w, int(img["width"])), max(h, int(img["height"]))
+    return [w, h] if w > 0 and h > 0 else [DEFAULT_MAP_RESOLUTION, DEFAULT_MAP_RESOLUTION // 2]
 
 
 def _input(b, node, name, ctx, problems, kind):

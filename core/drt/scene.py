@@ -265,7 +265,7 @@ class Scene:
     #: the world's homogeneous medium (``drt.volumes.media``), None: none
     world_volume: dict | None = None
     #: a textured world: its validated program dict plus "radiance_reg" (the register holding
-    #: the radiance along −d) and "map_resolution" (importance map R × R/2); None: constant
+    #: the radiance along −d) and "map_size" (importance map (W, H), (0, 0): none); None: constant
     world_program: dict | None = field(default=None, repr=False)
 
     @property
@@ -433,12 +433,12 @@ def _medium(d: dict, path: str) -> dict | None:
         raise SceneError(where, problem) from None
 
 
-#: largest world importance-map resolution (the map is R × R/2 float64 pairs: 8192 → 1 GB)
+#: largest world importance-map side (the map is W × H float64 pairs: 8192 × 4096 → 0.5 GB)
 MAX_WORLD_MAP_RESOLUTION = 8192
 
 
 def _world_program(world: dict, n_images: int) -> dict | None:
-    """The world's validated ``program`` with its ``radiance_reg`` and ``map_resolution``
+    """The world's validated ``program`` with its ``radiance_reg`` and ``map_size``
     (docs/scene-format.md), or None for a constant world."""
     from .materials.program_format import validate_program
 
@@ -453,8 +453,14 @@ def _world_program(world: dict, n_images: int) -> dict | None:
         raise SceneError(where, problem) from None
     prog["radiance_reg"] = _number(world, "radiance_reg", "world", integer=True, lo=0,
                                    hi=prog["registers"] - 1)
-    prog["map_resolution"] = _number(world, "map_resolution", "world", 1024, integer=True, lo=2,
-                                     hi=MAX_WORLD_MAP_RESOLUTION)
+    size = _get(world, "map_size", "world", [1024, 512])
+    if not isinstance(size, (list, tuple)) or len(size) != 2:
+        raise SceneError("world.map_size", f"must be [width, height], got {size!r}")
+    w, h = (_number({"map_size": v}, "map_size", "world", integer=True, lo=0, hi=MAX_WORLD_MAP_RESOLUTION)
+            for v in size)
+    if (w == 0) != (h == 0):
+        raise SceneError("world.map_size", f"must be [0, 0] (no importance sampling) or both > 0, got {size!r}")
+    prog["map_size"] = (w, h)
     return prog
 
 

@@ -7,8 +7,9 @@ coordinates are the ray direction and UV is zero (`world_radiance_at`). The prog
 
 **Importance map** (Cycles's ``scene/light.cpp`` background map, ``kernel/light/background.h``):
 the program is evaluated at the centres of a W × H equirectangular grid of directions (pixel
-(i, j) at u = (i + ½)/W, v = (j + ½)/H, `drt.sampling.spherical_maps`); each pixel's weight is
-the average of |r|, |g|, |b| times sin θ of its row centre. Rows are sampled ∝ their sums
+(i, j) at u = (i + ½)/W, v = (j + ½)/H, `drt.sampling.spherical_maps`) and at its corners; each
+pixel's weight is the largest average of |r|, |g|, |b| among its centre and corners (Cycles:
+the centre's) times sin θ of its row centre. Rows are sampled ∝ their sums
 (marginal CDF), then a column within the row (conditional CDF), then uniformly within the
 pixel in (u, v). The solid-angle pdf of direction d is then
 
@@ -76,6 +77,17 @@ def _shade_pixels(pd, regs, point, prog, reg, width, height, out):
 
 
 @kernel
+def _shade_corners(pd, regs, point, prog, reg, width, height, out):
+    for j in range(height + 1):
+        for i in range(width + 1):
+            d = equirectangular_to_direction(i / width, j / height)
+            c = world_radiance_at(pd, regs, prog, reg, d, point)
+            out[j, i, 0] = c[0]
+            out[j, i, 1] = c[1]
+            out[j, i, 2] = c[2]
+
+
+@kernel
 def _radiance_rows(pd, regs, point, prog, reg, d, out):
     for r in range(d.shape[0]):
         c = world_radiance_at(pd, regs, prog, reg, (d[r, 0], d[r, 1], d[r, 2]), point)
@@ -112,17 +124,32 @@ def shade_map(pd, prog: int, reg: int, n_registers: int, width: int, height: int
     return out
 
 
+def shade_map_corners(pd, prog: int, reg: int, n_registers: int, width: int, height: int) -> np.ndarray:
+    """(height + 1, width + 1, 3) world radiance at the equirectangular pixel corners."""
+    out = np.zeros((height + 1, width + 1, 3))
+    _shade_corners(pd, register_file(n_registers), point_rows(), prog, reg, width, height, out)
+    return out
+
+
 # ------------------------------------------------------------------- the importance map
-def build_world_map(pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """(wm_cond, wm_marg, average radiance) of equirectangular radiance ``pixels`` (H, W, 3) as
-    Cycles builds them (float64 here). The average is ∫ lum(L) dω / 4π with Rec.709 luminance
-    (for light selection; Cycles's is the channel average)."""
+def build_world_map(pixels: np.ndarray, corners: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """(wm_cond, wm_marg, average radiance) of equirectangular radiance ``pixels`` (H, W, 3) at
+    the pixel centres, as Cycles builds them (float64 here). With ``corners`` (H + 1, W + 1, 3),
+    the radiance at the pixel corners, a pixel weighs the largest of its centre's and its four
+    corners' channel averages instead of its centre's alone (see docs/decisions.md: a pixel
+    whose centre is dark but whose edge touches an interpolated sun made NEE samples of
+    L/pdf ~ 10⁵). The average is ∫ lum(L) dω / 4π with Rec.709 luminance of the centres (for
+    light selection; Cycles's is the channel average)."""
     from .common import luminance
 
     pixels = np.asarray(pixels, dtype=np.float64)
     h, w = pixels.shape[:2]
     sin_theta = np.sin(np.pi * (np.arange(h) + 0.5) / h)
-    f = np.abs(pixels).mean(axis=2) * sin_theta[:, None]
+    value = np.abs(pixels).mean(axis=2)
+    if corners is not None:
+        c = np.abs(np.asarray(corners, dtype=np.float64)).mean(axis=2)
+        value = np.maximum.reduce([value, c[:-1, :-1], c[:-1, 1:], c[1:, :-1], c[1:, 1:]])
+    f = value * sin_theta[:, None]
     cond = np.zeros((h, w + 1, 2))
     cond[:, :w, 0] = f
     run = np.concatenate([np.zeros((h, 1)), np.cumsum(f / w, axis=1)], axis=1)  # (H, W + 1)
