@@ -235,3 +235,34 @@ def test_map_weights_bound_radiance_over_pdf_next_to_a_sun():
         r = shade_directions(pd, ld0.world_prog, ld0.world_reg, 5, d).mean(axis=1) / pdf
         ratios[corners] = r.max() / r.mean()
     assert ratios[True] < 20 < 100 < ratios[False], ratios
+
+
+def test_viewport_live_scene_renders_the_textured_world_like_the_final_render():
+    """LiveScene (the rendered viewport) with the world's program and images gives the final
+    render's image for the same camera and seed; a constant world afterwards drops the map."""
+    from drt.interactive import LiveScene
+    from drt.scene import MeshData
+
+    px = _world_image(w=32, h=16, sun=(13, 9, 400.0))
+    h = B.base_header(width=16, height=16, spp=8, max_bounces=2,
+                      camera={"type": "PERSP", "matrix_world": B.look_at((0, -4, 2), (0, 0, 0)), "lens": 30.0})
+    a = {}
+    world_header(h, a, px, map_size=(32, 16))
+    B.add_material(h, "white", [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}])
+    pos, tri = B.quad((0, 0, 0), (3, 0, 0), (0, 3, 0))
+    B.add_mesh(h, a, "plane", pos, tri)
+    scene = scene_from_dict(h, a)
+    want = render(scene, threads=1).combined
+
+    live = LiveScene(scene.render, scene.materials, [], scene.world_color)
+    live.set_world(scene.world_color, program=scene.world_program, images=scene.images)
+    m = scene.meshes[0]
+    live.set_object("plane", "plane", MeshData("plane", m.positions, m.triangles, m.material_index),
+                    np.eye(4))
+    s, ctx = live.context(scene.camera, 16, 16, spp=8)
+    assert ctx.integrator.lights.data.world_prog >= 0 and ctx.integrator.lights.world is not None
+    got = render(s, spp=8, context=ctx, threads=1).combined
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+    live.set_world((0.2, 0.2, 0.2))
+    s, ctx = live.context(scene.camera, 16, 16, spp=1)
+    assert ctx.integrator.lights.data.world_prog == -1 and ctx.integrator.lights.world is None

@@ -104,22 +104,27 @@ def _emissive_triangles(scene: Scene, geom, materials: MaterialTable) -> Emissiv
 
 def _textured_world(scene: Scene, geom, materials: MaterialTable, camera: Camera):
     """(ProgramData with the world program appended, (its index, radiance register), importance
-    map (wm_cond, wm_marg, average luminance) or None) of a scene whose world has a program: the
-    map is built here, at load, by running the program over the map's directions (never
-    stored); none when the world's ``map_size`` is (0, 0) (not importance-sampled)."""
+    map (wm_cond, wm_marg, average luminance) or None) of a scene whose world has a program."""
     from .integrator import program_data_for
+
+    pd = program_data_for(materials, geom, camera, world=scene.world_program)
+    return (pd,) + world_setup(scene.world_program, pd)
+
+
+def world_setup(wp: dict, pd):
+    """((index, radiance register), importance map or None) of world program ``wp`` appended to
+    ``pd``: the map is built here, at load, by running the program over the map's directions
+    (never stored); none when the world's ``map_size`` is (0, 0) (not importance-sampled)."""
     from .lights.world_map import build_world_map, shade_map, shade_map_corners
     from .materials.program_format import world_program_index
 
-    wp = scene.world_program
-    pd = program_data_for(materials, geom, camera, world=wp)
     index = world_program_index(pd)
     w, h = wp["map_size"]
     if w == 0:  # Cycles's World > Sampling: None: BSDF rays only
-        return pd, (index, wp["radiance_reg"]), None
+        return (index, wp["radiance_reg"]), None
     pixels = shade_map(pd, index, wp["radiance_reg"], wp["registers"], w, h)
     corners = shade_map_corners(pd, index, wp["radiance_reg"], wp["registers"], w, h)
-    return pd, (index, wp["radiance_reg"]), build_world_map(pixels, corners)
+    return (index, wp["radiance_reg"]), build_world_map(pixels, corners)
 
 
 def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None,
