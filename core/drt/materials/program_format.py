@@ -230,7 +230,7 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         reads_point[i] = bool(np.isin(ops[:, 0], list(POINT_OPS)).any()) or normal_reg[i] >= 0
     if world is not None:
         op_rows.append(world["ops"].copy())
-        op_rows[-1][op_rows[-1][:, 0] == OP_RAMP, 10] += sum(len(d) for d in data)
+        op_rows[-1][np.isin(op_rows[-1][:, 0], list(DATA_OPS)), 10] += sum(len(d) for d in data)
         const_rows.append(world["constants"])
         data.append(world["data"])
         op_start.append(op_start[-1] + len(world["ops"]))
