@@ -147,6 +147,24 @@ def test_driven_strength_and_mixed_backgrounds_match_cycles(tmp_path):
     assert np.median(np.abs(drt - cycles).max(axis=2) / np.maximum(cycles.max(axis=2), 1e-3)) < 5e-4
 
 
+def test_procedural_world_matches_cycles(tmp_path):
+    """A Noise texture on the default (Generated = direction) coordinates, through a Color Ramp,
+    as a sky: the procedural opcodes run for directions as for surface points."""
+    def build(nt):
+        noise = node(nt, "ShaderNodeTexNoise", {"Scale": 3.0, "Detail": 2.0})
+        ramp = node(nt, "ShaderNodeValToRGB")
+        nt.links.new(noise.outputs["Fac"], ramp.inputs["Fac"])
+        bg = node(nt, "ShaderNodeBackground", {"Color": ramp.outputs["Color"], "Strength": 2.0})
+        return bg.outputs[0]
+
+    sc = _scene(build, (math.radians(70), 0, math.radians(20)))
+    cycles, drt, res = _render_both(sc, tmp_path, "noise")
+    assert "program" in res.header["world"] and res.header["world"]["map_size"] == [1024, 512]
+    rel = _relative_errors(cycles, drt)
+    assert np.count_nonzero(rel > 1.0) == 0, np.sort(rel.ravel())[-5:]
+    assert np.median(np.abs(drt - cycles).max(axis=2) / np.maximum(cycles.max(axis=2), 1e-3)) < 5e-4
+
+
 def test_constant_world_exports_as_before(tmp_path):
     from addon.export import export_depsgraph
 
