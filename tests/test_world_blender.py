@@ -165,6 +165,30 @@ def test_procedural_world_matches_cycles(tmp_path):
     assert np.median(np.abs(drt - cycles).max(axis=2) / np.maximum(cycles.max(axis=2), 1e-3)) < 5e-4
 
 
+def test_light_path_camera_ray_trick_matches_cycles(tmp_path):
+    """Mix Shader(Is Camera Ray, HDRI, flat colour): the camera sees the flat colour (the Light
+    Path rows are filled for escaped rays); with Is Camera Ray inverted it sees the HDRI."""
+    for invert in (False, True):
+        def build(nt):
+            img, _ = env_image(str(tmp_path / "env.exr"))
+            env = node(nt, "ShaderNodeTexEnvironment", image=img)
+            bg1 = node(nt, "ShaderNodeBackground", {"Color": env.outputs["Color"], "Strength": 1.0})
+            bg2 = node(nt, "ShaderNodeBackground", {"Color": (0.3, 0.5, 0.7, 1.0), "Strength": 1.0})
+            lp = node(nt, "ShaderNodeLightPath")
+            fac = lp.outputs["Is Camera Ray"]
+            if invert:
+                fac = node(nt, "ShaderNodeMath", {0: 1.0, 1: fac}, operation="SUBTRACT").outputs[0]
+            mix = node(nt, "ShaderNodeMixShader", {0: fac, 1: bg1.outputs[0], 2: bg2.outputs[0]})
+            return mix.outputs[0]
+
+        sc = _scene(build, (math.radians(80), 0, math.radians(40)))
+        cycles, drt, _ = _render_both(sc, tmp_path, f"lightpath{invert}")
+        rel = _relative_errors(cycles, drt)
+        assert np.count_nonzero(rel > 1.0) == 0, (invert, np.sort(rel.ravel())[-5:])
+        flat = np.allclose(cycles, [0.3, 0.5, 0.7], atol=1e-4)
+        assert flat != invert
+
+
 def test_constant_world_exports_as_before(tmp_path):
     from addon.export import export_depsgraph
 
