@@ -112,8 +112,15 @@ CASES = {
 }
 
 
-@pytest.mark.parametrize("name", list(CASES))
-@pytest.mark.parametrize("view", [(math.radians(60), 0, math.radians(30)), (math.radians(150), 0, math.radians(-100))])
+#: the image lookup itself (every interpolation) is the Image Texture's, parity-tested in
+#: test_material_programs.py: Closest and Cubic run in the slow suite here
+SLOW_CASES = {"equirect closest*", "equirect cubic"}
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW_CASES else n
+                                  for n in CASES])
+@pytest.mark.parametrize("view", [(math.radians(60), 0, math.radians(30)),
+                                  pytest.param((math.radians(150), 0, math.radians(-100)), marks=pytest.mark.slow)])
 def test_environment_world_matches_cycles_per_pixel(tmp_path, name, view):
     sc = _scene(_env_world(str(tmp_path / "env.exr"), **CASES[name]), view)
     cycles, drt, res = _render_both(sc, tmp_path, "world")
