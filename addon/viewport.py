@@ -24,6 +24,7 @@ import numpy as np
 from . import compat, denoising
 from .export import _instance_key, _instance_name, _is_rendered
 from .export.materials import MaterialExporter
+from .export.node_programs import ImageTable
 from .export.mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays
 from .export.scene_parts import camera_dict, light_dict, matrix_list, render_settings, world_dict
 
@@ -241,12 +242,15 @@ class ViewportSync:
 
     def _sync_world_and_settings(self, scene, force: bool = False) -> None:
         self._sync_denoiser(scene, force)
-        world = world_dict(scene.world, [])
-        checked = _validated(scene, [], [], world)
+        images = ImageTable()  # the world's own images (LiveScene appends them to the materials')
+        world = world_dict(scene.world, [], images)
+        extra = {"images": images.images} if images.images else None
+        checked = _validated(scene, [], [], world, extra, images.arrays)
         if force or world != self._world:
             self.exports["world"] += 1
             self._world = world
-            self.session.edit(lambda live, c=checked.world_color, v=checked.world_volume: live.set_world(c, v))
+            self.session.edit(lambda live, c=checked.world_color, v=checked.world_volume,
+                              p=checked.world_program, im=checked.images: live.set_world(c, v, p, im))
         if force or checked.render != self._settings:
             self.exports["settings"] += 1
             self._settings = checked.render

@@ -410,6 +410,28 @@ def test_blender_light_edit_resends_lights_only(blender_viewport):
 
 
 @blender_only
+def test_blender_hdri_world_reaches_the_viewport(blender_viewport, tmp_path):
+    """An Environment Texture world is sent with its program and image; the session renders
+    it (the program runs in the viewport like in the final render)."""
+    vp = blender_viewport
+    exports = dict(vp.exports)
+    img = bpy.data.images.new("sky", 8, 4, alpha=False, float_buffer=True)
+    img.pixels.foreach_set(np.tile([2.0, 1.0, 0.5, 1.0], 32).astype(np.float32))
+    nt = bpy.context.scene.world.node_tree
+    bg = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBackground")
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = img
+    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+    evaluate()
+    f = vp.session.wait(lambda f: f.divider == 1, 60)
+    assert f is not None, vp.session.error
+    assert vp.exports == dict(exports, world=exports["world"] + 1)
+    live = vp.session.live
+    assert live.world_program is not None and len(live.world_images) == 1
+    assert np.isfinite(f.rgba).all()
+
+
+@blender_only
 def test_blender_added_and_hidden_objects(blender_viewport):
     vp = blender_viewport
     n = len(vp.session.live.objects)

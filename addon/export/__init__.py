@@ -162,7 +162,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
         for o, info in zip(objects, infos):
             o["info"] = info
     header = {"format": "drt-scene", "version": 1, "render": render, "camera": camera,
-              "world": world_dict(scene.world, warnings), "materials": mats.materials,
+              "world": world_dict(scene.world, warnings, mats.images), "materials": mats.materials,
               "lights": lights, "meshes": meshes, "objects": objects}
     if mats.attributes:  # named per-corner attributes programs read (arrays mesh<K>.attr<I>)
         header["attributes"] = list(mats.attributes)

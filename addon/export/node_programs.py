@@ -47,6 +47,9 @@ LIGHT_PATH_OUTPUTS = {
     "Is Shadow Ray": None, "Is Volume Scatter Ray": None, "Transparent Depth": None, "Portal Depth": None,
 }
 OP_NOISE, OP_WHITE_NOISE, OP_VORONOI, OP_WAVE, OP_MAGIC, OP_BRICK, OP_CURVES = 50, 51, 52, 53, 54, 55, 56
+OP_ENVIRONMENT = 70  # mode = projection·ENV_PROJECTION_STRIDE + interpolation·8 (+ REPEAT)
+ENV_PROJECTION_STRIDE = 32
+ENV_PROJECTIONS = ["EQUIRECTANGULAR", "MIRROR_BALL"]
 
 MATH_OPS = ["ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM", "SQRT",
             "INVERSE_SQRT", "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM", "LESS_THAN",
@@ -94,6 +97,7 @@ SUPPORTED_NODES = {
     "ShaderNodeTexNoise", "ShaderNodeTexWhiteNoise", "ShaderNodeTexVoronoi", "ShaderNodeTexWave",
     "ShaderNodeTexMagic", "ShaderNodeTexBrick", "ShaderNodeRGBCurve", "ShaderNodeVectorCurve",
     "ShaderNodeFloatCurve", "ShaderNodeVertexColor", "ShaderNodeAttribute",
+    "ShaderNodeTexEnvironment",
 }
 
 
@@ -256,6 +260,9 @@ class ProgramBuilder:
         self.problems: list[str] = []
         self.material_pass_index = 0  # the Object Info node's Material Index
         self._variant = 0  # 0: at the hit; 1, 2: a Bump node's offset evaluations (own caches)
+        #: compiling the world's tree: an unlinked texture vector is the ray direction, which
+        #: the core passes as the Generated/Object coordinates (Cycles's background setup)
+        self.world = False
 
     # --- registers ---------------------------------------------------------------------------
     def new_reg(self) -> int:
@@ -395,6 +402,8 @@ class ProgramBuilder:
             return self.emit(OP_MAPPING, MAPPING_TYPES.index(vt), ins)
         if k == "ShaderNodeTexImage":
             return self._image(node, ctx)
+        if k == "ShaderNodeTexEnvironment":
+            return self._environment(node, ctx)
         if k == "ShaderNodeTexChecker":
             vec = self._tex_vector(node, ctx, "generated")
             col, fac = self.emit(OP_CHECKER, 0, [vec, self.inp(node, "Color1", ctx),
@@ -619,6 +628,36 @@ class ProgramBuilder:
         col, alpha = self.emit(OP_IMAGE, mode, [vec], param=idx, outputs=2)
         return {"Color": col, "Alpha": alpha}
 
+    def _environment(self, node, ctx):
+        """Environment Texture (equirectangular, mirror ball; Cycles's extension is always
+        REPEAT). Its unlinked Vector is the shading position, which only the world has (the
+        ray direction); in a material that is a position we do not carry: unsupported."""
+        image = node.image
+        magenta = {"Color": Value(self, const=(1.0, 0.0, 1.0)), "Alpha": Value(self, const=1.0)}
+        if image is None:
+            return magenta
+        if node.projection not in ENV_PROJECTIONS or image.source not in ("FILE", "GENERATED"):
+            raise Unsupported(node)
+        sock = socket(node.inputs, "Vector")
+        src, sctx = resolve(sock, ctx)
+        if src is None and not self.world:
+            raise Unsupported(node)
+        try:
+            idx = self.images.index_of(image)
+        except ValueError as e:
+            self.problems.append(str(e))
+            raise Unsupported(node) from None
+        if idx is None:
+            self.problems.append(f"image '{image.name}' has no pixels (missing file?), rendered "
+                                 f"magenta as in Cycles")
+            return magenta
+        vec = self.geometry(OP_GENERATED) if src is None else self.output(src, sctx)
+        interp = min(INTERPOLATIONS.index(node.interpolation), 2)  # Smart: Cubic (Cycles's CPU)
+        mode = ENV_PROJECTIONS.index(node.projection) * ENV_PROJECTION_STRIDE + interp * 8
+        col, alpha = self.emit(OP_ENVIRONMENT, mode, [vec], param=idx, outputs=2)
+        col.fallback = self.images.mean_color(idx, node.projection == "EQUIRECTANGULAR")
+        return {"Color": col, "Alpha": alpha}
+
     def _mix(self, node, oname, ctx):
         if node.bl_idname == "ShaderNodeMixRGB":
             data_type, blend = "RGBA", node.blend_type
@@ -753,6 +792,17 @@ class ImageTable:
                             "array": name})
         self._index[key] = idx
         return idx
+
+    def mean_color(self, idx: int, equirectangular: bool) -> np.ndarray:
+        """Mean linear RGB of image ``idx`` (over the sphere, sin θ-weighted by row, for an
+        equirectangular map): a textured world's constant stand-in (the viewport's)."""
+        arr = self.arrays[self.images[idx]["array"]]
+        lin = arr[..., :3].astype(np.float64) / (255.0 if arr.dtype == np.uint8 else 1.0)
+        if self.images[idx]["srgb"]:  # stored sRGB-encoded (docs/materials.md, Images)
+            lin = np.where(lin < 0.04045, lin / 12.92, ((np.maximum(lin, 0.0) + 0.055) / 1.055) ** 2.4)
+        h = lin.shape[0]
+        w = np.sin(np.pi * (np.arange(h) + 0.5) / h) if equirectangular else np.ones(h)
+        return (lin.mean(axis=1) * w[:, None]).sum(axis=0) / w.sum()
 
 
 from .procedural_nodes import PROCEDURAL_COMPILERS  # noqa: E402  (it imports this module's names)

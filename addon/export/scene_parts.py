@@ -137,13 +137,16 @@ def light_dict(obj, matrix, warnings: list) -> dict | None:
     return d
 
 
-def world_dict(world, warnings: list) -> dict:
-    """Constant background radiance: Background color × strength (+ the world's medium)."""
-    return _with_volume(world, warnings, _world_surface(world, warnings))
+def world_dict(world, warnings: list, images=None) -> dict:
+    """The world: a constant background radiance (Background color × strength) or, when
+    textures drive it, a world program (``world_program.world_surface``) whose images join
+    ``images`` (the export's ``ImageTable``; the viewport passes a table of its own); without
+    ``images`` a textured world is its constant stand-in colour (+ the world's medium)."""
+    return _with_volume(world, warnings, _world_surface(world, warnings, images))
 
 
-def _world_surface(world, warnings: list) -> dict:
-    """Constant background radiance: Background color × strength."""
+def _world_surface(world, warnings: list, images=None) -> dict:
+    """The world's surface: a constant colour or a program (``world_program``)."""
     if world is None:
         return {"color": [0.0, 0.0, 0.0]}
     tree = compat.world_node_tree(world)
@@ -153,24 +156,11 @@ def _world_surface(world, warnings: list) -> dict:
     out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
     if out is None or not out.inputs["Surface"].is_linked:
         return {"color": [0.0, 0.0, 0.0]}
-    node = out.inputs["Surface"].links[0].from_node
-    if node.bl_idname != "ShaderNodeBackground":
-        warnings.append(f"World '{world.name}': '{node.name}' unsupported, using the world color")
-        return {"color": [float(x) for x in world.color[:3]]}
-    col_sock, str_sock = node.inputs["Color"], node.inputs["Strength"]
-    if col_sock.is_linked:
-        src = col_sock.links[0].from_node
-        if src.bl_idname == "ShaderNodeRGB":
-            col = np.array(src.outputs[0].default_value[:3])
-        else:
-            warnings.append(f"World '{world.name}': background color from '{src.name}' "
-                            "unsupported, using its constant value")
-            col = np.array(col_sock.default_value[:3])
-    else:
-        col = np.array(col_sock.default_value[:3])
-    if str_sock.is_linked:
-        warnings.append(f"World '{world.name}': linked strength unsupported, using its value")
-    return {"color": (col * float(str_sock.default_value)).tolist()}
+    from .world_program import world_surface
+    d = world_surface(world, out.inputs["Surface"], images, warnings)
+    if images is None:
+        d = {"color": d["color"]}
+    return d
 
 
 def _with_volume(world, warnings: list, d: dict) -> dict:

@@ -28,8 +28,8 @@ from .camera import Camera
 from .film import SampleBatch
 from .geometry import SceneGeometry
 from .lights import LightSet
+from .lights.world_map import point_rows
 from .materials import MaterialTable
-from .materials.program_format import POINT_ROWS
 from .path_stages import (D_BOUNCE0, D_LENS, D_PIXEL, D_TIME, DIMS_PER_BOUNCE,  # noqa: F401 (re-exported)
                           MAX_SAMPLE_RADIANCE, RR_START_BOUNCE, SHADOW_EPSILON)
 from .sampling.pixel_filter import PixelFilter
@@ -66,6 +66,17 @@ def _shadow_rays(n: int) -> stages.ShadowRays:
                              vstack=np.empty((n, STACK_SIZE), dtype=np.int64))
 
 
+def program_data_for(materials: MaterialTable, geom: SceneGeometry, camera: Camera, world=None):
+    """The ``ProgramData`` of the scene's material programs, and of the validated ``world``
+    program if given (appended last; ``drt.materials.program_format.world_program_index``)."""
+    return materials.program_data(geom.uvs, getattr(geom, "corner_attrs", None),
+                                  getattr(geom, "origin_shift", None),
+                                  getattr(geom, "object_of", None), getattr(geom, "object_info", None),
+                                  getattr(geom, "static_positions", None),
+                                  getattr(geom, "static_triangles", None),
+                                  camera.pixel_footprint(), camera.texture_space(), world=world)
+
+
 class Integrator:
     """Renders batches of camera samples. Thread-safe: holds only read-only scene data; every
     batch owns its arrays."""
@@ -83,6 +94,8 @@ class Integrator:
         direct: str = "MIS_POWER",
         indirect: str = "BSDF",
         media: MediumData | None = None,
+        programs=None,
+        world_registers: int = 0,
     ):
         if direct not in DIRECT_STRATEGIES:
             raise ValueError(f"unknown direct-light strategy {direct!r} (choose from {', '.join(DIRECT_STRATEGIES)})")
@@ -112,14 +125,13 @@ class Integrator:
             transparent_bounces=int(getattr(settings, "transparent_bounces", 8)))
         self._workspaces = threading.local()
         # material programs (textures): a thread rewrites its own copy of the material data
-        self.programs = materials.program_data(geom.uvs, getattr(geom, "corner_attrs", None),
-                                              getattr(geom, "origin_shift", None),
-                                              getattr(geom, "object_of", None), getattr(geom, "object_info", None),
-                                              getattr(geom, "static_positions", None),
-                                              getattr(geom, "static_triangles", None),
-                                              camera.pixel_footprint(), camera.texture_space())
-        self.n_registers = int(max((m["program"]["registers"] for m in materials.program_source[0]
-                                    if m.get("program")), default=0)) if self.programs.prog_of.shape[0] else 0
+        # (``programs``: built by the caller when it also holds the world's program, see
+        # render.prepare; ``world_registers``: that program's register count)
+        self.programs = programs if programs is not None else program_data_for(materials, geom, camera)
+        src = getattr(materials, "program_source", None)
+        self.material_programs = src is not None
+        self.n_registers = max(int(max((m["program"]["registers"] for m in src[0] if m.get("program")),
+                                       default=0)) if src is not None else 0, int(world_registers))
         normals = geom.normals if geom.normals is not None else np.zeros((0, 3, 3), np.float32)
         self.surfaces = stages.Surfaces(
             material=np.ascontiguousarray(geom.material, dtype=np.int32),
@@ -151,10 +163,10 @@ class Integrator:
         ws = getattr(self._workspaces, "materials", None)
         if ws is None:
             md = self.materials.data
-            if self.n_registers:
+            if self.material_programs:
                 md = type(md)(*(np.array(a, copy=True) for a in md))
             ws = self._workspaces.materials = (md, np.zeros((max(self.n_registers, 1), 3)),
-                                               np.zeros((POINT_ROWS, 3)))
+                                               point_rows())
         return ws
 
     def _workspace(self, n: int) -> tuple[stages.Paths, stages.ShadowRays]:

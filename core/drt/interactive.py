@@ -147,6 +147,9 @@ class LiveScene:
         self.lights: list = []
         self.world_color = np.zeros(3)
         self.world_volume = None  # the world medium (drt.volumes), set by set_world
+        self.world_program = None   # a textured world's validated program (scene.world_program)
+        self.world_images: list = []  # the images it reads (its image indices count from 0)
+        self._world_map = None      # (program index, radiance register, map) while unchanged
         self.origin_shift = None if origin_shift is None else np.asarray(origin_shift, np.float64).reshape(3).copy()
         self.counters = BuildCounters()
         self.warnings: list[str] = []
@@ -244,8 +247,11 @@ class LiveScene:
         self.lights = _lights({"lights": list(lights)})
         self._lights_dirty = True
 
-    def set_world(self, color, volume: dict | None = None) -> None:
-        """The world's colour and its (validated, ``Scene.world_volume``) medium, if any."""
+    def set_world(self, color, volume: dict | None = None, program: dict | None = None, images=()) -> None:
+        """The world: constant radiance ``color`` (3,), its (validated, ``Scene.world_volume``)
+        medium if any, and for a textured world its validated ``program``
+        (``Scene.world_program``) with the ``images`` it reads (a scene's ``images`` entries;
+        the program's image indices count in this list)."""
         c = np.asarray(color, dtype=np.float64).reshape(3)
         if not np.all(np.isfinite(c)) or np.any(c < 0):
             raise SceneError("world.color", f"must be finite and >= 0, got {c.tolist()}")
@@ -253,6 +259,24 @@ class LiveScene:
         if not np.array_equal(c, self.world_color):
             self.world_color = c.copy()
             self._lights_dirty = True
+        if program is not None or self.world_program is not None:
+            if len(self.world_images) or len(images):
+                self._material_table = None  # its image list carries the world's images
+            self.world_program = program
+            self.world_images = list(images)
+            self._world_map = None
+            self._lights_dirty = True
+
+    def _world_program_in_table(self) -> dict:
+        """The world program with its image indices moved past the materials' images (the
+        material table holds both lists, materials' first)."""
+        from .materials.program_format import OP_ENVIRONMENT, OP_IMAGE
+
+        wp = dict(self.world_program)
+        ops = wp["ops"].copy()
+        ops[np.isin(ops[:, 0], (OP_IMAGE, OP_ENVIRONMENT)), 10] += len(self.images)
+        wp["ops"] = ops
+        return wp
 
     def set_settings(self, settings: RenderSettings) -> None:
         if settings != self.settings:
@@ -275,29 +299,44 @@ class LiveScene:
         geom, tracer = self._geometry()
         if self._material_table is None:
             try:
-                self._material_table = MaterialTable.from_scene(self._materials_or_default(), self.images,
+                self._material_table = MaterialTable.from_scene(self._materials_or_default(),
+                                                                self.images + self.world_images,
                                                                 self.attributes)
             except ValueError as e:
                 raise SceneError("materials", str(e)) from None
             self.counters.material_builds += 1
+        cam = Camera(camera, settings, geom.origin_shift)
+        programs, world_regs = None, 0
+        if self.world_program is not None:  # a textured world: its program joins the materials'
+            from .integrator import program_data_for
+            from .render import world_setup
+
+            programs = program_data_for(self._material_table, geom, cam, world=self._world_program_in_table())
+            world_regs = self.world_program["registers"]
+            if self._world_map is None:
+                self._world_map = world_setup(self.world_program, programs)
+                self._lights_dirty = True
         if self._lights_dirty or self._light_set is None:
             emissive = _emissive_triangles(None, geom, self._material_table)
+            wprog, wmap = self._world_map if self.world_program is not None else (None, None)
             try:
                 self._light_set = LightSet(self.lights, self.world_color, emissive,
                                            origin_shift=geom.origin_shift,
-                                           scene_radius=geom.scene_radius, world_nee=False)
+                                           scene_radius=geom.scene_radius, world_nee=wmap is not None,
+                                           world_program=wprog, world_map=wmap)
             except ValueError as e:
                 raise SceneError("lights", str(e)) from None
             self._lights_dirty = False
             self.counters.light_builds += 1
         if self._filter is None:
             self._filter = PixelFilter(settings.filter_type, settings.filter_width)
-        cam = Camera(camera, settings, geom.origin_shift)
         integ = Integrator(settings, geom, tracer, self._material_table, self._light_set, cam,
                            Sampler(settings.sampler, settings.seed, settings.spp), self._filter,
                            direct=settings.direct, indirect=settings.indirect,
-                           media=media_for_scene(self.materials, getattr(self, "world_volume", None), geom))
-        scene = Scene(settings, camera, self.world_color, self.materials, self.lights, [], [])
+                           media=media_for_scene(self.materials, getattr(self, "world_volume", None), geom),
+                           programs=programs, world_registers=world_regs)
+        scene = Scene(settings, camera, self.world_color, self.materials, self.lights, [], [],
+                      world_program=self.world_program)
         return scene, RenderContext(scene, integ, tracer)
 
     @property

@@ -43,8 +43,9 @@ from .camera import camera_ray
 from .kernels import inline_kernel, kernel
 from .kernels.vec3 import add, build_frame, dot, load, mul, neg, normalize, scale, store, sub, to_local, to_world
 from .lights.common import I_VISIBLE_CAMERA
-from .lights import (emissive_pdf, light_sample, shape_emission, shape_intersect, sun_emission, sun_in_cone,
-                     world_pdf, world_radiance)
+from .lights import (emissive_pdf, light_sample_full, shape_emission, shape_intersect, sun_emission,
+                     sun_in_cone, world_pdf, world_radiance)
+from .lights.world_map import world_radiance_at
 from .materials import (LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, NO_BUMP, bsdf_eval_bump,
                         bsdf_sample_bump)
 from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
@@ -194,6 +195,23 @@ def shading_normal(surf, hits, i, prim, ng):
     if dot(n, ng) < 0.0:  # shading normals live on the geometric front side
         return neg(n)
     return n
+
+
+@inline_kernel
+def world_emission(ld, pd, regs, point, d, flags, counts, camera):
+    """Radiance the world sends along −d: its program's for a textured world (``point`` gets
+    the direction's rows and the ray's Light Path rows, as `fill_point` for a hit), else the
+    constant colour."""
+    if ld.world_prog >= 0:
+        _put(point, POINT_PATH, (1.0 if camera else 0.0, 1.0 if flags & RAY_DIFFUSE else 0.0,
+                                 1.0 if flags & (RAY_GLOSSY | RAY_SINGULAR) else 0.0))
+        _put(point, POINT_PATH2, (1.0 if flags & RAY_SINGULAR else 0.0,
+                                  1.0 if not camera and not flags & RAY_TRANSMIT else 0.0,
+                                  1.0 if flags & RAY_TRANSMIT else 0.0))
+        _put(point, POINT_DEPTH, (float(counts[0]), float(counts[1]), float(counts[2])))
+        _put(point, POINT_MISC, (float(counts[3]), 1e10, 0.0))  # Cycles: FLT_MAX ray length
+        return world_radiance_at(pd, regs, ld.world_prog, ld.world_reg, d, point)
+    return world_radiance(ld, d)
 
 
 @inline_kernel
@@ -351,7 +369,9 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
     (``drt.volumes.media.MediumData``; disabled: no media, nothing below touches them).
 
     Camera rays and sample dimensions go by the path's bounce count, which equals ``depth_i``
-    unless a path crossed volume-only boundaries (those segments are not bounces)."""
+    unless a path crossed volume-only boundaries (those segments are not bounces). A textured world
+    (``ld.world_prog`` ≥ 0) runs its program in ``regs`` too, for escaped rays and world light
+    samples, with ``point`` filled for the direction (``drt.lights.world_map``)."""
     direct = settings.direct
     n_shadow = 0
     j = 0
@@ -464,7 +484,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             if camera and settings.film_transparent:
                 out.alpha[slot] = 0.0
             else:
-                le = world_radiance(ld, d)
+                le = world_emission(ld, pd, regs, point, d, paths.prev_flags[i], paths.counts[i], camera)
                 wpdf = world_pdf(ld, prev_p, prev_n, d, prev_hint)
                 w = hit_weight(direct, prev_delta, prev_pdf, wpdf)
                 acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
@@ -534,7 +554,12 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         if direct != DIRECT_BSDF and ld.n_strategies > 0 and not md.delta_only[mat]:
             hint = material_hint(md, mat, n_wo, wo)
             ul0, ul1 = sample_2d(sd, pixel, idx, base + 1)
-            wi, dist, le, lpdf, l_delta, l_valid = light_sample(ld, p, n_wo, hint, u_light_select, ul0, ul1)
+            wi, dist, le, lpdf, l_delta, l_valid, strategy, _ = light_sample_full(
+                ld, p, n_wo, hint, u_light_select, ul0, ul1)
+            if l_valid and lpdf > 0.0 and strategy == ld.world_index and ld.world_prog >= 0:
+                # Cycles evaluates the background for a light sample as an emission ray:
+                # every Light Path flag 0 (this hit's rows in ``point`` are no longer needed)
+                le = world_emission(ld, pd, regs, point, wi, 0, paths.counts[i], False)
             if l_valid and lpdf > 0.0:
                 wi_l = to_local(wi, t_ax, b_ax, ns)
                 f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local)

@@ -102,6 +102,31 @@ def _emissive_triangles(scene: Scene, geom, materials: MaterialTable) -> Emissiv
     return EmissiveTriangles(verts, materials.emission[mat[em]], em)
 
 
+def _textured_world(scene: Scene, geom, materials: MaterialTable, camera: Camera):
+    """(ProgramData with the world program appended, (its index, radiance register), importance
+    map (wm_cond, wm_marg, average luminance) or None) of a scene whose world has a program."""
+    from .integrator import program_data_for
+
+    pd = program_data_for(materials, geom, camera, world=scene.world_program)
+    return (pd,) + world_setup(scene.world_program, pd)
+
+
+def world_setup(wp: dict, pd):
+    """((index, radiance register), importance map or None) of world program ``wp`` appended to
+    ``pd``: the map is built here, at load, by running the program over the map's directions
+    (never stored); none when the world's ``map_size`` is (0, 0) (not importance-sampled)."""
+    from .lights.world_map import build_world_map, shade_map, shade_map_corners
+    from .materials.program_format import world_program_index
+
+    index = world_program_index(pd)
+    w, h = wp["map_size"]
+    if w == 0:  # Cycles's World > Sampling: None: BSDF rays only
+        return (index, wp["radiance_reg"]), None
+    pixels = shade_map(pd, index, wp["radiance_reg"], wp["registers"], w, h)
+    corners = shade_map_corners(pd, index, wp["radiance_reg"], wp["registers"], w, h)
+    return (index, wp["radiance_reg"]), build_world_map(pixels, corners)
+
+
 def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None,
             direct: str | None = None, indirect: str | None = None) -> RenderContext:
     """Build the tracer, material table, lights and camera for ``scene``. Arguments that are
@@ -115,14 +140,20 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
     except ValueError as e:
         raise SceneError("materials", str(e)) from None
     emissive = _emissive_triangles(scene, geom, materials)
+    camera = Camera(scene.camera, settings, geom.origin_shift)
+    programs, world_program, world_map, world_regs = None, None, None, 0
+    if scene.world_program is not None:
+        programs, world_program, world_map = _textured_world(scene, geom, materials, camera)
+        world_regs = scene.world_program["registers"]
     try:
-        # a constant-colour world is found by BSDF rays only, as in Cycles (see LightSet)
+        # a constant-colour world is found by BSDF rays only, as in Cycles (see LightSet); a
+        # textured one is importance-sampled (drt.lights.world_map)
         lights = LightSet(scene.lights, scene.world_color, emissive, origin_shift=geom.origin_shift,
-                          scene_radius=geom.scene_radius, world_nee=False)
+                          scene_radius=geom.scene_radius, world_nee=world_map is not None,
+                          world_program=world_program, world_map=world_map)
     except ValueError as e:
         raise SceneError("lights", str(e)) from None
     tracer = Tracer(geom)
-    camera = Camera(scene.camera, settings, geom.origin_shift)
     integ = Integrator(
         settings, geom, tracer, materials, lights, camera,
         Sampler(settings.sampler, settings.seed, settings.spp),
@@ -130,9 +161,11 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
         direct=settings.direct,
         indirect=settings.indirect,
         media=media_for_scene(scene.materials, scene.world_volume, geom),
+        programs=programs,
+        world_registers=world_regs,
     )
     ctx = RenderContext(scene, integ, tracer, time.perf_counter() - t0)
-    if not scene.lights and not np.any(scene.world_color > 0) and emissive is None:
+    if not scene.lights and not np.any(scene.world_color > 0) and emissive is None and world_map is None:
         ctx.warnings.append("the scene has no lights, no emissive materials and a black world: the image will be black")
     return ctx
 

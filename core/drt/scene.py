@@ -267,6 +267,9 @@ class Scene:
     attributes: list = field(default_factory=list, repr=False)
     #: the world's homogeneous medium (``drt.volumes.media``), None: none
     world_volume: dict | None = None
+    #: a textured world: its validated program dict plus "radiance_reg" (the register holding
+    #: the radiance along −d) and "map_size" (importance map (W, H), (0, 0): none); None: constant
+    world_program: dict | None = field(default=None, repr=False)
 
     @property
     def has_motion(self) -> bool:
@@ -431,6 +434,37 @@ def _medium(d: dict, path: str) -> dict | None:
     except ValueError as e:  # "path.volume.field: problem"
         where, _, problem = str(e).partition(": ")
         raise SceneError(where, problem) from None
+
+
+#: largest world importance-map side (the map is W × H float64 pairs: 8192 × 4096 → 0.5 GB)
+MAX_WORLD_MAP_RESOLUTION = 8192
+
+
+def _world_program(world: dict, n_images: int) -> dict | None:
+    """The world's validated ``program`` with its ``radiance_reg`` and ``map_size``
+    (docs/scene-format.md), or None for a constant world."""
+    from .materials.program_format import validate_program
+
+    if not isinstance(world, dict):
+        raise SceneError("world", "must be an object")
+    if world.get("program") is None:
+        return None
+    try:
+        prog = validate_program(world["program"], n_images, "world.program")
+    except ValueError as e:
+        where, _, problem = str(e).partition(": ")
+        raise SceneError(where, problem) from None
+    prog["radiance_reg"] = _number(world, "radiance_reg", "world", integer=True, lo=0,
+                                   hi=prog["registers"] - 1)
+    size = _get(world, "map_size", "world", [1024, 512])
+    if not isinstance(size, (list, tuple)) or len(size) != 2:
+        raise SceneError("world.map_size", f"must be [width, height], got {size!r}")
+    w, h = (_number({"map_size": v}, "map_size", "world", integer=True, lo=0, hi=MAX_WORLD_MAP_RESOLUTION)
+            for v in size)
+    if (w == 0) != (h == 0):
+        raise SceneError("world.map_size", f"must be [0, 0] (no importance sampling) or both > 0, got {size!r}")
+    prog["map_size"] = (w, h)
+    return prog
 
 
 def _images(h: dict, arrays: dict) -> list:
@@ -598,6 +632,7 @@ def scene_from_dict(header: dict, arrays: dict | None = None) -> Scene:
     attributes = _list(header, "attributes", "") if "attributes" in header else []
     if not all(isinstance(a, str) for a in attributes):
         raise SceneError("attributes", "must be a list of names")
+    world_program = _world_program(world, len(images))
     materials = _materials(header, len(images), len(attributes))
     lights = _lights(header)
     meshes = _meshes(header, arrays, len(materials), len(attributes))
@@ -605,5 +640,5 @@ def scene_from_dict(header: dict, arrays: dict | None = None) -> Scene:
     if not materials and any(len(m.triangles) for m in meshes):
         # Geometry without materials renders as a neutral grey diffuse (Blender's default look).
         materials = [{"name": "default", "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}], "emission": [0, 0, 0]}]
-    return Scene(render, camera, world_color, materials, lights, meshes, objects, header, arrays, images, list(attributes),
-                 world_volume)
+    return Scene(render, camera, world_color, materials, lights, meshes, objects, header, arrays, images,
+                 list(attributes), world_volume, world_program)

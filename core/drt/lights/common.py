@@ -121,7 +121,10 @@ def one_minus_cos_from_sin2(sin2):
 #: Emissive triangles (K rows): ``tf`` (K, T_COLUMNS) float64: T_V0, T_E1, T_E2, T_NG,
 #:   T_RADIANCE (3 each), T_AREA; tri_pmf, tri_cdf (K,); tri_ids int64 (global ids),
 #:   tri_sorted_ids int64, tri_sorted_local int64 (sorted ids → local index); n_tris.
-#: World: world_color (3,) (zeros without a world), has_world bool.
+#: World: world_color (3,) (zeros without a world), has_world bool. A textured world
+#:   (``drt.lights.world_map``): world_prog, the index of its program in the integrator's
+#:   ``ProgramData`` (−1: constant world), world_reg its radiance register, and the importance
+#:   map wm_cond (H, W + 1, 2), wm_marg (H + 1, 2) (zero-size without a map).
 LightData = namedtuple("LightData", [
     "n_lights", "n_strategies", "n_shapes", "n_suns", "n_tris", "emissive_index", "world_index",
     "has_world", "has_emissive", "per_point",
@@ -129,6 +132,7 @@ LightData = namedtuple("LightData", [
     "pmf", "cdf", "sf",
     "tf", "tri_pmf", "tri_cdf", "tri_ids", "tri_sorted_ids", "tri_sorted_local",
     "world_color",
+    "world_prog", "world_reg", "wm_cond", "wm_marg",
 ])
 
 _VEC_FIELDS = ("pos", "radiance", "intensity", "spot_dir", "ex", "ey", "ez", "normal", "corner",
@@ -195,11 +199,13 @@ def selection_tables(k: int) -> dict:
 
 
 def build_light_data(lights, group=None, world_color=None, *, pmf=None, cdf=None,
-                     per_point: bool = False, selection: dict | None = None) -> LightData:
+                     per_point: bool = False, selection: dict | None = None,
+                     world_program: tuple[int, int] = (-1, -1), world_map=None) -> LightData:
     """The `LightData` of header lights (objects with a ``_store(arrays, i)`` method), an
     optional `EmissiveGroup` and an optional world colour (None: no world). Without ``pmf`` the
     strategies are chosen uniformly (a single strategy: probability 1); ``selection`` holds the
-    `selection_tables` arrays (zeros by default)."""
+    `selection_tables` arrays (zeros by default). A textured world: ``world_program`` =
+    (program index, radiance register) and ``world_map`` = (wm_cond, wm_marg)."""
     n = len(lights)
     arrays = {f: np.zeros((n, 3)) for f in _VEC_FIELDS}
     arrays.update({f: np.zeros(n) for f in _FLOAT_FIELDS})
@@ -237,6 +243,11 @@ def build_light_data(lights, group=None, world_color=None, *, pmf=None, cdf=None
                    tri_sorted_ids=np.zeros(0, np.int64), tri_sorted_local=np.zeros(0, np.int64))
     n_tris = len(tri["tri_area"])
 
+    if world_map is None:
+        cond, marg = np.zeros((0, 1, 2)), np.zeros((1, 2))
+    else:
+        cond, marg = (np.asarray(a, dtype=np.float64) for a in world_map)
+
     def ints(a):
         return np.array(a, dtype=np.int64, order="C", copy=True).reshape(-1)
 
@@ -254,4 +265,6 @@ def build_light_data(lights, group=None, world_color=None, *, pmf=None, cdf=None
         tri_pmf=_f64(tri["tri_pmf"], (n_tris,)), tri_cdf=_f64(tri["tri_cdf"], (n_tris,)),
         tri_ids=ints(tri["tri_ids"]), tri_sorted_ids=ints(tri["tri_sorted_ids"]),
         tri_sorted_local=ints(tri["tri_sorted_local"]),
-        world_color=_f64(world_color if world_color is not None else np.zeros(3), (3,)))
+        world_color=_f64(world_color if world_color is not None else np.zeros(3), (3,)),
+        world_prog=int(world_program[0]), world_reg=int(world_program[1]),
+        wm_cond=_f64(cond, cond.shape), wm_marg=_f64(marg, marg.shape))

@@ -47,7 +47,7 @@ from .selection import (ShadingHint, hint_arrays, hint_known, row_hint, select_i
                         select_strategy, selection_prob, selection_totals, strategy_prob)
 from .spot import SpotLight
 from .sun import SunLight, sun_contains, sun_pdf_dir, sun_sample
-from .world import WorldLight, world_dir_pdf, world_sample
+from .world import WorldLight, world_dir_pdf, world_pdf_dir, world_sample
 from ..kernels import kernel
 from ..kernels.vec3 import dot, load, store, sub
 from .common import I_IS_DELTA, I_KIND, L_RADIANCE  # noqa: F401 (table columns)
@@ -211,7 +211,7 @@ def world_pdf(ld, p, n, d, hint):
     (zero: uniform sphere), as `light_sample` would; 0 without a world."""
     if not ld.has_world:
         return 0.0
-    return world_dir_pdf(n, d) * selection_prob(ld, p, hint, ld.world_index)
+    return world_pdf_dir(ld, n, d) * selection_prob(ld, p, hint, ld.world_index)
 
 
 @inline_kernel
@@ -543,7 +543,8 @@ class LightSet:
     def __init__(self, lights: list[dict], world_color=(0.0, 0.0, 0.0),
                  emissive: EmissiveTriangles | None = None, *, origin_shift=(0.0, 0.0, 0.0),
                  scene_radius: float | None = None, selection: str = "DISTANCE",
-                 world_nee: bool = True):
+                 world_nee: bool = True, world_program: tuple[int, int] | None = None,
+                 world_map=None):
         origin_shift = np.asarray(origin_shift, dtype=np.float64).reshape(3)
         group = EmissiveGroup(emissive) if emissive is not None else None
         if group is not None and len(group) == 0:
@@ -555,7 +556,15 @@ class LightSet:
         self.n_lights = len(self.lights)
         self.emissive = group
         world_color = np.asarray(world_color, dtype=np.float64).reshape(3)
-        self.world = WorldLight(world_color, self.scene_radius) if (world_color > 0).any() and world_nee else None
+        # a textured world (drt.lights.world_map): its program's index and radiance register in
+        # the integrator's ProgramData, and its importance map (wm_cond, wm_marg, average)
+        self.world_program = world_program
+        self.world_map = world_map
+        if world_map is not None:
+            self.world = WorldLight(world_color, self.scene_radius, world_map[2]) \
+                if world_map[2] > 0.0 and world_nee else None
+        else:
+            self.world = WorldLight(world_color, self.scene_radius) if (world_color > 0).any() and world_nee else None
         self.world_color = world_color
         self.strategies = list(self.lights)
         self.emissive_index = self.world_index = -1
@@ -582,7 +591,9 @@ class LightSet:
         self.data = build_light_data(
             self.lights, self.emissive, self.world.radiance if self.world is not None else None,
             pmf=self.pmf, cdf=self.cdf, per_point=self._per_point,
-            selection=self._selection_tables())
+            selection=self._selection_tables(),
+            world_program=world_program if world_program is not None else (-1, -1),
+            world_map=world_map[:2] if world_map is not None else None)
         if self.world is None and (world_color > 0).any():  # seen by rays that miss, not sampled
             self.data = self.data._replace(world_color=np.array(world_color, dtype=np.float64))
 

@@ -37,6 +37,10 @@ OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING = 10, 11, 12, 13
 OP_IMAGE, OP_CHECKER, OP_GRADIENT, OP_RAMP = 20, 21, 22, 23
 OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31, 32, 33, 34, 35
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
+#: Environment Texture (the world's opcodes use 70–79): mode = projection·32 + image mode
+#: (interpolation·8 + extension, always REPEAT as Cycles), param = image; in0 = the direction
+OP_ENVIRONMENT = 70
+ENV_PROJECTION_STRIDE = 32
 # shading-point inputs of surface hits (docs/materials.md, "Shading-point inputs")
 OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 92, 93, 94
 OP_BUMP_OFFSET, OP_BUMP, OP_CAMERA_COORDS = 95, 96, 97
@@ -50,7 +54,7 @@ OPCODES = PROCEDURAL_OPCODES | {OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL
            OP_CAMERA_COORDS, OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
            OP_CHECKER, OP_GRADIENT, OP_RAMP, OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA,
            OP_BRIGHT_CONTRAST, OP_HSV, OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE,
-           OP_RGB_TO_HSV, OP_HSV_TO_RGB}
+           OP_RGB_TO_HSV, OP_HSV_TO_RGB, OP_ENVIRONMENT}
 #: geometry inputs an opcode reads (the scene stores those per-corner arrays only if read)
 READS = {OP_UV: "uv", OP_GENERATED: "generated", OP_OBJECT: "object_coords"}
 OP_WIDTH = 11
@@ -133,7 +137,7 @@ def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> 
         regs = row[2:10]
         if regs.max() >= n or regs.min() < -1 or row[2] < 0:
             raise ValueError(f"{where}.ops[{k}]: register out of range")
-        if row[0] == OP_IMAGE and not 0 <= row[10] < n_images:
+        if row[0] in (OP_IMAGE, OP_ENVIRONMENT) and not 0 <= row[10] < n_images:
             raise ValueError(f"{where}.ops[{k}]: image {int(row[10])} does not exist")
         if row[0] == OP_ATTRIBUTE and not 0 <= row[10] < n_attributes:
             raise ValueError(f"{where}.ops[{k}]: attribute {int(row[10])} does not exist")
@@ -182,11 +186,13 @@ POINT_OPS = frozenset({OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_
 def build_program_data(materials: list[dict], table, images: list[tuple[dict, np.ndarray]],
                        uv, generated, objco, cutoff: float, attrs=None, origin=None,
                        object_of=None, object_info=None, positions=None, triangles=None,
-                       footprint=None, camera=None) -> ProgramData | None:
+                       footprint=None, camera=None, world=None) -> ProgramData | None:
     """ProgramData for the validated ``materials`` (scene.py) and their ``MaterialTable``; None
-    when no material has a program. Lobes are matched to table slots with the table's own rule
-    (a lobe whose colour's mean is below ``cutoff`` was dropped)."""
-    if not any(m.get("program") for m in materials):
+    when no material has a program and there is no ``world`` program. Lobes are matched to
+    table slots with the table's own rule (a lobe whose colour's mean is below ``cutoff`` was
+    dropped). A validated ``world`` program is appended after the materials' programs: its
+    index is ``world_program_index(pd)``."""
+    if not any(m.get("program") for m in materials) and world is None:
         return None
     m_count = len(materials)
     n_slots = table.lobe_type.shape[1]
@@ -222,6 +228,13 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         emission_reg[i] = _reg(mat.get("emission_reg"), n, f"{where} emission_reg")
         normal_reg[i] = _reg(mat.get("normal_reg"), n, f"{where} normal_reg")
         reads_point[i] = bool(np.isin(ops[:, 0], list(POINT_OPS)).any()) or normal_reg[i] >= 0
+    if world is not None:
+        op_rows.append(world["ops"].copy())
+        op_rows[-1][np.isin(op_rows[-1][:, 0], list(DATA_OPS)), 10] += sum(len(d) for d in data)
+        const_rows.append(world["constants"])
+        data.append(world["data"])
+        op_start.append(op_start[-1] + len(world["ops"]))
+        const_start.append(const_start[-1] + len(world["constants"]))
     info = np.zeros((len(images), 5), np.int64)
     u8, f32 = [], []
     off_u8 = off_f = 0
@@ -242,7 +255,7 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
 
     return ProgramData(
         prog_of=prog_of, op_start=np.array(op_start, np.int64),
-        ops=np.ascontiguousarray(np.concatenate(op_rows), np.int64),
+        ops=np.ascontiguousarray(np.concatenate(op_rows).reshape(-1, OP_WIDTH), np.int64),
         const_start=np.array(const_start, np.int64),
         const_reg=np.ascontiguousarray(consts[:, 0], np.int64),
         const_val=np.ascontiguousarray(consts[:, 1:], np.float64),
@@ -258,6 +271,11 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         object_of=arr(object_of, np.int32, (0,)), object_info=arr(object_info, np.float64, (0, 9)),
         positions=arr(positions, np.float32, (0, 3)), triangles=arr(triangles, np.int32, (0, 3)),
         footprint=arr(footprint, np.float64, (0, 3)), camera=arr(camera, np.float64, (0, 4)))
+
+
+def world_program_index(pd: ProgramData) -> int:
+    """Index of the world program `build_program_data` appended (the last program)."""
+    return int(pd.op_start.shape[0]) - 2
 
 
 def empty_program_data() -> ProgramData:

@@ -44,7 +44,9 @@ from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, PO
                              OP_COMBINE, OP_COMPONENT, OP_GAMMA, OP_GENERATED, OP_GRADIENT,
                              OP_HSV, OP_HSV_TO_RGB, OP_IMAGE, OP_INVERT, OP_MAP_RANGE,
                              OP_ATTRIBUTE, OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
-                             OP_TO_GRAY, OP_UV, OP_VMATH, RAMP_TABLE_SIZE)
+                             OP_TO_GRAY, OP_UV, OP_VMATH, RAMP_TABLE_SIZE, OP_ENVIRONMENT,
+                             ENV_PROJECTION_STRIDE)
+from ..sampling.spherical_maps import direction_to_uv
 
 
 # --- helpers (Cycles's util/math.h semantics) ---------------------------------------------------
@@ -995,6 +997,12 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
         elif op == OP_IMAGE:
             v = _reg(regs, i0)
             r, g, b, a = image_lookup(pd, param, mode, v[0], v[1])
+            _set(regs, o0, (r, g, b))
+            _set1(regs, o1, a)
+        elif op == OP_ENVIRONMENT:
+            v = _reg(regs, i0)
+            u, vv = direction_to_uv(mode // ENV_PROJECTION_STRIDE, v[0], v[1], v[2])
+            r, g, b, a = image_lookup(pd, param, mode % ENV_PROJECTION_STRIDE, u, vv)
             _set(regs, o0, (r, g, b))
             _set1(regs, o1, a)
         elif op == OP_CHECKER:

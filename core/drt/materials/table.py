@@ -428,6 +428,7 @@ class MaterialTable:
         emission = np.array(emissions).reshape(m, 3)
         table = cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission)
         table.program_source = None
+        table.images = list(images)  # a world program may read them without any material program
         if any(isinstance(mat, dict) and mat.get("program") for mat in materials):
             table.program_source = (list(materials), list(images), list(attributes))
             for i, mat in enumerate(materials):
@@ -437,15 +438,20 @@ class MaterialTable:
         return table
 
     def program_data(self, uv=None, corner_attrs=None, origin=None, object_of=None, object_info=None,
-                     positions=None, triangles=None, footprint=None, camera=None):
+                     positions=None, triangles=None, footprint=None, camera=None, world=None):
         """The ``ProgramData`` of this scene's material programs (geometry inputs: the global
-        per-triangle uv (T, 3, 2) and ``corner_attrs`` of ``SceneGeometry``); zero-size arrays
-        when no material has a program."""
+        per-triangle uv (T, 3, 2) and ``corner_attrs`` of ``SceneGeometry``) and of the
+        validated ``world`` program if given (appended last, ``world_program_index``);
+        zero-size arrays when there is no program at all."""
         from .program_format import build_program_data, empty_program_data
 
         src = getattr(self, "program_source", None)
-        if src is None:
+        if src is None and world is None:
             return empty_program_data()
+        if src is None:  # only the world has a program: no geometry inputs are read
+            return build_program_data([{}] * len(self.names), self, getattr(self, "images", []),
+                                      None, None, None, CLOSURE_WEIGHT_CUTOFF, origin=origin,
+                                      camera=camera, footprint=footprint, world=world)
         attrs = corner_attrs or {}
         named = None
         n_named = len(src[2]) if len(src) > 2 else 0
@@ -458,7 +464,7 @@ class MaterialTable:
                         named[i] = attrs[f"attr{i}"]
         return build_program_data(src[0], self, src[1], uv, attrs.get("generated"),
                                   attrs.get("object_coords"), CLOSURE_WEIGHT_CUTOFF, named, origin,
-                                  object_of, object_info, positions, triangles, footprint, camera)
+                                  object_of, object_info, positions, triangles, footprint, camera, world)
 
     # ------------------------------------------------------------------ queries
     def _mat_rows(self, mat) -> np.ndarray:
