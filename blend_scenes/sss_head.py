@@ -44,6 +44,10 @@ def build():
     head.data.materials.append(skin_material())
     head.data.polygons.foreach_set("use_smooth", [True] * len(head.data.polygons))
     head.data.update()
+    # smooth geometry, not only smooth normals: where a low-poly facet's shading normal and its
+    # geometric normal disagree, Cycles and DRT handle SSS exits differently (docs/subsurface.md)
+    sub = head.modifiers.new("Subdivision", "SUBSURF")
+    sub.levels, sub.render_levels = 2, 2
     # behind the head, facing the camera (−Y): its light passes through the ears
     C.light("Back", "AREA", (0.0, 2.2, 0.4), rotation=(C.deg(-90), 0.0, 0.0), energy=400.0, size=1.5)
     C.light("Sun", "SUN", (0, 0, 5), rotation=(C.deg(50), 0.0, C.deg(-35)), energy=1.0)
