@@ -220,3 +220,41 @@ def test_extreme_radii_are_stable(radius):
         assert 0.6 < mean < 0.85  # Lambert 0.8 in a furnace is 0.8
     else:
         assert 0.8 < mean < 1.01
+
+
+def test_scene_without_sss_takes_no_sss_path():
+    """Cost follows use: no walker, zero-size per-path SSS arrays, no exit material."""
+    from drt.render import prepare
+
+    h = base_header(8, 8, 1)
+    add_material(h, "d", [{"type": "DIFFUSE", "color": [0.5, 0.5, 0.5]}])
+    a = {}
+    pos, tri, nrm = uv_sphere(1.0, rings=8, segments=16)
+    add_mesh(h, a, "ball", pos, tri, 0, normals=nrm)
+    integ = prepare(scene_from_dict(h, a)).integrator
+    assert integ.sss is None and integ.n_passes == integ.max_depth + 1
+    paths, _ = integ._workspace(4)
+    assert paths.sss.shape == (0,) and paths.sss_coef.shape == (0, 10)
+    assert "__drt_sss_exit__" not in integ.materials.names
+
+
+def test_walk_ignores_other_objects():
+    """Hits are object-local (Cycles's scene_intersect_local): a black sphere inside the SSS
+    sphere changes nothing — the image is identical, sample for sample."""
+    def image(inner):
+        h = base_header(16, 16, 8, world=(1.0, 1.0, 1.0),
+                        camera={"type": "PERSP", "matrix_world": look_at((0, -6, 0), (0, 0, 0)), "lens": 120.0})
+        h["version"] = 2
+        add_material(h, "sss", [sss_lobe(color=[0.8, 0.8, 0.8], radius=[2.0, 2.0, 2.0])])
+        add_material(h, "black", [{"type": "DIFFUSE", "color": [0.0, 0.0, 0.0]}])
+        a = {}
+        pos, tri, nrm = uv_sphere(1.0, rings=16, segments=32)
+        add_mesh(h, a, "ball", pos, tri, 0, normals=nrm)
+        if inner:
+            pos, tri, nrm = uv_sphere(0.6, rings=12, segments=24)
+            add_mesh(h, a, "core", pos, tri, 1, normals=nrm)
+        return render(scene_from_dict(h, a), threads=1).combined[..., :3]
+
+    with_core, without = image(True), image(False)
+    assert with_core.mean() > 0.5
+    np.testing.assert_array_equal(with_core, without)
