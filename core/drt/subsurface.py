@@ -434,33 +434,52 @@ class SubsurfaceWalker:
         # which matters when the mean free path is below the offset (tiny radii)
         cos = np.abs(np.einsum("ij,ij->i", ws.d, ws.n_entry))
         eps0 = (OFFSET_ABSOLUTE + OFFSET_RELATIVE * np.abs(ws.o).max(axis=1)) / np.maximum(cos, 1e-3)
-        for _ in range(BSSRDF_MAX_BOUNCES):
-            act = np.nonzero(ws.state == SSS_WALK)[0]
+        kinds = np.unique(group)
+        single = int(kinds[0]) if len(kinds) == 1 else None  # the usual case: one object
+        for it in range(BSSRDF_MAX_BOUNCES):
+            act = np.flatnonzero(ws.state == SSS_WALK)
             if not len(act):
                 break
             self.steps_taken += len(act)
             walk_sample(ws, act)
-            hit_t = np.full(len(act), np.inf)
-            g_act = group[act]
-            for k in np.unique(g_act):
-                sel = np.nonzero(g_act == k)[0]
-                r = act[sel]
-                push = np.where(ws.step[r] == 0, eps0[r], 0.0)
-                o = ws.o[r] + push[:, None] * ws.d[r]
-                tmax = np.maximum(ws.tmax[r] - push, 0.0)
+            first = it == 0  # every walk takes its first step in the first pass
+            hit_t = np.empty(len(act))
+            if single is not None:
+                parts = ((single, None),)
+            else:
+                g_act = group[act]
+                parts = tuple((int(k), np.flatnonzero(g_act == k)) for k in np.unique(g_act))
+            for k, sel in parts:
+                r = act if sel is None else act[sel]
+                d = ws.d[r]
+                if first:
+                    push = eps0[r]
+                    o = ws.o[r] + push[:, None] * d
+                    tmax = np.maximum(ws.tmax[r] - push, 0.0)
+                else:
+                    push = 0.0
+                    o = ws.o[r]
+                    tmax = ws.tmax[r]
                 if k >= 0:
-                    tracer, offset = self.local[int(k)]
-                    h = tracer.intersect(o, ws.d[r], None, tmax)
+                    tracer, offset = self.local[k]
+                    h = tracer.intersect(o, d, None, tmax)
                 else:
                     tracer, offset = self.tracer, 0
-                    h = tracer.intersect(o, ws.d[r], tau[r], tmax)
-                hit = (h.prim >= 0) & (tmax > 0.0)
-                hit_t[sel] = np.where(hit, h.t + push, np.inf)
-                rh = r[hit]
-                ex_prim[rh] = h.prim[hit] + offset
-                ex_b[rh, 0], ex_b[rh, 1] = h.b1[hit], h.b2[hit]
-                ex_p[rh] = h.p[hit]
-                ex_ng[rh] = h.ng[hit]
+                    h = tracer.intersect(o, d, tau[r], tmax)
+                hit = h.prim >= 0
+                if first:
+                    hit &= tmax > 0.0
+                ht = np.where(hit, h.t + push, np.inf)
+                if sel is None:
+                    hit_t = ht
+                else:
+                    hit_t[sel] = ht
+                if hit.any():
+                    rh = r[hit]
+                    ex_prim[rh] = h.prim[hit] + offset
+                    ex_b[rh, 0], ex_b[rh, 1] = h.b1[hit], h.b2[hit]
+                    ex_p[rh] = h.p[hit]
+                    ex_ng[rh] = h.ng[hit]
             walk_advance(ws, act, hit_t)
         ws.state[ws.state == SSS_WALK] = SSS_DEAD  # (walk_advance already stops at the cap)
         dead = ws.state == SSS_DEAD
