@@ -232,7 +232,7 @@ def test_scene_without_sss_takes_no_sss_path():
     pos, tri, nrm = uv_sphere(1.0, rings=8, segments=16)
     add_mesh(h, a, "ball", pos, tri, 0, normals=nrm)
     integ = prepare(scene_from_dict(h, a)).integrator
-    assert integ.sss is None and integ.n_passes == integ.max_depth + 1
+    assert integ.sss is None and integ.loop_limit == integ.max_depth + 1
     paths, _ = integ._workspace(4)
     assert paths.sss.shape == (0,) and paths.sss_coef.shape == (0, 10)
     assert "__drt_sss_exit__" not in integ.materials.names
