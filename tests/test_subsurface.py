@@ -258,3 +258,27 @@ def test_walk_ignores_other_objects():
     with_core, without = image(True), image(False)
     assert with_core.mean() > 0.5
     np.testing.assert_array_equal(with_core, without)
+
+
+def test_sss_in_a_fog_world_renders():
+    """SSS and media together (issue 14's two halves): an SSS sphere inside a world medium, lit
+    by a point light (a world medium with absorption blacks out the sun and the world at
+    infinity, as in Cycles), renders finite, and the fog dims it against clear air."""
+    def mean(volume):
+        h = base_header(16, 16, 16,
+                        camera={"type": "PERSP", "matrix_world": look_at((0, -6, 0), (0, 0, 0)), "lens": 120.0})
+        h["version"] = 2
+        if volume:
+            h["world"]["volume"] = {"scatter": [0.05, 0.05, 0.05], "absorption": [0.1, 0.1, 0.1]}
+        h["lights"].append({"name": "Key", "type": "POINT", "matrix_world": look_at((0, -3, 3), (0, 0, 0)),
+                            "color": [1, 1, 1], "power": 1000.0, "radius": 0.1})
+        add_material(h, "sss", [sss_lobe(color=[0.8, 0.6, 0.4], radius=[0.5, 0.2, 0.1])])
+        a = {}
+        pos, tri, nrm = uv_sphere(1.0, rings=16, segments=32)
+        add_mesh(h, a, "ball", pos, tri, 0, normals=nrm)
+        img = render(scene_from_dict(h, a), threads=1).combined[..., :3]
+        assert np.isfinite(img).all()
+        return sphere_pixels(img).mean()
+
+    clear, foggy = mean(False), mean(True)
+    assert 0.05 < foggy < clear
