@@ -36,7 +36,7 @@ def _validated(scene, materials: list, lights: list, world: dict, extra=None, ar
     (the camera is a placeholder: the view supplies the real one); ``extra`` header entries
     (images, attributes) with their ``arrays``."""
     scene_mod = compat.core_module("scene")
-    header = {"format": "drt-scene", "version": 1, "render": render_settings(scene, preview=True),
+    header = {"format": "drt-scene", "version": 2, "render": render_settings(scene, preview=True),
               "camera": {"type": "PERSP", "matrix_world": _IDENTITY}, "world": world,
               "materials": materials, "lights": lights, "meshes": [], "objects": [], **(extra or {})}
     return scene_mod.scene_from_dict(header, dict(arrays or {}))

@@ -24,7 +24,8 @@ from test_addon import ensure_registered, open_scene  # noqa: E402
 
 pytestmark = pytest.mark.blender
 
-SCENE_NAMES = ["cornell_box", "dof", "motion_blur", "glossy_glass", "all_lights", "showcase", "textured", "procedural"]
+SCENE_NAMES = ["cornell_box", "dof", "motion_blur", "glossy_glass", "all_lights", "showcase", "textured", "procedural",
+               "sss_head"]
 
 
 def read_npz(path):

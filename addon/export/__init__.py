@@ -161,7 +161,9 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     if mats.reads_object_info():
         for o, info in zip(objects, infos):
             o["info"] = info
-    header = {"format": "drt-scene", "version": 1, "render": render, "camera": camera,
+    # version 2 only when needed (SUBSURFACE lobes), so that other scenes stay readable by v1 readers
+    version = 2 if any(lb["type"] == "SUBSURFACE" for m in mats.materials for lb in m["lobes"]) else 1
+    header = {"format": "drt-scene", "version": version, "render": render, "camera": camera,
               "world": world_dict(scene.world, warnings, mats.images), "materials": mats.materials,
               "lights": lights, "meshes": meshes, "objects": objects}
     if mats.attributes:  # named per-corner attributes programs read (arrays mesh<K>.attr<I>)

@@ -22,7 +22,14 @@ Mapping (see docs/addon.md, "Materials"):
     emission     = a · emission color × emission strength
   where F = 2s·(F0 + (1 − F0)/21), F0 = ((ior − 1)/(ior + 1))², the cosine-weighted average of
   Schlick's Fresnel: the core's GLOSSY lobe has no Fresnel term, so the average reflectance
-  stands in for it. Coat, sheen and subsurface are ignored with a warning.
+  stands in for it. Coat and sheen are ignored with a warning.
+  Subsurface weight w_s splits the DIFFUSE lobe (Cycles's "Diffuse/Subsurface component"):
+    DIFFUSE(base·(1−F)·(1−w_s)) + SUBSURFACE(clamp(base)·(1−F)·w_s, radius × scale, method,
+    ior: IOR (Random Walk) or Subsurface IOR (Skin), roughness, anisotropy, weight = the scalar
+    factor of the colour) — docs/subsurface.md. Radius, scale, IORs and anisotropy are
+    constant-only.
+- Subsurface Scattering node → SUBSURFACE(color, radius × scale, falloff, IOR, roughness:
+  sqrt(Roughness) (Cycles uses the node's roughness as the GGX alpha), anisotropy).
 - Anything else: one warning per material, and a DIFFUSE lobe of the node's color/base color
   (or the material's viewport color).
 
@@ -189,6 +196,15 @@ class MaterialExporter:
                 out["roughness"] = min(max(float(np.ravel(r)[0]), 0.0), 1.0)
         if "ior" in lb:
             out["ior"] = lb["ior"]
+        for key in ("radius", "method", "anisotropy"):  # SUBSURFACE lobes
+            if key in lb:
+                out[key] = lb[key]
+        if "weight" in lb:
+            k = constant(lb["weight"])
+            k = _representative(k, 0.0)[0] if isinstance(k, Value) else float(np.ravel(k)[0])
+            if not k > 0.0:
+                return None
+            out["weight"] = k
         return out
 
     @staticmethod
@@ -317,6 +333,15 @@ class MaterialExporter:
             return lobes, em
         if kind == "ShaderNodeBsdfPrincipled":
             return self._principled(node, w, problems, ctx)
+        if kind == "ShaderNodeSubsurfaceScattering":
+            col = self._color(node, "Color", problems, ctx=ctx)
+            r = min(max(self._const_value(node, "Roughness", problems, 1.0, ctx), 0.0), 1.0)
+            return [{"type": "SUBSURFACE", "color": w * col, "weight": w,
+                     "radius": self._sss_radius(node, "Radius", "Scale", problems, ctx),
+                     "method": self._sss_method(node, "falloff", problems),
+                     "ior": self._const_value(node, "IOR", problems, 1.4, ctx),
+                     "roughness": float(np.sqrt(r)),
+                     "anisotropy": self._const_value(node, "Anisotropy", problems, 0.0, ctx)}], np.zeros(3)
 
         # Unsupported: its (base) color as diffuse.
         problems.append(f"unsupported shader '{node.name}' ({kind}), rendered as diffuse")
@@ -350,6 +375,19 @@ class MaterialExporter:
             v = self._b.emit(OP_VMATH_NORMALIZE[0], OP_VMATH_NORMALIZE[1], [v, v])
         self._normal = (key, v)
 
+    def _sss_radius(self, node, radius_name, scale_name, problems, ctx):
+        """Radius × scale (metres per channel, ≥ 0), constant-only."""
+        rad = self._const_color(node, radius_name, problems, (1.0, 0.2, 0.1), ctx)
+        scale = self._const_value(node, scale_name, problems, 1.0, ctx)
+        return [float(max(x * scale, 0.0)) for x in np.broadcast_to(rad, 3)]
+
+    @staticmethod
+    def _sss_method(node, prop, problems):
+        method = getattr(node, prop, "RANDOM_WALK")
+        if method == "BURLEY":
+            problems.append(f"'{node.name}' Christensen-Burley subsurface rendered as Random Walk")
+        return method if method in ("RANDOM_WALK", "RANDOM_WALK_SKIN", "BURLEY") else "RANDOM_WALK"
+
     def _principled(self, node, w, problems, ctx):
         base = self._color(node, "Base Color", problems, ctx=ctx)
         metallic = clamp01(self._value(node, "Metallic", problems, 0.0, ctx))
@@ -368,13 +406,14 @@ class MaterialExporter:
         em_col = self._color(node, "emission_color", problems, (0, 0, 0), ctx)
         em_strength = self._value(node, "Emission Strength", problems, 1.0, ctx) \
             if node.inputs.get("Emission Strength") is not None else 1.0
-        for key in ("coat", "sheen", "subsurface"):
+        for key in ("coat", "sheen"):
             if self._const_value(node, key, problems, 0.0, ctx) > 0.0:
                 problems.append(f"'{node.name}' {key} ignored")
         for key in ("Coat Normal", "Tangent"):
             sock = node.inputs.get(key)
             if sock is not None and resolve(sock, ctx)[0] is not None:
                 problems.append(f"'{node.name}' linked {key} ignored")
+        sss = min(max(self._const_value(node, "subsurface", problems, 0.0, ctx), 0.0), 1.0)
 
         f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
         f_avg = min(2.0 * spec * (f0 + (1.0 - f0) / 21.0), 1.0) if ior > 1.0 else 0.0
@@ -388,7 +427,26 @@ class MaterialExporter:
                           "roughness": rough, "ior": ior})
         opaque = wa * dielectric * (1 - trans)
         if maybe_positive(opaque):
-            lobes.append({"type": "DIFFUSE", "color": opaque * (1 - f_avg) * base})
+            if sss < 1.0:
+                lobes.append({"type": "DIFFUSE", "color": opaque * (1 - f_avg) * (1 - sss) * base})
+            if sss > 1e-5:  # Cycles's CLOSURE_WEIGHT_CUTOFF
+                k = opaque * (1 - f_avg) * sss
+                clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
+                method = self._sss_method(node, "subsurface_method", problems)
+                # Cycles's Random Walk enters through the specular layer's IOR, which Specular IOR
+                # Level rescales (F0 × 2·level, then back to an IOR): level 0 gives IOR 1
+                eta = ior
+                if spec != 0.5:
+                    f0s = min(f0 * 2.0 * spec, 1.0 - 1e-6)
+                    eta = (1.0 + np.sqrt(f0s)) / (1.0 - np.sqrt(f0s))
+                ior_sss = self._const_value(node, "Subsurface IOR", problems, 1.4, ctx) \
+                    if method == "RANDOM_WALK_SKIN" else eta
+                r_entry = rough if not isinstance(rough, Value) else rough
+                lobes.append({"type": "SUBSURFACE", "color": k * clamped, "weight": k,
+                              "radius": self._sss_radius(node, "Subsurface Radius", "Subsurface Scale",
+                                                         problems, ctx),
+                              "method": method, "ior": float(ior_sss), "roughness": r_entry,
+                              "anisotropy": self._const_value(node, "Subsurface Anisotropy", problems, 0.0, ctx)})
             if f_avg > 0:
                 lobes.append({"type": "GLOSSY", "color": opaque * f_avg * tint, "roughness": rough})
         if maybe_positive(1 - alpha):  # transparency: straight through (a textured alpha: cut-outs)

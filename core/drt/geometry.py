@@ -62,6 +62,9 @@ class SceneGeometry:
     scene_radius: float = 1.0  # radius of the bounding sphere of all geometry (scene units)
     #: (T_all,) int32 index into scene.objects of each global triangle (volume stack keys)
     object_id: np.ndarray = None
+    #: [(first, end)) global triangle ranges of the static objects, in object order (objects
+    #: without triangles omitted): subsurface walks stay inside one object (drt.subsurface)
+    static_ranges: list = field(default_factory=list)
 
     @property
     def static_count(self) -> int:
@@ -141,6 +144,8 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     order_static, order_moving = [], []  # meshes in global triangle order (for corner_attrs)
     obj_static, obj_moving = [], []  # object index per triangle block (Object Info)
     v_offset = 0
+    t_offset = 0
+    ranges = []
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     any_normals = any(m.normals is not None for m in scene.meshes)
@@ -176,6 +181,8 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         static_pos.append(world)
         static_tri.append((mesh.triangles + v_offset).astype(np.int32))
         v_offset += len(world)
+        ranges.append((t_offset, t_offset + len(mesh.triangles)))
+        t_offset += len(mesh.triangles)
         nw = _transform_normals(mesh.normals, m) if mesh.normals is not None else None
         a, b, c, d = per_tri(mesh, nw)
         mats_static.append(a), nrm_static.append(b), hasn_static.append(c), uv_static.append(d)
@@ -187,6 +194,7 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         static_positions=np.concatenate(static_pos) if static_pos else np.zeros((0, 3), np.float32),
         static_triangles=np.concatenate(static_tri) if static_tri else np.zeros((0, 3), np.int32),
     )
+    geom.static_ranges = ranges
     offset = geom.static_count
     for mm in moving:
         mm.prim_offset = offset

@@ -47,7 +47,8 @@ _NO_XFORM = np.zeros((0, 3, 3))
 _NO_MOVING = np.zeros(0, dtype=bool)
 
 
-def _paths(n: int) -> stages.Paths:
+def _paths(n: int, sss: bool = False) -> stages.Paths:
+    m = n if sss else 0  # subsurface state only in scenes with SSS
     return stages.Paths(
         o=np.empty((n, 3)), d=np.empty((n, 3)), tmax=np.empty(n), tau=np.empty(n),
         throughput=np.empty((n, 3)), prev_pdf=np.empty(n), prev_delta=np.empty(n, dtype=bool),
@@ -57,7 +58,10 @@ def _paths(n: int) -> stages.Paths:
         pixel=np.empty(n, dtype=np.int64), index=np.empty(n, dtype=np.int64),
         prev_flags=np.empty(n, dtype=np.int32),
         vstack=np.empty((n, STACK_SIZE), dtype=np.int64), vcount=np.empty(n, dtype=np.int32),
-        vseg=np.empty(n, dtype=np.int32))
+        vseg=np.empty(n, dtype=np.int32),
+        sss=np.zeros(m, dtype=np.int8), sss_coef=np.empty((m, 10)), sss_n=np.empty((m, 3)),
+        sss_p=np.empty((m, 3)), sss_prim=np.empty(m, dtype=np.int64), sss_b=np.empty((m, 2)),
+        sss_count=np.zeros(m, dtype=np.int32))
 
 
 def _shadow_rays(n: int) -> stages.ShadowRays:
@@ -113,6 +117,13 @@ class Integrator:
         self.filter = pixel_filter
         self.motion = bool(geom.moving) or camera.motion is not None
         self.max_depth = settings.max_bounces + 1
+        # subsurface scattering: walks between shade calls; an SSS exit takes a loop pass of its
+        # own without counting a bounce, so a path needs at most twice the passes
+        self.sss = None
+        if getattr(materials, "has_subsurface", False):
+            from .subsurface import SubsurfaceWalker
+
+            self.sss = SubsurfaceWalker(geom, tracer, materials, sampler)
         self.stage_settings = stages.StageSettings(
             width=int(settings.width), height=int(settings.height),
             max_bounces=int(settings.max_bounces), diffuse_bounces=int(settings.diffuse_bounces),
@@ -144,6 +155,8 @@ class Integrator:
             media = media._replace(camera_stack=camera_stack(media, tracer))
         self.media = media
         self.loop_limit = self.max_depth + 1 + (stages.VOLUME_BOUNDS_MAX if media.enabled else 0)
+        if self.sss is not None:  # an SSS exit takes a loop pass of its own, no bounce
+            self.loop_limit += self.max_depth + 1
 
     def _hit_arrays(self, hits) -> stages.HitArrays:
         if hits.moving_linear is not None:
@@ -176,7 +189,7 @@ class Integrator:
         # a path in a medium may queue two shadow rays per bounce (volume + surface NEE)
         n_shadow = 2 * n if self.media.enabled else n
         if ws is None or len(ws[0].slot) < n or len(ws[1].slot) < n_shadow:
-            ws = self._workspaces.arrays = (_paths(n), _shadow_rays(n_shadow))
+            ws = self._workspaces.arrays = (_paths(n, self.sss is not None), _shadow_rays(n_shadow))
         paths, shadow = ws
         return (stages.Paths(*(a[:n] for a in paths)), stages.ShadowRays(*(a[:n_shadow] for a in shadow)))
 
@@ -218,18 +231,26 @@ class Integrator:
             paths.vcount[:] = 0
             paths.vseg[:] = 0
         live = n
+        if self.sss is not None:
+            paths.sss[:] = 0
+            paths.sss_count[:] = 0
         for depth_i in range(self.loop_limit):
             if live == 0:
                 break
             hits = self.tracer.intersect(paths.o[:live], paths.d[:live], paths.tau[:live], paths.tmax[:live])
+            hit_arrays = self._hit_arrays(hits)
+            if self.sss is not None:
+                self.sss.patch_hits(paths, live, hit_arrays)
             live, n_shadow = stages.shade(sd, md, self.programs, regs, point, ld, self.surfaces, self.stage_settings, depth_i, live,
-                                          paths, self._hit_arrays(hits), out, shadow, vd)
+                                          paths, hit_arrays, out, shadow, vd)
             if n_shadow and vd.enabled:
                 self._shadows_through_media(shadow, n_shadow, out.radiance)
             elif n_shadow:
                 blocked = self.tracer.occluded(shadow.o[:n_shadow], shadow.d[:n_shadow],
                                                shadow.tmax[:n_shadow], shadow.tau[:n_shadow])
                 stages.add_unoccluded(shadow, n_shadow, blocked, out.radiance)
+            if self.sss is not None and live:
+                self.sss.run(paths, live, depth_i)
 
         # a NaN/Inf sample is counted, dropped (it does not enter its pixel's mean) and reported;
         # so is one beyond MAX_SAMPLE_RADIANCE, which would overflow the float32 passes

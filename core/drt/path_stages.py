@@ -51,6 +51,8 @@ from .materials import (LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, NO_BUMP, b
 from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
                                        POINT_P, POINT_PATH, POINT_PATH2, POINT_XFORM)
 from .materials.programs import eval_material
+from .materials.table import LOBE_SUBSURFACE, pick_lobe
+from .subsurface import SSS_DEAD, SSS_EXIT, SSS_EXIT_FLAT, SSS_NONE, SSS_WALK, sss_coefficients
 from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_5d
 from .sampling.warps import cosine_hemisphere, uniform_hemisphere
@@ -95,6 +97,15 @@ Paths = namedtuple("Paths", [
     "vstack",                             # (n, STACK_SIZE) int64 volume stack (drt.volumes.stack)
     "vcount",                             # (n,) int32 volume scatter events so far
     "vseg",                               # (n,) int32 ray segments so far (volume sample dims)
+    # subsurface scattering (drt.subsurface; zero-size arrays in scenes without SSS):
+    "sss",                                # (n,) int8 SSS_NONE / _WALK / _EXIT / _EXIT_FLAT / _DEAD
+    "sss_coef",                           # (n, 10): σt (3), α (3), throughput factor (3), g
+    "sss_n", "sss_p",                     # (n, 3): entry normal (outside) and point; at an exit
+                                          # the exit's geometric normal and point
+    "sss_prim",                           # (n,) entry triangle; at an exit the exit triangle
+    "sss_b",                              # (n, 2) barycentrics (b1, b2) of the exit
+    "sss_count",                          # (n,) int32 SSS exits so far (they shift the sample
+                                          # dimensions: an exit is a vertex but no bounce)
 ])
 
 # how a ray left its last vertex (Cycles's ray-type flags, for the Light Path node); 0: camera
@@ -314,6 +325,9 @@ def copy_path(paths, i, j):
         paths.vstack[j, c] = paths.vstack[i, c]
     paths.vcount[j] = paths.vcount[i]
     paths.vseg[j] = paths.vseg[i]
+    if paths.sss.shape[0]:
+        paths.sss[j] = paths.sss[i]
+        paths.sss_count[j] = paths.sss_count[i]
 
 
 @kernel
@@ -375,7 +389,13 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
     direct = settings.direct
     n_shadow = 0
     j = 0
+    sss_on = paths.sss.shape[0] > 0
     for i in range(live):
+        sss_state = paths.sss[i] if sss_on else SSS_NONE
+        if sss_state == SSS_DEAD:
+            continue  # its random walk found no way out
+        exiting = sss_state == SSS_EXIT or sss_state == SSS_EXIT_FLAT
+        n_sss = paths.sss_count[i] if sss_on else 0
         slot = paths.slot[i]
         o = load(paths.o, i)
         d = load(paths.d, i)
@@ -385,8 +405,11 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         prev_p = load(paths.prev_p, i)
         prev_n = load(paths.prev_n, i)
         bounce = paths.counts[i, 0]
-        camera = bounce == 0
-        base = D_BOUNCE0 + DIMS_PER_BOUNCE * bounce
+        # an SSS exit is a vertex without a bounce: it takes the next dimensions, and only the
+        # first hit of a camera path writes the camera outputs
+        vertex = bounce + n_sss
+        camera = vertex == 0
+        base = D_BOUNCE0 + DIMS_PER_BOUNCE * vertex
         prev_hint = material_hint(md, paths.prev_mat[i], prev_n, load(paths.prev_wo, i))
         prim = hits.prim[i]
         t_geom = hits.t[i] if prim >= 0 else np.inf
@@ -425,7 +448,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 n_shadow += 1
 
         # --- emitters along the ray: light shapes (transparent), then a sun disk and the world
-        for k in range(ld.n_shapes):
+        # (an SSS exit "ray" is no ray: the walk ended on the surface from inside)
+        for k in range(0 if exiting else ld.n_shapes):
             t = shape_intersect(ld, k, o, d)
             if t < t_end:
                 light, le, lpdf = shape_emission(ld, k, o, d, t, prev_p, prev_hint)
@@ -493,7 +517,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
 
         # --- the surface hit: its emission (also for paths stopping here at a bounce limit)
         mat = surf.material[prim]
-        if vd.enabled and vd.pass_through[mat]:
+        if vd.enabled and vd.pass_through[mat] and not exiting:
             # a volume-only mesh has no surface: cross it (update the stack), no bounce
             store(out.radiance, slot, add(load(out.radiance, slot), acc))
             if paths.vseg[i] >= VOLUME_BOUNDS_MAX + settings.max_bounces or not any_positive(thr):
@@ -510,11 +534,17 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             continue
         p = load(hits.p, i)
         ng = load(hits.ng, i)
-        ns = shading_normal(surf, hits, i, prim, ng)
+        ns = ng if sss_state == SSS_EXIT_FLAT else shading_normal(surf, hits, i, prim, ng)
         ns_unmapped = ns
         mapped = False
         wo = neg(d)
-        if pd.prog_of.shape[0] and pd.prog_of[mat] >= 0:  # a textured material: this hit's parameters
+        if exiting:
+            # Cycles shades an SSS exit as a white Lambert without emission, facing the side of
+            # the *geometric* normal the walk left through (sd->N flips with Ng), whatever the
+            # smooth normal says; the Lambert's only use of wo is that side
+            mat = md.sss_exit[0]
+            wo = ns if dot(wo, ng) >= 0.0 else neg(ns)
+        elif pd.prog_of.shape[0] and pd.prog_of[mat] >= 0:  # a textured material: this hit's parameters
             if pd.reads_point[mat]:
                 fill_point(point, pd, surf, hits, i, prim, p, ng, ns, wo, paths.prev_flags[i], paths.counts[i],
                            t_geom, camera)
@@ -528,7 +558,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                         nm = valid_specular_normal(scale(ng, side), wo, nm)
                     ns = scale(nm, side)
                     mapped = True
-        if md.has_emission[mat]:
+        if md.has_emission[mat] and not exiting:
             le = load(md.emission, mat)
             lpdf = emissive_pdf(ld, prim, prev_p, p, ng, prev_hint)
             w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
@@ -604,13 +634,15 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         refl_sh = wi_l[2] * wo_l[2] > 0.0
         alive = b_valid and refl_geo == refl_sh and any_positive(weight)
         thr = mul(thr, weight)
-        n_bounce = bounce + 1
+        # entering SSS is no bounce (Cycles's subsurface_bounce skips path_state_next)
+        entering = kind == LOBE_SUBSURFACE
+        n_bounce = bounce + (0 if entering else 1)
         n_diffuse = paths.counts[i, 1] + (1 if kind == LOBE_DIFFUSE else 0)
         n_glossy = paths.counts[i, 2] + (1 if kind == LOBE_GLOSSY else 0)
         n_transmission = paths.counts[i, 3] + (1 if kind == LOBE_TRANSMISSION else 0)
         limit = (n_bounce > settings.max_bounces or n_diffuse > settings.diffuse_bounces
                  or n_glossy > settings.glossy_bounces or n_transmission > settings.transmission_bounces)
-        if bounce + 1 >= RR_START_BOUNCE:
+        if vertex + 1 >= RR_START_BOUNCE and not exiting:  # one roulette per SSS event, as Cycles
             u_rr = sample_2d(sd, pixel, idx, base + 3)[0]
             q = min(max(max(thr[0], max(thr[1], thr[2])), 0.0), 1.0)
             if not u_rr < q:
@@ -620,14 +652,26 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         if not alive:
             continue
 
+        if entering:
+            # the walk (drt.subsurface, run by the integrator) starts here, just inside
+            s_slot, _ = pick_lobe(md, mat, u_lobe)
+            sss_coefficients(md, mat, s_slot, paths.sss_coef, j)
+            store(paths.sss_n, j, n_wo)
+            store(paths.sss_p, j, p)
+            paths.sss_prim[j] = prim
+        if sss_on:
+            paths.sss[j] = SSS_WALK if entering else SSS_NONE
+            paths.sss_count[j] = n_sss + (1 if entering else 0)  # the exit vertex takes the next dims
+
         # --- write the continuing path to slot j ≤ i (compaction in place)
         if vd.enabled:
             stack_copy(paths.vstack, i, paths.vstack, j)
-            if not refl_geo:  # transmitted: the path enters or leaves the material's medium
+            if not refl_geo and not entering:  # transmitted: enters or leaves the material's medium
                 stack_cross(vd, paths.vstack, j, prim, mat, wi, ng)
             paths.vcount[j] = paths.vcount[i]
             paths.vseg[j] = paths.vseg[i] + 1
-        store(paths.o, j, offset_point(p, ng, wi))
+        # a walk starts exactly on the surface (its first ray is pushed along wi by the walker)
+        store(paths.o, j, p if entering else offset_point(p, ng, wi))
         store(paths.d, j, wi)
         paths.tmax[j] = np.inf
         paths.tau[j] = paths.tau[i]

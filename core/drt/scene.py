@@ -18,11 +18,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 FORMAT_NAME = "drt-scene"
-SUPPORTED_VERSIONS = (1,)
+SUPPORTED_VERSIONS = (1, 2)  # 2: adds SUBSURFACE lobes (docs/scene-format.md)
 
 LIGHT_TYPES = ("POINT", "SPOT", "SUN", "AREA")
 AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
-LOBE_TYPES = ("DIFFUSE", "GLOSSY", "GLASS")
+LOBE_TYPES = ("DIFFUSE", "GLOSSY", "GLASS", "SUBSURFACE")
+SSS_METHODS = ("RANDOM_WALK", "RANDOM_WALK_SKIN", "BURLEY")  # = drt.materials.subsurface_lobe
 FILTER_TYPES = ("BLACKMAN_HARRIS", "GAUSSIAN", "BOX")
 SAMPLER_KINDS = ("SOBOL", "STRATIFIED", "RANDOM")
 DIRECT_STRATEGIES = ("MIS_POWER", "MIS_BALANCE", "LIGHT", "BSDF")
@@ -376,7 +377,7 @@ def _camera(h: dict) -> CameraSpec:
     return cam
 
 
-def _materials(h: dict, n_images: int = 0, n_attributes: int = 0) -> list[dict]:
+def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int = 2) -> list[dict]:
     from .materials.program_format import validate_program
 
     mats = _list(h, "materials", "")
@@ -395,6 +396,15 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0) -> list[dict]:
                 entry["roughness"] = _number(lobe, "roughness", lp, 0.5 if t == "GLOSSY" else 0.0, lo=0, hi=1)
             if t == "GLASS":
                 entry["ior"] = _number(lobe, "ior", lp, 1.45, lo=0, lo_open=True, hi=100)
+            if t == "SUBSURFACE":
+                if version < 2:
+                    raise SceneError(lp + ".type", "SUBSURFACE lobes need scene version >= 2")
+                entry["radius"] = _vector(lobe, "radius", lp, 3, lo=0.0).tolist()
+                entry["method"] = _enum(lobe, "method", lp, SSS_METHODS) if "method" in lobe else "RANDOM_WALK"
+                entry["ior"] = _number(lobe, "ior", lp, 1.4, lo=0, lo_open=True, hi=100)
+                entry["roughness"] = _number(lobe, "roughness", lp, 1.0, lo=0, hi=1)
+                entry["anisotropy"] = _number(lobe, "anisotropy", lp, 0.0, lo=-1, hi=1)
+                entry["weight"] = _number(lobe, "weight", lp, 1.0, lo=0, lo_open=True)
             for key in ("color_reg", "roughness_reg"):
                 if key in lobe:
                     entry[key] = _number(lobe, key, lp, integer=True, lo=0)
@@ -633,7 +643,7 @@ def scene_from_dict(header: dict, arrays: dict | None = None) -> Scene:
     if not all(isinstance(a, str) for a in attributes):
         raise SceneError("attributes", "must be a list of names")
     world_program = _world_program(world, len(images))
-    materials = _materials(header, len(images), len(attributes))
+    materials = _materials(header, len(images), len(attributes), version)
     lights = _lights(header)
     meshes = _meshes(header, arrays, len(materials), len(attributes))
     objects = _objects(header, len(meshes))

@@ -49,6 +49,7 @@ from ..kernels import inline_kernel, kernel
 from ..kernels.vec3 import load, store
 from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample
 from .diffuse import INV_PI, diffuse_eval, diffuse_sample
+from .subsurface_lobe import BSSRDF_MIN_RADIUS, SSS_METHODS, effective_radius, sss_entry_sample
 from .ggx import (
     ALPHA_SQ_SINGULAR,
     f64_array,
@@ -63,7 +64,13 @@ BSDF_NONE = 0
 BSDF_DIFFUSE = 1
 BSDF_GLOSSY = 2
 BSDF_GLASS = 3
-BSDF_TYPES = {"DIFFUSE": BSDF_DIFFUSE, "GLOSSY": BSDF_GLOSSY, "GLASS": BSDF_GLASS}
+BSDF_SUBSURFACE = 4  # random-walk SSS entry (drt.subsurface); never evaluated, only sampled
+BSDF_TYPES = {"DIFFUSE": BSDF_DIFFUSE, "GLOSSY": BSDF_GLOSSY, "GLASS": BSDF_GLASS,
+              "SUBSURFACE": BSDF_SUBSURFACE}
+#: name of the white Lambert material appended to tables with SSS: shades SSS exit points
+SSS_EXIT_MATERIAL = "__drt_sss_exit__"
+#: columns of lobe_sss (M, L, 8)
+SSS_RADIUS, SSS_G, SSS_IOR, SSS_METHOD, SSS_WEIGHT, SSS_ALPHA = 0, 3, 4, 5, 6, 7
 
 #: lobes whose average colour is below this are dropped (Cycles's CLOSURE_WEIGHT_CUTOFF).
 CLOSURE_WEIGHT_CUTOFF = 1e-5
@@ -73,6 +80,7 @@ LOBE_NONE = 0
 LOBE_DIFFUSE = 1
 LOBE_GLOSSY = 2          # glossy reflection and glass reflection
 LOBE_TRANSMISSION = 3    # glass refraction
+LOBE_SUBSURFACE = 4      # entered a SUBSURFACE lobe: the path continues with a random walk
 
 
 @dataclass
@@ -106,11 +114,14 @@ _ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
 #:   albedo (M, 3) f64: sum of the lobe colours; delta_only (M,) bool: no lobe can be evaluated;
 #:   pure_diffuse (M,) bool: exactly one lobe, Lambert; transmission_or_delta (M,) bool: a glass
 #:   or delta lobe is present; has_diffuse (M,) bool;
-#:   summary (M, 4) f64: (kd, kg, alpha, kt) as ``MaterialTable.lobe_summary`` gives.
+#:   summary (M, 4) f64: (kd, kg, alpha, kt) as ``MaterialTable.lobe_summary`` gives;
+#:   lobe_sss (M, L, 8) f64: SUBSURFACE lobes' (effective radius r, g, b (metres, after
+#:   Cycles's bssrdf_setup_radius), anisotropy, ior, method code, weight, entry GGX alpha);
+#:   sss_exit (1,) int64: the white Lambert row shading SSS exits (−1: no SSS in the scene).
 MaterialData = namedtuple("MaterialData", [
     "lobe_type", "lobe_color", "lobe_alpha", "lobe_ior", "lobe_delta", "lobe_select", "lobe_cdf",
     "lobe_count", "emission", "has_emission", "albedo", "delta_only", "pure_diffuse",
-    "transmission_or_delta", "has_diffuse", "summary"])
+    "transmission_or_delta", "has_diffuse", "summary", "lobe_sss", "sss_exit"])
 
 
 #: ``ns_local`` of a surface without a bump/normal map: the shading frame's own z
@@ -182,6 +193,21 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
 
 
 @inline_kernel
+def pick_lobe(md, m, u_lobe):
+    """(slot, u_rest): the lobe u_lobe selects and u_lobe rescaled inside its interval."""
+    count = md.lobe_count[m]
+    slot = 0
+    for j in range(md.lobe_cdf.shape[1]):
+        if u_lobe >= md.lobe_cdf[m, j]:
+            slot += 1
+    slot = min(slot, count - 1)
+    p_sel = md.lobe_select[m, slot]
+    cdf_lo = md.lobe_cdf[m, slot - 1] if slot > 0 else 0.0
+    u_rest = (u_lobe - cdf_lo) / (p_sel if p_sel > 0.0 else 1.0)
+    return slot, min(max(u_rest, 0.0), _ONE_MINUS_EPS)
+
+
+@inline_kernel
 def bsdf_sample(md, m, wo, u_lobe, u0, u1):
     """``bsdf_sample_bump`` without a normal map (see there)."""
     return bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, NO_BUMP)
@@ -200,15 +226,8 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
     count = md.lobe_count[m]
     if count == 0 or wo[2] == 0.0:
         return zero, zero, 0.0, LOBE_NONE, False, False
-    slot = 0
-    for j in range(md.lobe_cdf.shape[1]):
-        if u_lobe >= md.lobe_cdf[m, j]:
-            slot += 1
-    slot = min(slot, count - 1)
+    slot, u_rest = pick_lobe(md, m, u_lobe)
     p_sel = md.lobe_select[m, slot]
-    cdf_lo = md.lobe_cdf[m, slot - 1] if slot > 0 else 0.0
-    u_rest = (u_lobe - cdf_lo) / (p_sel if p_sel > 0.0 else 1.0)
-    u_rest = min(max(u_rest, 0.0), _ONE_MINUS_EPS)
     t = md.lobe_type[m, slot]
     is_delta = md.lobe_delta[m, slot]
     # alpha 0 makes the lobe functions take their delta path (also for glass with ior ≈ 1)
@@ -224,6 +243,16 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
     elif t == BSDF_GLASS:
         wi, refracted = glass_sample(wo, alpha, ior, u_rest, u0, u1)
         kind = LOBE_TRANSMISSION if refracted else LOBE_GLOSSY
+    elif t == BSDF_SUBSURFACE:
+        # Cycles's subsurface_bounce: weight = closure weight / selection probability, the
+        # entry direction only (no Fresnel, no f/pdf); pdf 1 marks "not for MIS"
+        wi, ok = sss_entry_sample(int(md.lobe_sss[m, slot, SSS_METHOD]), md.lobe_sss[m, slot, SSS_ALPHA],
+                                  md.lobe_sss[m, slot, SSS_IOR], wo, u_rest, u0, u1)
+        if not ok or p_sel <= 0.0:
+            return wi, zero, 0.0, LOBE_NONE, False, False
+        weight = (md.lobe_color[m, slot, 0] / p_sel, md.lobe_color[m, slot, 1] / p_sel,
+                  md.lobe_color[m, slot, 2] / p_sel)
+        return wi, weight, 1.0, LOBE_SUBSURFACE, False, True
     else:
         return zero, zero, 0.0, LOBE_NONE, False, False
     side = wo[2] * wi[2]
@@ -294,10 +323,41 @@ def _rgb(value, where: str, field: str) -> np.ndarray:
     return rgb
 
 
+def _subsurface_lobe(lobe: dict, color: np.ndarray, where: str):
+    """A SUBSURFACE lobe dict → (lobe_sss row (8,), its colour, the colour of the channels
+    that become Lambert (radius < BSSRDF_MIN_RADIUS, as Cycles's bssrdf_setup) or None).
+    Clamps as Cycles: anisotropy to [0, 0.9], IOR to [1.01, 3.8]; BURLEY is walked as
+    RANDOM_WALK (docs/subsurface.md)."""
+    method = lobe.get("method", "RANDOM_WALK")
+    if method not in SSS_METHODS:
+        raise _fail(where, f"method must be one of {list(SSS_METHODS)}, got {method!r}")
+    radius = _rgb(lobe.get("radius", [1.0, 0.2, 0.1]), where, "radius")
+    ior = min(max(_number(lobe.get("ior", 1.4), where, "ior"), 1.01), 3.8)
+    r = _number(lobe.get("roughness", 1.0), where, "roughness")
+    if not 0.0 <= r <= 1.0:
+        raise _fail(where, f"roughness must be in [0, 1], got {r!r}")
+    g = min(max(_number(lobe.get("anisotropy", 0.0), where, "anisotropy"), 0.0), 0.9)
+    k = _number(lobe.get("weight", 1.0), where, "weight")
+    if not k > 0.0:
+        raise _fail(where, f"weight must be > 0, got {k!r}")
+    small = radius < BSSRDF_MIN_RADIUS
+    split = None
+    if small.any():
+        split = np.where(small, color, 0.0)
+        color = np.where(small, 0.0, color)
+        radius = np.where(small, 0.0, radius)
+    albedo = np.clip(color / k, 0.0, 1.0)
+    row = np.zeros(8)
+    row[SSS_RADIUS:SSS_RADIUS + 3] = np.where(small, 0.0, effective_radius(radius, albedo, ior, method))
+    row[SSS_G], row[SSS_IOR], row[SSS_METHOD] = g, ior, SSS_METHODS.index(method)
+    row[SSS_WEIGHT], row[SSS_ALPHA] = k, r * r
+    return row, color, split
+
+
 class MaterialTable:
     """All materials of a scene; see the module docstring for the arrays."""
 
-    def __init__(self, names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission):
+    def __init__(self, names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission, lobe_sss=None):
         self.names = list(names)
         self.lobe_type = np.asarray(lobe_type, dtype=np.int8)
         self.lobe_color = np.asarray(lobe_color, dtype=np.float64)
@@ -310,7 +370,11 @@ class MaterialTable:
         self.lobe_delta = used & (self.lobe_type != BSDF_DIFFUSE) & (
             (self.lobe_alpha ** 2 <= ALPHA_SQ_SINGULAR)
             | ((self.lobe_type == BSDF_GLASS) & (np.abs(self.lobe_ior - 1.0) < IOR_ONE_EPS)))
+        sss = used & (self.lobe_type == BSDF_SUBSURFACE)
+        self.lobe_sss = np.zeros((m, n_slots, 8)) if lobe_sss is None else np.asarray(lobe_sss, np.float64)
         w = np.where(used, self.lobe_color.mean(axis=2), 0.0)
+        # Cycles's bssrdf_setup: a BSSRDF's sample weight is average(weight) × its channel count
+        w = np.where(sss, w * (self.lobe_sss[..., SSS_RADIUS:SSS_RADIUS + 3] > 0).sum(axis=-1), w)
         total = w.sum(axis=1, keepdims=True)
         self.lobe_select = np.divide(w, total, out=np.zeros_like(w), where=total > 0)
         cdf = np.cumsum(self.lobe_select, axis=1)
@@ -339,14 +403,18 @@ class MaterialTable:
             emission=c(self.emission.reshape(m, 3), np.float64),
             has_emission=c(self.has_emission, np.bool_),
             albedo=c(albedo, np.float64),
-            delta_only=c(~np.any(used & ~self.lobe_delta, axis=1), np.bool_),
+            delta_only=c(~np.any(used & ~self.lobe_delta & ~sss, axis=1), np.bool_),
             pure_diffuse=c(pure_diffuse, np.bool_),
             transmission_or_delta=c(
-                np.any(used & ((self.lobe_type == BSDF_GLASS) | self.lobe_delta), axis=1),
+                np.any(used & ((self.lobe_type == BSDF_GLASS) | self.lobe_delta | sss), axis=1),
                 np.bool_),
             has_diffuse=c(np.any(self.lobe_type == BSDF_DIFFUSE, axis=1), np.bool_),
             summary=c(np.stack(self._summarise_lobes(used), axis=1).reshape(m, 4), np.float64),
+            lobe_sss=c(self.lobe_sss.reshape(m, n_slots, 8), np.float64),
+            sss_exit=np.array([self.names.index(SSS_EXIT_MATERIAL) if SSS_EXIT_MATERIAL in self.names
+                               else -1], np.int64),
         )
+        self.has_subsurface = bool(sss.any())
 
     def _summarise_lobes(self, used):
         """Per material, what light selection needs to guess where the BSDF is large (see
@@ -387,7 +455,7 @@ class MaterialTable:
             if not isinstance(lobes, (list, tuple)):
                 raise _fail(where, f"lobes must be a list, got {type(lobes).__name__}")
             emissions.append(_rgb(mat.get("emission", [0.0, 0.0, 0.0]), where, "emission"))
-            rows = []
+            rows, extra = [], []
             for j, lobe in enumerate(lobes):
                 lw = f"{where} lobe {j}"
                 if not isinstance(lobe, dict):
@@ -412,21 +480,38 @@ class MaterialTable:
                     ior = _number(lobe["ior"], lw, "ior")
                     if ior <= 0.0:
                         raise _fail(lw, f"ior must be > 0, got {ior!r}")
+                sss = np.zeros(8)
+                if kind == "SUBSURFACE":
+                    sss, color, split = _subsurface_lobe(lobe, color, lw)
+                    if split is not None and split.mean() >= CLOSURE_WEIGHT_CUTOFF:
+                        extra.append((BSDF_DIFFUSE, split, 0.0, 1.0, np.zeros(8)))
+                    if not np.any(sss[SSS_RADIUS:SSS_RADIUS + 3] > 0):
+                        continue  # every channel became Lambert
                 if color.mean() >= CLOSURE_WEIGHT_CUTOFF:
-                    rows.append((BSDF_TYPES[kind], color, alpha, ior))
+                    rows.append((BSDF_TYPES[kind], color, alpha, ior, sss))
+            # Lambert lobes split off SSS channels go last: program registers address the
+            # slots of the file's own lobes
+            rows += extra
             names.append(name)
             parsed.append(rows)
+        if any(r[0] == BSDF_SUBSURFACE for rows in parsed for r in rows):
+            # SSS exit points are shaded by a white Lambert (Cycles's subsurface_shader_data_setup)
+            names.append(SSS_EXIT_MATERIAL)
+            parsed.append([(BSDF_DIFFUSE, np.ones(3), 0.0, 1.0, np.zeros(8))])
+            emissions.append(np.zeros(3))
         m = len(parsed)
         n_slots = max((len(r) for r in parsed), default=0)
         lobe_type = np.zeros((m, n_slots), np.int8)
         lobe_color = np.zeros((m, n_slots, 3))
         lobe_alpha = np.zeros((m, n_slots))
         lobe_ior = np.ones((m, n_slots))
+        lobe_sss = np.zeros((m, n_slots, 8))
         for i, rows in enumerate(parsed):
-            for j, (t, c, a, eta) in enumerate(rows):
+            for j, (t, c, a, eta, ss) in enumerate(rows):
                 lobe_type[i, j], lobe_color[i, j], lobe_alpha[i, j], lobe_ior[i, j] = t, c, a, eta
+                lobe_sss[i, j] = ss
         emission = np.array(emissions).reshape(m, 3)
-        table = cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission)
+        table = cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission, lobe_sss)
         table.program_source = None
         table.images = list(images)  # a world program may read them without any material program
         if any(isinstance(mat, dict) and mat.get("program") for mat in materials):

@@ -1,0 +1,500 @@
+"""Random-walk subsurface scattering (SSS) with Cycles's semantics (Blender 5.0's Cycles, see
+docs/subsurface.md): the coefficients, the entry bounce and the compiled walk steps.
+
+A SUBSURFACE lobe (scene-format.md) carries the closure weight ``color`` (what Cycles calls the
+BSSRDF weight: base colour × subsurface weight × layering), the scalar ``weight`` that colour was
+scaled by (so the *albedo* of the walk is ``clamp(color / weight, 0, 1)``, also for textured
+colours), the user ``radius`` (per channel, metres, already × Subsurface Scale), the method, the
+entry IOR and roughness and the phase anisotropy.
+
+Cycles's chain, reproduced here:
+
+1. ``bssrdf_setup``: anisotropy clamped to [0, 0.9], IOR to [1.01, 3.8]; channels whose radius
+   is below ``BSSRDF_MIN_RADIUS`` become a Lambert lobe (done when the table is built); the
+   BSSRDF is picked with sample weight average(colour) × (number of SSS channels).
+2. ``bssrdf_setup_radius``: RANDOM_WALK (and BURLEY, mapped to it) scales the radius by 1/(4π);
+   RANDOM_WALK_SKIN scales it by sqrt(3(1 − α')) where α' solves the classical dipole's diffuse
+   reflectance Rd(α') = albedo for the IOR (Jensen's F_dr fit, bisection as Cycles).
+3. ``subsurface_random_walk_remap``: per channel, the single-scattering albedo α from the
+   multiple-scattering albedo by Chiang et al.'s fit (polynomials in g), σt = 1 / (r (1 − g));
+   the path throughput is divided by the albedo and α is raised to at least 0.2 (the
+   throughput scaled by α/0.2 to compensate).
+4. Entry: RANDOM_WALK refracts through a GGX microfacet normal (alpha = roughness², the
+   Principled roughness; IOR the Principled IOR); SKIN takes a cosine direction into the
+   surface with probability ½, else refracts with alpha 1 and the Subsurface IOR. No Fresnel
+   and no BSDF/pdf factor: Cycles only uses the direction.
+5. The walk: per step a colour channel is chosen ∝ α·throughput (MIS over channels, balance
+   heuristic), the direction from Henyey-Greenstein ("classic") or from Dwivedi's guided
+   distribution toward the entry plane (and, when the first ray found the opposite side, the
+   mirrored one), the distance exponentially with σt (stretched for guided samples); one-sample
+   MIS over {classic, guided, backward guided} × {r, g, b}. Hits are restricted to the entered
+   object (``scene_intersect_local``). After 9 steps the anisotropy is replaced by the
+   similarity-relation isotropic medium. At most 256 steps; a walk whose throughput falls below
+   1e-6 dies.
+6. The exit vertex is shaded as a white Lambert surface (normal: the exit point's shading
+   normal, on the outside); no emission there. The entry is not a bounce; the diffuse sample at
+   the exit counts one (diffuse) bounce, as Cycles's ``path_state_next`` does.
+
+Random numbers of the walk come from a counter hash of (seed, pixel, sample, bounce, step,
+use): the walk needs up to 256 × 5 numbers, beyond what a stratified sequence helps with
+(Cycles, too, scrambles the walk's stream away from the path's).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+
+from .kernels import inline_kernel, kernel
+from .kernels.vec3 import build_frame, dot, load, normalize, store, to_world
+from .materials.subsurface_lobe import MIN_ALPHA, remap
+from .materials.table import SSS_G, SSS_RADIUS, SSS_WEIGHT
+from .sampling.sequences import hash32
+from .trace import OFFSET_ABSOLUTE, OFFSET_RELATIVE
+
+BSSRDF_MAX_BOUNCES = 256
+VOLUME_THROUGHPUT_EPSILON = 1e-6
+SIMILARITY_LEVEL = 9
+
+# walk row states (Paths.sss); EXIT_FLAT: an exit on a moving object, shaded with its
+# geometric normal (docs/subsurface.md)
+SSS_NONE, SSS_WALK, SSS_EXIT, SSS_DEAD, SSS_EXIT_FLAT = 0, 1, 2, 3, 4
+
+_INV_2_32 = 1.0 / 4294967296.0
+
+
+# ----------------------------------------------------------------------------- the walk
+
+@inline_kernel
+def sss_coefficients(md, m, slot, coef, j):
+    """Row j of ``coef`` (n, 10) ← (σt, α, throughput factor, g) of the SUBSURFACE lobe ``slot``
+    of material m, from its colour at this hit (textures may have rewritten it): albedo =
+    clamp(colour / weight, 0, 1), Cycles's per-channel remap, factor 1/albedo with the α ≥ 0.2
+    compensation (``coefficients`` is the numpy twin)."""
+    k = md.lobe_sss[m, slot, SSS_WEIGHT]
+    g = md.lobe_sss[m, slot, SSS_G]
+    for c in range(3):
+        a = min(max(md.lobe_color[m, slot, c] / k, 0.0), 1.0)
+        st, al = remap(a, md.lobe_sss[m, slot, SSS_RADIUS + c], g)
+        fac = 1.0 / a if a != 0.0 else 0.0
+        if al < MIN_ALPHA:
+            fac *= al / MIN_ALPHA
+            al = MIN_ALPHA
+        coef[j, c] = st
+        coef[j, 3 + c] = al
+        coef[j, 6 + c] = fac
+    coef[j, 9] = g
+
+
+#: The state of the walking rows (compacted, n rows). Arrays:
+#:   o, d (n, 3): current walk point and direction; tmax (n,): length of the next ray;
+#:   thr (n, 3): path throughput; sigma_t, alpha (n, 3); g (n,) anisotropy;
+#:   n_entry, p_entry (n, 3): entry shading normal (outside) and point; step (n,) int64;
+#:   opposite (n,) bool, opp_dist (n,); key (n,) uint-like int64 random stream;
+#:   t_sample (n,): sampled free flight; pend (n, 8): per-step terms kept across the ray cast
+#:   (channel pdf r, g, b, forward/backward pdf factors, forward/backward stretching,
+#:   backward fraction); guided_frac (n,): the step's guided fraction; diff_len (n,) Dwivedi
+#:   diffusion length, phase_log (n,); state (n,) int8: SSS_WALK, SSS_EXIT, SSS_DEAD.
+WalkState = namedtuple("WalkState", [
+    "o", "d", "tmax", "thr", "sigma_t", "alpha", "g", "n_entry", "p_entry", "step", "opposite",
+    "opp_dist", "key", "t_sample", "pend", "guided_frac", "diff_len", "phase_log", "state"])
+
+
+@kernel
+def walk_key(seed_prefix, pixel, index, depth):
+    """The random stream of one walk: a hash of (sampler prefix, pixel, sample, bounce)."""
+    h = hash32((seed_prefix ^ 0x5BD1E995) & 0xFFFFFFFF)
+    h = hash32((h ^ pixel) & 0xFFFFFFFF)
+    h = hash32((h ^ index) & 0xFFFFFFFF)
+    return hash32((h ^ (depth * 0x9E3779B9)) & 0xFFFFFFFF)
+
+
+@inline_kernel
+def walk_rand(key, step, use):
+    """Uniform [0, 1) for (stream, step, use)."""
+    h = hash32((key ^ hash32((step * 8 + use) & 0xFFFFFFFF)) & 0xFFFFFFFF)
+    return float(h) * _INV_2_32
+
+
+@inline_kernel
+def diffusion_length_dwivedi(alpha):
+    """d'Eon & Křivánek 2020, Eq. 67 (as Cycles)."""
+    return 1.0 / math.sqrt(1.0 - alpha ** (2.44294 - 0.0215813 * alpha + 0.578637 / alpha))
+
+
+@inline_kernel
+def hg_pdf(cos_theta, g):
+    if abs(g) < 1e-3:
+        return 0.25 / math.pi
+    fac = 1.0 + g * (g - 2.0 * cos_theta)
+    return (1.0 - g * g) / (4.0 * math.pi * fac * math.sqrt(max(fac, 0.0)))
+
+
+@inline_kernel
+def direction_from_cosine(axis, cos_theta, u):
+    sin_theta = math.sqrt(max(0.0, 1.0 - cos_theta * cos_theta))
+    phi = 2.0 * math.pi * u
+    t, b = build_frame(axis)
+    return to_world((sin_theta * math.cos(phi), sin_theta * math.sin(phi), cos_theta), t, b, axis)
+
+
+@kernel
+def walk_start(ws, count, thr_factor):
+    """Per row: throughput × the coefficient factor, Dwivedi terms; rows whose diffusion length
+    is 1 die (Cycles returns early)."""
+    for i in range(count):
+        for c in range(3):
+            ws.thr[i, c] *= thr_factor[i, c]
+        amax = max(ws.alpha[i, 0], max(ws.alpha[i, 1], ws.alpha[i, 2]))
+        v = diffusion_length_dwivedi(amax)
+        ws.diff_len[i] = v
+        if not (v > 1.0 and math.isfinite(v)):
+            ws.state[i] = SSS_DEAD
+            continue
+        ws.phase_log[i] = math.log((v + 1.0) / (v - 1.0))
+        ws.step[i] = 0
+        ws.opposite[i] = False
+        ws.opp_dist[i] = 0.0
+        ws.state[i] = SSS_WALK
+
+
+@inline_kernel
+def _coeffs(ws, i, step):
+    """(σt, σs, g, guided fraction) of row i at this step (similarity relation after
+    SIMILARITY_LEVEL steps)."""
+    g0 = ws.g[i]
+    st = (ws.sigma_t[i, 0], ws.sigma_t[i, 1], ws.sigma_t[i, 2])
+    ss = (st[0] * ws.alpha[i, 0], st[1] * ws.alpha[i, 1], st[2] * ws.alpha[i, 2])
+    if step <= SIMILARITY_LEVEL:
+        return st, ss, g0, 1.0 - max(0.5, abs(g0) ** 0.125)
+    ss2 = (ss[0] * (1.0 - g0), ss[1] * (1.0 - g0), ss[2] * (1.0 - g0))
+    st2 = (st[0] - ss[0] + ss2[0], st[1] - ss[1] + ss2[1], st[2] - ss[2] + ss2[2])
+    return st2, ss2, 0.0, 0.75
+
+
+@kernel
+def walk_sample(ws, rows):
+    """Sample channel, direction and free flight of every row in ``rows``; sets o/d/tmax of
+    the ray to cast (tmax: the flight, or on the first step ≥ 10 mean free paths to look for
+    the opposite side)."""
+    for r in range(rows.shape[0]):
+        i = rows[r]
+        step = ws.step[i]
+        key = ws.key[i]
+        st, ss, g, guided_frac = _coeffs(ws, i, step)
+        # channel ∝ |throughput · α| (balance-heuristic MIS over channels)
+        w0 = abs(ws.thr[i, 0] * ws.alpha[i, 0])
+        w1 = abs(ws.thr[i, 1] * ws.alpha[i, 1])
+        w2 = abs(ws.thr[i, 2] * ws.alpha[i, 2])
+        total = w0 + w1 + w2
+        if total > 1e-30:
+            p0, p1, p2 = w0 / total, w1 / total, w2 / total
+        else:
+            p0 = p1 = p2 = 1.0 / 3.0
+        u = walk_rand(key, step, 0)
+        if u < p0:
+            sample_st = st[0]
+        elif u < p0 + p1:
+            sample_st = st[1]
+        else:
+            sample_st = st[2]
+        ut = walk_rand(key, step, 1)
+        fwd_factor = 0.0
+        bwd_factor = 0.0
+        fwd_stretch = 1.0
+        bwd_stretch = 1.0
+        bwd_frac = 0.0
+        if step > 0:
+            v = ws.diff_len[i]
+            plog = ws.phase_log[i]
+            guided = walk_rand(key, step, 2) < guided_frac
+            n = load(ws.n_entry, i)
+            backward = False
+            if ws.opposite[i]:
+                od = ws.opp_dist[i]
+                x = -((ws.o[i, 0] - ws.p_entry[i, 0]) * n[0] + (ws.o[i, 1] - ws.p_entry[i, 1]) * n[1]
+                      + (ws.o[i, 2] - ws.p_entry[i, 2]) * n[2])
+                x = min(max(x, 0.0), od)
+                bwd_frac = 1.0 / (1.0 + math.exp(min((od - 2.0 * x) / v, 700.0)))
+                backward = walk_rand(key, step, 3) < bwd_frac
+            us0 = walk_rand(key, step, 4)
+            us1 = walk_rand(key, step, 5)
+            d_old = load(ws.d, i)
+            if guided:
+                cos_theta = v - (v + 1.0) * math.exp(-us0 * plog)
+                if backward:
+                    cos_theta = -cos_theta
+                nd = direction_from_cosine(n, cos_theta, us1)
+                hg = hg_pdf(dot(d_old, nd), g)
+            else:
+                ct = 1.0 - 2.0 * us0
+                if abs(g) >= 1e-3:
+                    k = (1.0 - g * g) / (1.0 - g * ct)
+                    ct = (1.0 + g * g - k * k) / (2.0 * g)
+                ct = min(max(ct, -1.0), 1.0)
+                hg = hg_pdf(ct, g)
+                nd = direction_from_cosine(d_old, ct, us1)
+                cos_theta = dot(nd, n)
+            nd, _ = normalize(nd)
+            store(ws.d, i, nd)
+            # guided / classic pdf ratio of the direction (channel independent)
+            fwd_factor = (0.5 / math.pi) / ((v - cos_theta) * plog) / hg
+            bwd_factor = (0.5 / math.pi) / ((v + cos_theta) * plog) / hg
+            fwd_stretch = 1.0 - cos_theta / v
+            bwd_stretch = 1.0 + cos_theta / v
+            if guided:
+                sample_st *= bwd_stretch if backward else fwd_stretch
+        t = -math.log(1.0 - ut) / sample_st
+        if step == 0:
+            st_min = min(st[0], min(st[1], st[2]))
+            ws.tmax[i] = max(t, 10.0 / st_min)
+        else:
+            ws.tmax[i] = t
+        ws.t_sample[i] = t
+        ws.guided_frac[i] = guided_frac if step > 0 else 0.0
+        ws.pend[i, 0] = p0
+        ws.pend[i, 1] = p1
+        ws.pend[i, 2] = p2
+        ws.pend[i, 3] = fwd_factor
+        ws.pend[i, 4] = bwd_factor
+        ws.pend[i, 5] = fwd_stretch
+        ws.pend[i, 6] = bwd_stretch
+        ws.pend[i, 7] = bwd_frac
+
+
+@inline_kernel
+def _flight_pdf(sigma, t, hit):
+    """Per channel: transmittance, or σ·transmittance for a scattering event."""
+    tr = math.exp(-sigma * t)
+    return tr if hit else sigma * tr
+
+
+@kernel
+def walk_advance(ws, rows, hit_t):
+    """After the ray cast (hit_t: distance to the object's surface, inf if none within tmax):
+    advance, update the throughput with the MIS pdf, decide exit / death. Returns how many rows
+    are still walking."""
+    walking = 0
+    for r in range(rows.shape[0]):
+        i = rows[r]
+        step = ws.step[i]
+        st, ss, g, guided_frac = _coeffs(ws, i, step)
+        t = ws.t_sample[i]
+        th = hit_t[r]
+        hit = th < ws.tmax[i] and math.isfinite(th)
+        if step == 0:
+            if hit:
+                ws.opposite[i] = True
+                n = load(ws.n_entry, i)
+                ws.opp_dist[i] = -((ws.o[i, 0] + th * ws.d[i, 0] - ws.p_entry[i, 0]) * n[0]
+                                   + (ws.o[i, 1] + th * ws.d[i, 1] - ws.p_entry[i, 1]) * n[1]
+                                   + (ws.o[i, 2] + th * ws.d[i, 2] - ws.p_entry[i, 2]) * n[2])
+            hit = hit and th < t
+        if hit:
+            t = th
+        fwd_factor = ws.pend[i, 3]
+        bwd_factor = ws.pend[i, 4]
+        fwd_stretch = ws.pend[i, 5]
+        bwd_stretch = ws.pend[i, 6]
+        bwd_frac = ws.pend[i, 7]
+        denom = 0.0
+        contrib = (0.0, 0.0, 0.0)
+        for c in range(3):
+            s = st[c]
+            tr = math.exp(-s * t)
+            pdf = tr if hit else s * tr
+            if step > 0:
+                guided = _flight_pdf(fwd_stretch * s, t, hit)
+                if ws.opposite[i]:
+                    back = _flight_pdf(bwd_stretch * s, t, hit)
+                    guided = guided * fwd_factor * (1.0 - bwd_frac) + back * bwd_factor * bwd_frac
+                else:
+                    guided *= fwd_factor
+                pdf = pdf * (1.0 - guided_frac) + guided * guided_frac
+            denom += ws.pend[i, c] * pdf
+            val = tr if hit else ss[c] * tr
+            if c == 0:
+                contrib = (val, contrib[1], contrib[2])
+            elif c == 1:
+                contrib = (contrib[0], val, contrib[2])
+            else:
+                contrib = (contrib[0], contrib[1], val)
+        for c in range(3):
+            ws.o[i, c] += t * ws.d[i, c]
+        if not denom > 0.0 or not math.isfinite(denom):
+            ws.state[i] = SSS_DEAD
+            continue
+        for c in range(3):
+            ws.thr[i, c] *= contrib[c] / denom
+        ws.step[i] = step + 1
+        if hit:
+            ws.state[i] = SSS_EXIT
+            continue
+        tmaxc = max(ws.thr[i, 0], max(ws.thr[i, 1], ws.thr[i, 2]))
+        if not tmaxc >= VOLUME_THROUGHPUT_EPSILON or step + 1 >= BSSRDF_MAX_BOUNCES:
+            ws.state[i] = SSS_DEAD
+            continue
+        walking += 1
+    return walking
+
+
+@kernel
+def _walk_keys(prefix, pixel, index, depth, out):
+    for i in range(pixel.shape[0]):
+        out[i] = walk_key(prefix, pixel[i], index[i], depth)
+
+
+@kernel
+def _patch_exits(state, live, sss_prim, sss_b, sss_p, sss_n, prim, t, b1, b2, p, ng, moving):
+    """Hits of the rows that left a walk ← the exit vertex the walk found."""
+    for i in range(live):
+        if state[i] == SSS_EXIT or state[i] == SSS_EXIT_FLAT:
+            prim[i] = sss_prim[i]
+            t[i] = 0.0
+            b1[i] = sss_b[i, 0]
+            b2[i] = sss_b[i, 1]
+            for c in range(3):
+                p[i, c] = sss_p[i, c]
+                ng[i, c] = sss_n[i, c]
+            if moving.shape[0]:
+                moving[i] = False
+
+
+class SubsurfaceWalker:
+    """Runs the random walks of the paths ``shade`` marked SSS_WALK, as a wavefront: per step
+    one compiled sampling pass, one Embree query per entered object, one compiled update.
+
+    Hits are restricted to the entered object as Cycles's ``scene_intersect_local`` does: every
+    static object with an SSS material gets its own Embree scene. Walks on moving objects use
+    the whole scene at the path's shutter time (not restricted) and their exits are shaded with
+    the geometric normal (docs/subsurface.md)."""
+
+    def __init__(self, geom, tracer, materials, sampler):
+        from .geometry import SceneGeometry
+        from .trace import Tracer
+
+        self.tracer = tracer
+        self.static_count = geom.static_count
+        self.prefix = int(sampler.data.prefix)
+        sss_mats = np.nonzero(np.any(materials.lobe_type == 4, axis=1))[0]  # BSDF_SUBSURFACE
+        ranges = list(getattr(geom, "static_ranges", []) or [])
+        self.starts = np.array([s for s, _ in ranges], dtype=np.int64)
+        self.local = {}
+        for k, (s, e) in enumerate(ranges):
+            if e > s and np.isin(geom.material[s:e], sss_mats).any():
+                sub = SceneGeometry(origin_shift=geom.origin_shift, static_positions=geom.static_positions,
+                                    static_triangles=np.ascontiguousarray(geom.static_triangles[s:e]))
+                self.local[k] = (Tracer(sub), s)
+        # statistics: walk steps summed over rows, walks, walks out of steps, other deaths
+        self.steps_taken = self.walks = self.capped = self.died = 0
+
+    def patch_hits(self, paths, live, hits):
+        """Rows leaving a walk: their next 'hit' is the exit vertex (HitArrays, in place)."""
+        _patch_exits(paths.sss, live, paths.sss_prim, paths.sss_b, paths.sss_p, paths.sss_n,
+                     hits.prim, hits.t, hits.b1, hits.b2, hits.p, hits.ng, hits.moving)
+
+    def _group(self, prim):
+        """Per row: the index of its local tracer (object), −1 for moving objects."""
+        if not len(self.starts):
+            return np.full(len(prim), -1, np.int64)
+        obj = np.searchsorted(self.starts, prim, side="right") - 1
+        obj[prim >= self.static_count] = -1
+        return obj
+
+    def run(self, paths, live, depth_i):
+        """Walk every row of paths[:live] in state SSS_WALK; leaves them SSS_EXIT (/_FLAT) with
+        the exit vertex in sss_prim/sss_b/sss_p/sss_n, or SSS_DEAD."""
+        rows = np.nonzero(paths.sss[:live] == SSS_WALK)[0]
+        n = len(rows)
+        if not n:
+            return
+        coef = paths.sss_coef[rows]
+        key = np.empty(n, np.int64)
+        _walk_keys(self.prefix, np.ascontiguousarray(paths.pixel[rows]), np.ascontiguousarray(paths.index[rows]),
+                   depth_i, key)
+        ws = WalkState(
+            o=paths.o[rows], d=paths.d[rows], tmax=np.empty(n), thr=paths.throughput[rows],
+            sigma_t=np.ascontiguousarray(coef[:, 0:3]), alpha=np.ascontiguousarray(coef[:, 3:6]),
+            g=np.ascontiguousarray(coef[:, 9]), n_entry=paths.sss_n[rows], p_entry=paths.sss_p[rows],
+            step=np.zeros(n, np.int64), opposite=np.zeros(n, bool), opp_dist=np.zeros(n), key=key,
+            t_sample=np.zeros(n), pend=np.zeros((n, 8)), guided_frac=np.zeros(n), diff_len=np.zeros(n),
+            phase_log=np.zeros(n), state=np.zeros(n, np.int8))
+        walk_start(ws, n, np.ascontiguousarray(coef[:, 6:9]))
+        group = self._group(paths.sss_prim[rows])
+        tau = paths.tau[rows]
+        ex_prim = np.full(n, -1, np.int64)
+        ex_b = np.zeros((n, 2))
+        ex_p = np.zeros((n, 3))
+        ex_ng = np.zeros((n, 3))
+        # the first ray leaves the entry point along its own direction by the usual offset
+        # distance (trace.offset_point's), measured along the normal: Cycles excludes the entry
+        # triangle instead; moving the origin along the normal would start the walk deeper,
+        # which matters when the mean free path is below the offset (tiny radii)
+        cos = np.abs(np.einsum("ij,ij->i", ws.d, ws.n_entry))
+        eps0 = (OFFSET_ABSOLUTE + OFFSET_RELATIVE * np.abs(ws.o).max(axis=1)) / np.maximum(cos, 1e-3)
+        kinds = np.unique(group)
+        single = int(kinds[0]) if len(kinds) == 1 else None  # the usual case: one object
+        for it in range(BSSRDF_MAX_BOUNCES):
+            act = np.flatnonzero(ws.state == SSS_WALK)
+            if not len(act):
+                break
+            self.steps_taken += len(act)
+            walk_sample(ws, act)
+            first = it == 0  # every walk takes its first step in the first pass
+            hit_t = np.empty(len(act))
+            if single is not None:
+                parts = ((single, None),)
+            else:
+                g_act = group[act]
+                parts = tuple((int(k), np.flatnonzero(g_act == k)) for k in np.unique(g_act))
+            for k, sel in parts:
+                r = act if sel is None else act[sel]
+                d = ws.d[r]
+                if first:
+                    push = eps0[r]
+                    o = ws.o[r] + push[:, None] * d
+                    tmax = np.maximum(ws.tmax[r] - push, 0.0)
+                else:
+                    push = 0.0
+                    o = ws.o[r]
+                    tmax = ws.tmax[r]
+                if k >= 0:
+                    tracer, offset = self.local[k]
+                    h = tracer.intersect(o, d, None, tmax)
+                else:
+                    tracer, offset = self.tracer, 0
+                    h = tracer.intersect(o, d, tau[r], tmax)
+                hit = h.prim >= 0
+                if first:
+                    hit &= tmax > 0.0
+                ht = np.where(hit, h.t + push, np.inf)
+                if sel is None:
+                    hit_t = ht
+                else:
+                    hit_t[sel] = ht
+                if hit.any():
+                    rh = r[hit]
+                    ex_prim[rh] = h.prim[hit] + offset
+                    ex_b[rh, 0], ex_b[rh, 1] = h.b1[hit], h.b2[hit]
+                    ex_p[rh] = h.p[hit]
+                    ex_ng[rh] = h.ng[hit]
+            walk_advance(ws, act, hit_t)
+        ws.state[ws.state == SSS_WALK] = SSS_DEAD  # (walk_advance already stops at the cap)
+        dead = ws.state == SSS_DEAD
+        self.walks += n
+        self.capped += int((dead & (ws.step >= BSSRDF_MAX_BOUNCES)).sum())
+        self.died += int(dead.sum())
+        out = ws.state == SSS_EXIT
+        state = np.where(out, np.where(group < 0, SSS_EXIT_FLAT, SSS_EXIT), SSS_DEAD).astype(np.int8)
+        paths.sss[rows] = state
+        paths.throughput[rows] = ws.thr
+        r_ex = rows[out]
+        paths.sss_prim[r_ex] = ex_prim[out]
+        paths.sss_b[r_ex] = ex_b[out]
+        paths.sss_p[r_ex] = ex_p[out]
+        paths.sss_n[r_ex] = ex_ng[out]
+        paths.o[r_ex] = ex_p[out]
+        paths.d[r_ex] = -ws.d[out]  # as if arriving from outside: wo points out of the surface
+        paths.tmax[rows] = 0.0      # their next Embree query is a formality (patch_hits)
