@@ -13,9 +13,32 @@ import numpy as np
 from .. import compat
 from .node_programs import resolve
 
-_media = compat.core_module("volumes.media")  # the core's conversions (bundled or installed)
-add_media, principled_volume, scale_medium = _media.add_media, _media.principled_volume, _media.scale_medium
-volume_absorption, volume_scatter = _media.volume_absorption, _media.volume_scatter
+
+
+def _m():
+    """The core's media conversions (bundled or installed), imported at first use: importing
+    the add-on must not need the core (a Blender without it still loads and reports)."""
+    return compat.core_module("volumes.media")
+
+
+def add_media(*parts):
+    return _m().add_media(*parts)
+
+
+def principled_volume(**kw):
+    return _m().principled_volume(**kw)
+
+
+def scale_medium(*a, **kw):
+    return _m().scale_medium(*a, **kw)
+
+
+def volume_absorption(*a):
+    return _m().volume_absorption(*a)
+
+
+def volume_scatter(*a):
+    return _m().volume_scatter(*a)
 
 
 def volume_medium(exporter, out_node, problems: list) -> dict | None:
