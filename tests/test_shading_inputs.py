@@ -293,6 +293,23 @@ def test_bump_matches_cycles(tmp_path, shape):
         assert int((diff > 3e-3).sum()) <= 6, (k, int((diff > 3e-3).sum()), float(diff.max()))
 
 
+def _interior(img, tol=1e-6):
+    """Pixels away from the image border and from any step of ``img`` (a noise-free render):
+    Cycles's samples spread over about a pixel even with a 0.01-pixel filter (measured: edge
+    pixels blend ~10 % of the neighbour), so only these compare pixel by pixel."""
+    flat = np.zeros(img.shape[:2], bool)
+    flat[1:-1, 1:-1] = True
+    for axis in (0, 1):
+        step = np.abs(np.diff(img, axis=axis)).max(axis=-1) > tol
+        if axis == 0:
+            flat[1:] &= ~step
+            flat[:-1] &= ~step
+        else:
+            flat[:, 1:] &= ~step
+            flat[:, :-1] &= ~step
+    return flat
+
+
 def test_textured_alpha_cuts_out_like_cycles(tmp_path):
     """A Principled BSDF whose Alpha is a checker (a cut-out card) in front of an emitter: the
     camera sees the card's emission where alpha is 1 and the emitter where it is 0."""
@@ -333,18 +350,7 @@ def test_textured_alpha_cuts_out_like_cycles(tmp_path):
     card = np.abs(cycles - [1.0, 0.5, 0.2]).max(axis=-1) < 1e-3
     through = np.abs(cycles - [0.1, 0.2, 0.5]).max(axis=-1) < 1e-3
     assert card.sum() > 300 and through.sum() > 300  # both kinds of pixel are there
-    # compare away from the checker's and the card's edges: Cycles's samples spread over about
-    # a pixel even with a 0.01-pixel filter (measured: edge pixels blend ~10 % of the neighbour)
-    flat = np.zeros((32, 32), bool)
-    flat[1:-1, 1:-1] = True
-    for axis in (0, 1):
-        step = np.abs(np.diff(drt, axis=axis)).max(axis=-1) > 1e-6
-        if axis == 0:
-            flat[1:] &= ~step
-            flat[:-1] &= ~step
-        else:
-            flat[:, 1:] &= ~step
-            flat[:, :-1] &= ~step
+    flat = _interior(drt)
     assert flat.sum() > 400
     diff = np.abs(cycles - drt).max(axis=-1)
     assert diff[flat].max() < 1e-3, diff[flat].max()
@@ -382,3 +388,128 @@ def test_normal_map_on_ngons_matches_cycles(tmp_path):
     assert not res.warnings, res.warnings
     assert np.abs(tile(drt, 0, 2) - tile(drt, 3, 2)).max() > 0.05  # the map bends the normal
     _compare(cycles, drt, len(cases), n=2, outliers=10)
+
+
+def _shadow_scene(make_card_material):
+    """A white ground lit by a delta sun at 30°, a card above it with the material
+    ``make_card_material()`` builds, seen from above (orthographic, no indirect light): the
+    ground shows the card's shadow."""
+    from node_parity import setup_scene
+
+    sc = setup_scene(2)
+    card_material = make_card_material()
+    sc.cycles.samples = sc.drt.samples = 16
+    ground = bpy.data.materials.new("ground")
+    ground.node_tree.nodes.clear()
+    d = node(ground.node_tree, "ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.8, 0.8, 1)})
+    ground.node_tree.links.new(d.outputs[0], ground.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    bpy.ops.mesh.primitive_plane_add(size=4.0, location=(0, 0, -0.5))
+    bpy.context.object.data.materials.append(ground)
+    bpy.ops.mesh.primitive_plane_add(size=1.2, location=(-0.2, 0.1, 0.2))
+    bpy.context.object.data.materials.append(card_material)
+    light = bpy.data.lights.new("sun", "SUN")
+    light.energy, light.angle = 3.0, 0.0
+    ob = bpy.data.objects.new("sun", light)
+    ob.rotation_euler = (0.0, 0.5, 0.0)
+    sc.collection.objects.link(ob)
+    return sc
+
+
+def _render_both(sc, tmp_path, tag):
+    from addon.export import export_depsgraph
+    from drt.render import render
+    from drt.scene import scene_from_dict
+
+    path = str(tmp_path / f"{tag}.exr")
+    sc.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path)
+    cycles = np.array(img.pixels[:], dtype=np.float64).reshape(32, 32, 4)[::-1, :, :3]
+    bpy.data.images.remove(img)
+    res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
+    assert not res.warnings, res.warnings
+    drt = np.asarray(render(scene_from_dict(res.header, res.arrays), threads=1).combined, np.float64)[..., :3]
+    return cycles, drt
+
+
+def test_alpha_cut_out_casts_a_cut_out_shadow_like_cycles(tmp_path):
+    """Transparent shadows: a checker-alpha card's shadow on the ground is a checker too (the
+    shadow rays pass the transparent squares), and the camera sees the ground through them."""
+    def card():
+        mat = bpy.data.materials.new("card")
+        nt = mat.node_tree
+        nt.nodes.clear()
+        uv = nt.nodes.new("ShaderNodeTexCoord").outputs["UV"]
+        chk = node(nt, "ShaderNodeTexChecker", {"Vector": uv, "Scale": 3.0, "Color1": (1, 1, 1, 1),
+                                                "Color2": (0, 0, 0, 1)})
+        # (a Diffuse BSDF: DRT's Principled specular layer is still the simplified one)
+        dif = node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.2, 0.5, 0.9, 1)})
+        tr = node(nt, "ShaderNodeBsdfTransparent")
+        mix = node(nt, "ShaderNodeMixShader", {0: chk.outputs["Fac"], 1: tr.outputs[0], 2: dif.outputs[0]})
+        nt.links.new(mix.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+        return mat
+    cycles, drt = _render_both(_shadow_scene(card), tmp_path, "cutout")
+    lit = cycles[..., 0] > 0.5
+    assert 50 < (~lit).sum() < 900  # a partial shadow: some ground is lit through the squares
+    assert abs(drt.mean() / cycles.mean() - 1) < 0.01, (drt.mean(), cycles.mean())
+    flat = _interior(drt, 1e-3)
+    assert flat.sum() > 300
+    # (a few samples of Cycles's land farther than a pixel: one of 16 shows as 0.04)
+    assert (np.abs(drt - cycles).max(axis=-1)[flat] > 2e-3).mean() < 0.02
+
+
+def test_is_shadow_ray_trick_removes_a_shadow_like_cycles(tmp_path):
+    """Mix(Diffuse, Transparent, Is Shadow Ray): the card is seen but casts no shadow."""
+    def card():
+        mat = bpy.data.materials.new("card")
+        nt = mat.node_tree
+        nt.nodes.clear()
+        lp = nt.nodes.new("ShaderNodeLightPath")
+        dif = node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.9, 0.3, 0.1, 1)})
+        tr = node(nt, "ShaderNodeBsdfTransparent")
+        mix = node(nt, "ShaderNodeMixShader", {0: lp.outputs["Is Shadow Ray"], 1: dif.outputs[0], 2: tr.outputs[0]})
+        nt.links.new(mix.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+        return mat
+    cycles, drt = _render_both(_shadow_scene(card), tmp_path, "noshadow")
+    ground = np.abs(cycles - cycles[0, -1]).max(axis=-1) < 1e-3  # pixels like a lit ground corner
+    assert ground.mean() > 0.5  # no shadow anywhere: the ground is uniformly lit
+    assert abs(drt.mean() / cycles.mean() - 1) < 0.01, (drt.mean(), cycles.mean())
+    flat = _interior(drt, 1e-3)
+    assert (np.abs(drt - cycles).max(axis=-1)[flat] > 2e-3).mean() < 0.02
+
+
+def test_half_transparent_card_under_an_area_light_matches_cycles(tmp_path):
+    """A 50 % transparent card between an area light and the ground: light reaches the ground
+    both by next-event estimation (shadow rays pass the card at half strength) and by BSDF rays
+    passing it; the MIS state of the ground vertex is kept across the pass, so neither is
+    counted twice. Image means against Cycles."""
+    from node_parity import setup_scene
+
+    sc = setup_scene(2)
+    sc.cycles.samples = sc.drt.samples = 64
+    sc.cycles.max_bounces = sc.drt.max_bounces = 2
+    ground = bpy.data.materials.new("ground")
+    ground.node_tree.nodes.clear()
+    d = node(ground.node_tree, "ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.8, 0.8, 1)})
+    ground.node_tree.links.new(d.outputs[0], ground.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    card = bpy.data.materials.new("card")
+    card.node_tree.nodes.clear()
+    dif = node(card.node_tree, "ShaderNodeBsdfDiffuse", {"Color": (0.9, 0.2, 0.1, 1)})
+    tr = node(card.node_tree, "ShaderNodeBsdfTransparent", {"Color": (0.6, 0.9, 1.0, 1)})
+    mix = node(card.node_tree, "ShaderNodeMixShader", {0: 0.5, 1: dif.outputs[0], 2: tr.outputs[0]})
+    card.node_tree.links.new(mix.outputs[0], card.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    bpy.ops.mesh.primitive_plane_add(size=4.0, location=(0, 0, -0.5))
+    bpy.context.object.data.materials.append(ground)
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.3, 0.0, 0.0))
+    bpy.context.object.data.materials.append(card)
+    light = bpy.data.lights.new("area", "AREA")
+    light.energy, light.size = 30.0, 0.8
+    ob = bpy.data.objects.new("area", light)
+    ob.location = (0.5, 0.0, 0.6)
+    sc.collection.objects.link(ob)
+    cycles, drt = _render_both(sc, tmp_path, "halfcard")
+    under = np.zeros((32, 32), bool)
+    under[8:24, 16:28] = True  # the ground under the card (and the card itself)
+    for mask in (under, ~under):
+        a, b = cycles[mask].mean(), drt[mask].mean()
+        assert abs(b / a - 1) < 0.02, (a, b)

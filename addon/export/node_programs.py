@@ -33,7 +33,7 @@ OP_BUMP_OFFSET, OP_BUMP, OP_CAMERA_COORDS = 95, 96, 97
 OBJECT_INFO_OUTPUTS = {"Location": 0, "Color": 1, "Alpha": 2, "Object Index": 3, "Random": 4}
 # shading-point rows (drt.materials.program_format.POINT_*)
 POINT_P, POINT_N, POINT_NG, POINT_I = 3, 4, 5, 6
-POINT_PATH, POINT_PATH2, POINT_DEPTH, POINT_MISC = 8, 9, 10, 11
+POINT_PATH, POINT_PATH2, POINT_DEPTH, POINT_MISC, POINT_SHADOW = 8, 9, 10, 11, 15
 NORMAL_MAP_SPACES = ["TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD"]
 #: Geometry node outputs → (row, component or −1 for the vector)
 GEOMETRY_OUTPUTS = {"Position": (POINT_P, -1), "Normal": (POINT_N, -1), "True Normal": (POINT_NG, -1),
@@ -44,7 +44,8 @@ LIGHT_PATH_OUTPUTS = {
     "Is Singular Ray": (POINT_PATH2, 0), "Is Reflection Ray": (POINT_PATH2, 1),
     "Is Transmission Ray": (POINT_PATH2, 2), "Ray Depth": (POINT_DEPTH, 0), "Diffuse Depth": (POINT_DEPTH, 1),
     "Glossy Depth": (POINT_DEPTH, 2), "Transmission Depth": (POINT_MISC, 0), "Ray Length": (POINT_MISC, 1),
-    "Is Shadow Ray": None, "Is Volume Scatter Ray": None, "Transparent Depth": None, "Portal Depth": None,
+    "Is Shadow Ray": (POINT_SHADOW, 0), "Is Volume Scatter Ray": None, "Transparent Depth": None,
+    "Portal Depth": None,
 }
 OP_NOISE, OP_WHITE_NOISE, OP_VORONOI, OP_WAVE, OP_MAGIC, OP_BRICK, OP_CURVES = 50, 51, 52, 53, 54, 55, 56
 OP_ENVIRONMENT = 70  # mode = projection·ENV_PROJECTION_STRIDE + interpolation·8 (+ REPEAT)
@@ -511,9 +512,6 @@ class ProgramBuilder:
                 raise Unsupported(node)
             row = LIGHT_PATH_OUTPUTS[oname]
             if row is None:
-                if oname == "Is Shadow Ray":
-                    self.problems.append(f"'{node.name}' Is Shadow Ray is 0: DRT's shadow rays do not "
-                                         f"evaluate materials (shadows stay opaque)")
                 return Value(self, const=0.0)
             return self.point(*row)
         # Normal Map

@@ -38,6 +38,7 @@ from .scene import RenderSettings
 from .trace import Tracer
 from .volumes.media import STACK_SIZE, MediumData, build_medium_data
 from .volumes.stack import camera_stack
+from .materials.transparency import transparent_materials
 from .volumes.stage import add_transmitted, shadow_step
 
 DIRECT_STRATEGIES = scene_module.DIRECT_STRATEGIES
@@ -61,7 +62,7 @@ def _paths(n: int, sss: bool = False) -> stages.Paths:
         vseg=np.empty(n, dtype=np.int32),
         sss=np.zeros(m, dtype=np.int8), sss_coef=np.empty((m, 10)), sss_n=np.empty((m, 3)),
         sss_p=np.empty((m, 3)), sss_prim=np.empty(m, dtype=np.int64), sss_b=np.empty((m, 2)),
-        sss_count=np.zeros(m, dtype=np.int32))
+        sss_count=np.zeros(m, dtype=np.int32), tcount=np.zeros(n, dtype=np.int32))
 
 
 def _shadow_rays(n: int) -> stages.ShadowRays:
@@ -157,6 +158,13 @@ class Integrator:
         self.loop_limit = self.max_depth + 1 + (stages.VOLUME_BOUNDS_MAX if media.enabled else 0)
         if self.sss is not None:  # an SSS exit takes a loop pass of its own, no bounce
             self.loop_limit += self.max_depth + 1
+        # transparent surfaces (alpha, Transparent BSDF): passes of their own, and shadow rays
+        # that pass them (the closest-hit loop of _shadows_through) instead of Embree's occlusion
+        self.transparent = transparent_materials(materials.data)
+        if not self.transparent.any():
+            self.transparent = np.zeros(0, dtype=bool)
+        else:
+            self.loop_limit += int(settings.transparent_bounces)
 
     def _hit_arrays(self, hits) -> stages.HitArrays:
         if hits.moving_linear is not None:
@@ -193,22 +201,27 @@ class Integrator:
         paths, shadow = ws
         return (stages.Paths(*(a[:n] for a in paths)), stages.ShadowRays(*(a[:n_shadow] for a in shadow)))
 
-    def _shadows_through_media(self, shadow, count, radiance):
-        """Shadow rays in a scene with media: closest hits, repeatedly, so that rays attenuate
-        by exp(−∫σt) and pass volume-only boundaries (updating their stacks) until they reach
-        their light, an opaque surface, or VOLUME_BOUNDS_MAX boundaries."""
+    def _shadows_through(self, shadow, count, radiance, md, regs, point):
+        """Shadow rays in a scene with media or transparent surfaces: closest hits, repeatedly,
+        so that rays attenuate by exp(−∫σt) and by the transparent colour of the surfaces they
+        pass (Cycles's transparent shadows; a textured one runs its program at the hit), and
+        pass volume-only boundaries (updating their stacks), until they reach their light, an
+        opaque surface, or the crossing limit (VOLUME_BOUNDS_MAX with media, else the transparent
+        bounce limit + 1: then blocked, as Cycles)."""
         trans = np.ones((count, 3))
         blocked = np.zeros(count, dtype=bool)
         active = np.arange(count, dtype=np.int64)
         n_active = count
         o, d, tmax = shadow.o[:count], shadow.d[:count], shadow.tmax[:count]
-        for _ in range(stages.VOLUME_BOUNDS_MAX):
+        rounds = stages.VOLUME_BOUNDS_MAX if self.media.enabled else int(self.s.transparent_bounces) + 1
+        for _ in range(rounds):
             if n_active == 0:
                 break
             rows = active[:n_active]
             hits = self.tracer.intersect(o[rows], d[rows], shadow.tau[:count][rows], tmax[rows])
             n_active = shadow_step(self.media, self.surfaces.material, active, n_active, hits.prim, hits.t,
-                                   hits.ng, o, d, tmax, shadow.vstack, trans, blocked)
+                                   hits.ng, o, d, tmax, shadow.vstack, trans, blocked,
+                                   self.transparent, md, self.programs, regs, point, hits.b1, hits.b2)
         blocked[active[:n_active]] = True  # still crossing boundaries: give up (as Cycles)
         add_transmitted(shadow, count, blocked, trans, radiance)
 
@@ -243,8 +256,8 @@ class Integrator:
                 self.sss.patch_hits(paths, live, hit_arrays)
             live, n_shadow = stages.shade(sd, md, self.programs, regs, point, ld, self.surfaces, self.stage_settings, depth_i, live,
                                           paths, hit_arrays, out, shadow, vd)
-            if n_shadow and vd.enabled:
-                self._shadows_through_media(shadow, n_shadow, out.radiance)
+            if n_shadow and (vd.enabled or self.transparent.shape[0]):
+                self._shadows_through(shadow, n_shadow, out.radiance, md, regs, point)
             elif n_shadow:
                 blocked = self.tracer.occluded(shadow.o[:n_shadow], shadow.d[:n_shadow],
                                                shadow.tmax[:n_shadow], shadow.tau[:n_shadow])

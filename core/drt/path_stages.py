@@ -49,8 +49,9 @@ from .lights.world_map import world_radiance_at
 from .materials import (LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, NO_BUMP, bsdf_eval_bump,
                         bsdf_sample_bump)
 from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
-                                       POINT_P, POINT_PATH, POINT_PATH2, POINT_XFORM)
+                                       POINT_P, POINT_PATH, POINT_PATH2, POINT_SHADOW, POINT_XFORM)
 from .materials.programs import eval_material
+from .materials.transparency import straight_lobe
 from .materials.table import LOBE_SUBSURFACE, pick_lobe
 from .subsurface import SSS_DEAD, SSS_EXIT, SSS_EXIT_FLAT, SSS_NONE, SSS_WALK, sss_coefficients
 from .sampling.pixel_filter import filter_sample
@@ -106,6 +107,8 @@ Paths = namedtuple("Paths", [
     "sss_b",                              # (n, 2) barycentrics (b1, b2) of the exit
     "sss_count",                          # (n,) int32 SSS exits so far (they shift the sample
                                           # dimensions: an exit is a vertex but no bounce)
+    "tcount",                             # (n,) int32 transparent surfaces passed (Cycles's
+                                          # transparent bounces: no bounce, own sample dims)
 ])
 
 # how a ray left its last vertex (Cycles's ray-type flags, for the Light Path node); 0: camera
@@ -275,6 +278,7 @@ def fill_point(point, pd, surf, hits, i, prim, p, ng, ns, wo, flags, counts, ray
                               1.0 if flags & RAY_TRANSMIT else 0.0))
     _put(point, POINT_DEPTH, (float(counts[0]), float(counts[1]), float(counts[2])))
     _put(point, POINT_MISC, (float(counts[3]), ray_length, 1.0 if backfacing else 0.0))
+    _put(point, POINT_SHADOW, (0.0, 0.0, 0.0))
 
 
 @kernel
@@ -328,6 +332,7 @@ def copy_path(paths, i, j):
     if paths.sss.shape[0]:
         paths.sss[j] = paths.sss[i]
         paths.sss_count[j] = paths.sss_count[i]
+    paths.tcount[j] = paths.tcount[i]
 
 
 @kernel
@@ -360,6 +365,7 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
             paths.counts[i, c] = 0
         paths.terminate[i] = False
         paths.prev_flags[i] = 0
+        paths.tcount[i] = 0
         paths.slot[i] = i
         paths.pixel[i] = pixel
         paths.index[i] = idx
@@ -408,8 +414,9 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # an SSS exit is a vertex without a bounce: it takes the next dimensions, and only the
         # first hit of a camera path writes the camera outputs
         vertex = bounce + n_sss
-        camera = vertex == 0
-        base = D_BOUNCE0 + DIMS_PER_BOUNCE * vertex
+        camera = vertex == 0  # (a camera ray stays one through transparent surfaces, as Cycles)
+        # a transparent surface passed is a vertex without a bounce too: next dimensions
+        base = D_BOUNCE0 + DIMS_PER_BOUNCE * (vertex + paths.tcount[i])
         prev_hint = material_hint(md, paths.prev_mat[i], prev_n, load(paths.prev_wo, i))
         prim = hits.prim[i]
         t_geom = hits.t[i] if prim >= 0 else np.inf
@@ -633,6 +640,22 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         refl_geo = dot(wi, ng) * dot(wo, ng) > 0.0
         refl_sh = wi_l[2] * wo_l[2] > 0.0
         alive = b_valid and refl_geo == refl_sh and any_positive(weight)
+        if alive and b_delta and kind == LOBE_TRANSMISSION and straight_lobe(md, mat, u_lobe):
+            # --- an IOR-1 lobe (alpha, Transparent BSDF): the ray passes straight on, a
+            # transparent bounce. No bounce is counted and the MIS state of the last real
+            # vertex is kept, so a light hit behind pairs with that vertex's light sampling
+            # (whose shadow ray passes this surface too: drt.volumes.stage.shadow_step)
+            if paths.tcount[i] + 1 > settings.transparent_bounces:
+                continue
+            copy_path(paths, i, j)
+            if vd.enabled and not refl_geo:
+                stack_cross(vd, paths.vstack, j, prim, mat, wi, ng)
+            store(paths.o, j, offset_point(p, ng, wi))
+            paths.tmax[j] = max(paths.tmax[i] - t_geom, 0.0)
+            store(paths.throughput, j, mul(thr, weight))
+            paths.tcount[j] = paths.tcount[i] + 1
+            j += 1
+            continue
         thr = mul(thr, weight)
         # entering SSS is no bounce (Cycles's subsurface_bounce skips path_state_next)
         entering = kind == LOBE_SUBSURFACE

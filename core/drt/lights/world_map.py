@@ -31,7 +31,7 @@ import numpy as np
 
 from ..kernels import inline_kernel, kernel
 from ..materials.program_format import (POINT_GENERATED, POINT_I, POINT_N, POINT_NG, POINT_NSMOOTH, POINT_OBJECT,
-                                        POINT_P, POINT_ROWS, POINT_UV, POINT_XFORM)
+                                        POINT_P, POINT_ROWS, POINT_SHADOW, POINT_UV, POINT_XFORM)
 from ..materials.programs import run_program
 from ..sampling.spherical_maps import direction_to_equirectangular, equirectangular_to_direction
 
@@ -61,6 +61,7 @@ def world_radiance_at(pd, regs, prog, reg, d, point):
         point[POINT_NG, c] = -d[c]
         point[POINT_I, c] = -d[c]
         point[POINT_NSMOOTH, c] = -d[c]
+        point[POINT_SHADOW, c] = 0.0
     run_program(pd, regs, prog, -1, 0.0, 0.0, point)
     return (max(regs[reg, 0], 0.0), max(regs[reg, 1], 0.0), max(regs[reg, 2], 0.0))
 

@@ -74,7 +74,8 @@ POINT_PATH2 = 9    # (is singular ray, is reflection ray, is transmission ray)
 POINT_DEPTH = 10   # (ray depth, diffuse depth, glossy depth)
 POINT_MISC = 11    # (transmission depth, ray length, backfacing)
 POINT_XFORM = 12   # rows 12..14
-POINT_ROWS = 15
+POINT_SHADOW = 15  # (is shadow ray, 0, 0): 1 only where a shadow ray meets a transparent surface
+POINT_ROWS = 16
 #: Normal Map spaces (Blender's enum order)
 NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD")
 #: Rec.709 luminance weights (Blender's default working space): Cycles's colour → float

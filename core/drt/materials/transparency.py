@@ -14,7 +14,7 @@ import numpy as np
 
 from ..kernels import kernel
 from .dielectric import IOR_ONE_EPS
-from .table import BSDF_GLASS
+from .table import BSDF_GLASS, pick_lobe
 
 
 @kernel
@@ -28,6 +28,14 @@ def transparency(md, m):
             t1 += md.lobe_color[m, s, 1]
             t2 += md.lobe_color[m, s, 2]
     return t0, t1, t2
+
+
+@kernel
+def straight_lobe(md, m, u_lobe):
+    """Whether ``u_lobe`` picks (as ``bsdf_sample`` does) one of material m's IOR-1 GLASS lobes,
+    through which a ray passes straight."""
+    slot, _ = pick_lobe(md, m, u_lobe)
+    return md.lobe_type[m, slot] == BSDF_GLASS and abs(md.lobe_ior[m, slot] - 1.0) < IOR_ONE_EPS
 
 
 def transparent_materials(md) -> np.ndarray:

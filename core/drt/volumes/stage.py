@@ -32,6 +32,10 @@ from ..lights.common import AREA, I_KIND, L_COS_HALF, L_NORMAL, L_POS, L_RADIUS,
 from ..sampling.sequences import sample_2d
 from .distance import (channel_probs, equiangular_pdf, equiangular_sample, equiangular_setup, exp_pdf,
                        exp_sample, pick_channel)
+from ..materials.program_format import (POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH, POINT_P,
+                                        POINT_SHADOW, POINT_XFORM)
+from ..materials.programs import eval_material
+from ..materials.transparency import transparency
 from .phase import hg_pdf
 from .stack import stack_coefficients, stack_cross
 
@@ -291,12 +295,39 @@ def volume_segment(sd, ld, vd, stack, i, o, d, length, thr, terminate, nee, pixe
 # ---------------------------------------------------------------------- shadow rays in media
 
 @kernel
-def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, trans, blocked):
-    """One round of shadow rays through media: rows active[0:count] of the shadow arrays were
-    traced (closest hits prim/t/ng, row k of the hit arrays for active[k]). Attenuates each
-    by its stack's media up to the hit (or tmax), then: an opaque hit blocks, a pass-through
-    boundary updates the stack and moves the ray past it (stays active), no hit: done.
-    Returns the number of rows still active (compacted to the front of ``active``)."""
+def fill_shadow_point(point, pd, o, d, t, ng):
+    """The shading-point rows of a shadow ray's hit (drt.materials.program_format.POINT_*):
+    position, normals on the ray's side, incoming direction, ray length, Is Shadow Ray = 1;
+    everything else as for a hit of an unscattered ray."""
+    for r in range(point.shape[0]):
+        for c in range(3):
+            point[r, c] = 0.0
+    back = d[0] * ng[0] + d[1] * ng[1] + d[2] * ng[2] > 0.0
+    sgn = -1.0 if back else 1.0
+    for c in range(3):
+        point[POINT_P, c] = o[c] + d[c] * t + pd.origin[c]
+        point[POINT_N, c] = sgn * ng[c]
+        point[POINT_NG, c] = sgn * ng[c]
+        point[POINT_NSMOOTH, c] = ng[c]
+        point[POINT_I, c] = -d[c]
+        point[POINT_XFORM + c, c] = 1.0
+    point[POINT_MISC, 1] = t
+    point[POINT_MISC, 2] = 1.0 if back else 0.0
+    point[POINT_SHADOW, 0] = 1.0
+
+
+@kernel
+def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, trans, blocked,
+                transparent, md, pd, regs, point, b1, b2):
+    """One round of shadow rays through media and transparent surfaces: rows active[0:count]
+    of the shadow arrays were traced (closest hits prim/t/ng/b1/b2, row k of the hit arrays
+    for active[k]). Attenuates each by its stack's media up to the hit (or tmax), then: an
+    opaque hit blocks; a transparent surface (``transparent[mat]``: alpha, Transparent BSDF)
+    multiplies by its transparent colour (a textured one: its program run at the hit, with the
+    shading point's Is Shadow Ray set) and the ray moves past it; a pass-through boundary
+    updates the stack and moves the ray past it; no hit: done. ``md``/``regs``/``point``: the
+    thread's material workspace. Returns the number of rows still active (compacted to the
+    front of ``active``)."""
     n_next = 0
     for k in range(count):
         s = active[k]
@@ -311,14 +342,23 @@ def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, tra
         if not hit:
             continue
         mat = material[p]
-        if not vd.pass_through[mat]:
-            blocked[s] = True
-            continue
-        if trans[s, 0] == 0.0 and trans[s, 1] == 0.0 and trans[s, 2] == 0.0:
-            continue  # nothing gets through: done (the contribution is 0)
         dd = load(d, s)
         n = load(ng, k)
-        stack_cross(vd, stack, s, p, mat, dd, n)
+        if not (vd.enabled and vd.pass_through[mat]):
+            if not (transparent.shape[0] and transparent[mat]):
+                blocked[s] = True
+                continue
+            if pd.prog_of.shape[0] and pd.prog_of[mat] >= 0:
+                if pd.reads_point[mat]:
+                    fill_shadow_point(point, pd, load(o, s), dd, t[k], n)
+                eval_material(pd, md, regs, mat, p, b1[k], b2[k], point)
+            tc = transparency(md, mat)
+            for c in range(3):
+                trans[s, c] *= tc[c]
+        if trans[s, 0] == 0.0 and trans[s, 1] == 0.0 and trans[s, 2] == 0.0:
+            continue  # nothing gets through: done (the contribution is 0)
+        if vd.enabled:
+            stack_cross(vd, stack, s, p, mat, dd, n)
         oo = load(o, s)
         tk = t[k]
         # restart just past the boundary along the ray (relative offset, as trace.offset_point)
