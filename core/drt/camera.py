@@ -225,7 +225,12 @@ class Camera:
         for j in range(3):
             m[:3, j] /= max(np.linalg.norm(m[:3, j]), 1e-300)
         m[:3, 3] += self.origin_shift  # the tracer's frame is shifted; programs see Blender's
-        inv = np.linalg.inv(m)
+        try:
+            inv = np.linalg.inv(m)
+        except np.linalg.LinAlgError:  # a degenerate camera matrix: no camera coordinates
+            return np.zeros((5, 4))
+        if not np.all(np.isfinite(inv)):
+            return np.zeros((5, 4))
         out = np.zeros((5, 4))
         out[:3] = inv[:3]
         out[3, :3] = (float(cd.projection == PROJECTION_ORTHO), cd.plane_w, cd.plane_h)
