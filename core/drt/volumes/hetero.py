@@ -42,6 +42,8 @@ from ..materials.programs import run_program
 _MASK = 0xFFFFFFFF
 #: tentative collisions per tracked segment before giving up (a run-away majorant)
 MAX_STEPS = 1 << 20
+#: ratio tracking plays Russian roulette once its weight falls below this fraction
+RR_BELOW = 0.05
 
 
 @kernel
@@ -177,8 +179,15 @@ def ratio_tracking(vd, pd, regs, point, stack, i, o, d, length, state):
         w0 *= max(1.0 - st[0] / maj, 0.0)
         w1 *= max(1.0 - st[1] / maj, 0.0)
         w2 *= max(1.0 - st[2] / maj, 0.0)
-        if w0 == 0.0 and w1 == 0.0 and w2 == 0.0:
-            break
+        q = max(w0, max(w1, w2))
+        if q < RR_BELOW:  # Russian roulette: a dense medium costs O(1/RR_BELOW) steps, not σ̄·L
+            u, state = pcg_next(state)
+            if not u * RR_BELOW < q:
+                return (0.0, 0.0, 0.0), state
+            k = RR_BELOW / q
+            w0 *= k
+            w1 *= k
+            w2 *= k
     return (w0, w1, w2), state
 
 
@@ -212,8 +221,15 @@ def track_segment(vd, pd, regs, point, stack, i, o, d, length, thr, attenuate, s
             w0 *= n0 / maj
             w1 *= n1 / maj
             w2 *= n2 / maj
-            if w0 == 0.0 and w1 == 0.0 and w2 == 0.0:
-                break
+            q = max(w0, max(w1, w2))
+            if q < RR_BELOW * max(thr[0], max(thr[1], thr[2])):  # Russian roulette, as above
+                q = q / (RR_BELOW * max(thr[0], max(thr[1], thr[2])))
+                u, state = pcg_next(state)
+                if not u < q:
+                    return (a0, a1, a2), False, math.inf, (0.0, 0.0, 0.0), 0.0, state
+                w0 /= q
+                w1 /= q
+                w2 /= q
             continue
         pa = (st[0] - ss[0]) * w0 + (st[1] - ss[1]) * w1 + (st[2] - ss[2]) * w2
         ps = ss[0] * w0 + ss[1] * w1 + ss[2] * w2
