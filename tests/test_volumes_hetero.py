@@ -149,3 +149,30 @@ def test_stability_dense_and_thin_heterogeneous_media_with_point_light_inside(ga
     assert np.all(np.isfinite(img)) and np.all(img >= 0)
     if gain < 1:
         assert abs(img[0, 0].mean() - 1.0) < 0.01
+
+
+def test_textured_colour_absorption_and_scatter():
+    """A textured colour c = Generated z with constant density: Volume Absorption's σa = A·(1 − c)
+    integrates to A/2 through the 1 m slab (T = exp(−A/2) within 4 SE), and Volume Scatter's
+    σs = S·c (chromatic, no absorption) keeps the white furnace at 1 within 4 SE."""
+    absorb = np.array([1.0, 2.0, 4.0])
+    h = base_header(16, 16, 8, world=(1, 1, 1), camera={"type": "ORTHO", "matrix_world": translation(0, 0, 3.0),
+                                                       "ortho_scale": 1.0, "clip_start": 0.01, "clip_end": 100.0})
+    a = {}
+    h["materials"].append(dict(FOG_ONLY, volume={"absorption": absorb.tolist(), "color_reg": 1},
+                               program=_gradient_program(2, 1.0)))
+    _box_with_generated(h, a, "slab", 2.0, 1.0, 0, -0.5)
+    scene = scene_from_dict(h, a)
+    vd = prepare(scene).integrator.media
+    assert vd.hetero and vd.color_reg[0] == 1 and vd.density_reg[0] == -1
+    img = render(scene, threads=2).combined[..., :3].reshape(-1, 3)
+    _within_4se(img, np.exp(-absorb / 2))
+
+    h = base_header(12, 12, 32, world=(1, 1, 1), volume_bounces=256, max_bounces=512,
+                    camera={"type": "PERSP", "matrix_world": look_at((0, -6, 0.5), (0, 0, 0.5)), "lens": 120.0})
+    a = {}
+    h["materials"].append(dict(FOG_ONLY, volume={"scatter": [2.0, 4.0, 8.0], "anisotropy": 0.3, "color_reg": 1},
+                               program=_gradient_program(2, 1.0)))
+    _box_with_generated(h, a, "fog", 0.5, 1.0, 0, 0.0)
+    img = render(scene_from_dict(h, a), threads=2).combined[..., :3]
+    _within_4se(img[3:9, 3:9].reshape(-1, 3), np.ones(3))

@@ -166,7 +166,8 @@ class MaterialExporter:
             result["emission"] = [float(x) for x in np.broadcast_to(emission, 3)]
         if self._normal is not None and result["lobes"]:
             result["normal_reg"] = self._b.reg_of(self._normal[1])
-        if "emission_reg" in result or "normal_reg" in result or "density_reg" in result.get("volume", {}) or any(
+        if "emission_reg" in result or "normal_reg" in result or "density_reg" in result.get("volume", {}) \
+                or "color_reg" in result.get("volume", {}) or any(
                 "color_reg" in lb or "roughness_reg" in lb for lb in result["lobes"]):
             result["program"] = self._b.to_dict()
         problems += self._b.problems

@@ -77,21 +77,45 @@ def seed_of_point(p, k):
 
 
 @kernel
-def row_density(vd, pd, regs, point, key, x):
-    """Density factor of stack key ``key`` at shifted world point x (1 for homogeneous rows)."""
+def row_coefficients(vd, pd, regs, point, key, x):
+    """(σs, σt, density) of stack key ``key`` at shifted world point x: a homogeneous row's
+    constants (density 1), else its program's density (``density_reg``, 1 if −1) times, with a
+    textured colour c (``color_reg``), σs = S·c and σa = A·max(1 − c, 0) (S = sigma_s, A =
+    sigma_t − sigma_s per unit density and colour), clamped to the row's share of the majorant."""
     r = key % vd.stride
-    reg = vd.density_reg[r]
-    if reg < 0:
-        return 1.0
+    s0, s1, s2 = vd.sigma_s[r, 0], vd.sigma_s[r, 1], vd.sigma_s[r, 2]
+    t0, t1, t2 = vd.sigma_t[r, 0], vd.sigma_t[r, 1], vd.sigma_t[r, 2]
+    prog = vd.density_prog[r]
+    if prog < 0:
+        return (s0, s1, s2), (t0, t1, t2), 1.0
     obj = key // vd.stride
     m = vd.coord_map[obj]
     for c in range(3):
         point[POINT_GENERATED, c] = m[c, 0] * x[0] + m[c, 1] * x[1] + m[c, 2] * x[2] + m[c, 3]
         point[POINT_OBJECT, c] = m[3 + c, 0] * x[0] + m[3 + c, 1] * x[1] + m[3 + c, 2] * x[2] + m[3 + c, 3]
         point[POINT_UV, c] = 0.0
-    run_program(pd, regs, vd.density_prog[r], -1, 0.0, 0.0, point)
-    v = regs[reg, 0]
-    return min(max(v, 0.0), vd.majorant[r]) if v == v else 0.0
+    run_program(pd, regs, prog, -1, 0.0, 0.0, point)
+    k = 1.0
+    dreg = vd.density_reg[r]
+    if dreg >= 0:
+        v = regs[dreg, 0]
+        k = max(v, 0.0) if v == v else 0.0
+    creg = vd.color_reg[r]
+    if creg >= 0:
+        c0, c1, c2 = regs[creg, 0], regs[creg, 1], regs[creg, 2]
+        c0 = max(c0, 0.0) if c0 == c0 else 0.0
+        c1 = max(c1, 0.0) if c1 == c1 else 0.0
+        c2 = max(c2, 0.0) if c2 == c2 else 0.0
+        a0, a1, a2 = t0 - s0, t1 - s1, t2 - s2
+        s0, s1, s2 = s0 * c0, s1 * c1, s2 * c2
+        t0 = s0 + a0 * max(1.0 - c0, 0.0)
+        t1 = s1 + a1 * max(1.0 - c1, 0.0)
+        t2 = s2 + a2 * max(1.0 - c2, 0.0)
+    bound = vd.majorant[r] * max(vd.sigma_t[r, 0], max(vd.sigma_t[r, 1], vd.sigma_t[r, 2]))
+    top = k * max(t0, max(t1, t2))
+    if top > bound:  # above the majorant: clamp (biased; the grid bound has a safety factor)
+        k *= bound / top
+    return (k * s0, k * s1, k * s2), (k * t0, k * t1, k * t2), k
 
 
 @inline_kernel
@@ -115,7 +139,7 @@ def stack_is_hetero(vd, stack, i):
         key = stack[i, s]
         if key < 0:
             break
-        if vd.density_reg[key % vd.stride] >= 0:
+        if vd.density_prog[key % vd.stride] >= 0:
             return True
     return False
 
@@ -132,17 +156,17 @@ def coefficients_at(vd, pd, regs, point, stack, i, x):
         if key < 0:
             break
         r = key % vd.stride
-        k = row_density(vd, pd, regs, point, key, x)
-        s0 += k * vd.sigma_s[r, 0]
-        s1 += k * vd.sigma_s[r, 1]
-        s2 += k * vd.sigma_s[r, 2]
-        t0 += k * vd.sigma_t[r, 0]
-        t1 += k * vd.sigma_t[r, 1]
-        t2 += k * vd.sigma_t[r, 2]
+        ss, st, k = row_coefficients(vd, pd, regs, point, key, x)
+        s0 += ss[0]
+        s1 += ss[1]
+        s2 += ss[2]
+        t0 += st[0]
+        t1 += st[1]
+        t2 += st[2]
         e0 += k * vd.emission[r, 0]
         e1 += k * vd.emission[r, 1]
         e2 += k * vd.emission[r, 2]
-        gw += k * vd.g[r] * (vd.sigma_s[r, 0] + vd.sigma_s[r, 1] + vd.sigma_s[r, 2])
+        gw += vd.g[r] * (ss[0] + ss[1] + ss[2])
     ssum = s0 + s1 + s2
     g = gw / ssum if ssum > 0.0 else 0.0
     return (s0, s1, s2), (t0, t1, t2), (e0, e1, e2), g
@@ -253,9 +277,11 @@ def track_segment(vd, pd, regs, point, stack, i, o, d, length, thr, attenuate, s
 
 
 @kernel
-def _density_points(vd, pd, regs, point, key, xs, out):
+def _extinction_points(vd, pd, regs, point, key, xs, out):
+    """out[k] = the largest channel of σt at xs[k] (the majorant search)."""
     for k in range(xs.shape[0]):
-        out[k] = row_density(vd, pd, regs, point, key, (xs[k, 0], xs[k, 1], xs[k, 2]))
+        _, st, _ = row_coefficients(vd, pd, regs, point, key, (xs[k, 0], xs[k, 1], xs[k, 2]))
+        out[k] = max(st[0], max(st[1], st[2]))
 
 
 @kernel
@@ -295,9 +321,10 @@ def prepare(vd, pd, geom, n_registers: int, point_rows: int):
     k = vd.stride
     density_prog = np.full(k, -1, np.int64)
     for r in range(k - 1):
-        if vd.density_reg[r] >= 0:
+        if vd.density_reg[r] >= 0 or vd.color_reg[r] >= 0:
             density_prog[r] = int(pd.prog_of[r]) if r < len(pd.prog_of) else -1
-    density_reg = np.where(density_prog >= 0, vd.density_reg, -1)
+    hetero_row = density_prog >= 0
+    density_reg = np.where(hetero_row, vd.density_reg, -1)
     obj = np.asarray(geom.object_id if geom.object_id is not None else np.zeros(len(geom.material)), np.int64)
     n_obj = int(obj.max()) + 1 if len(obj) else 1
     coord_map = np.zeros((n_obj, 6, 4))
@@ -308,7 +335,7 @@ def prepare(vd, pd, geom, n_registers: int, point_rows: int):
     gen = geom.corner_attrs.get("generated")
     objco = geom.corner_attrs.get("object_coords")
     mats = np.asarray(geom.material)
-    pairs = {(int(o_), int(m_)) for o_, m_ in zip(obj[:n_static], mats[:n_static]) if density_reg[m_] >= 0}
+    pairs = {(int(o_), int(m_)) for o_, m_ in zip(obj[:n_static], mats[:n_static]) if hetero_row[m_]}
     boxes = {}
     for o_ in {p[0] for p in pairs}:
         tris = np.nonzero(obj[:n_static] == o_)[0]
@@ -319,13 +346,14 @@ def prepare(vd, pd, geom, n_registers: int, point_rows: int):
         if objco is not None:
             coord_map[o_, 3:6] = _fit_affine(pos, np.asarray(objco[tris], np.float64).reshape(-1, 3))
     majorant = np.ones(k)
-    big = np.where(density_reg >= 0, np.inf, 1.0)
+    big = np.where(hetero_row, np.inf, 1.0)
     vd = vd._replace(density_reg=density_reg, density_prog=density_prog, coord_map=coord_map,
-                     majorant=big, hetero=bool((density_reg >= 0).any()))
+                     color_reg=np.where(hetero_row, vd.color_reg, -1), majorant=big,
+                     hetero=bool(hetero_row.any()))
     regs = np.zeros((max(n_registers, 1), 3))
     point = np.zeros((point_rows, 3))
     n = MAJORANT_GRID
-    for r in np.nonzero(density_reg >= 0)[0]:
+    for r in np.nonzero(hetero_row)[0]:
         best = 0.0
         for o_, m_ in pairs:
             if m_ != r:
@@ -334,7 +362,9 @@ def prepare(vd, pd, geom, n_registers: int, point_rows: int):
             axes = [np.linspace(lo[c], hi[c], n) for c in range(3)]
             xs = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
             out = np.zeros(len(xs))
-            _density_points(vd, pd, regs, point, o_ * k + r, np.ascontiguousarray(xs), out)
+            _extinction_points(vd, pd, regs, point, o_ * k + r, np.ascontiguousarray(xs), out)
             best = max(best, float(out.max()))
-        majorant[r] = best * MAJORANT_SAFETY if best > 0.0 else 0.0
+        top = float(vd.sigma_t[r].max())
+        # the row's majorant share is stored relative to its largest constant channel
+        majorant[r] = best * MAJORANT_SAFETY / top if best > 0.0 and top > 0.0 else 0.0
     return vd._replace(majorant=majorant)
