@@ -176,3 +176,31 @@ def test_textured_colour_absorption_and_scatter():
     _box_with_generated(h, a, "fog", 0.5, 1.0, 0, 0.0)
     img = render(scene_from_dict(h, a), threads=2).combined[..., :3]
     _within_4se(img[3:9, 3:9].reshape(-1, 3), np.ones(3))
+
+
+def test_area_light_inside_a_heterogeneous_medium_is_seen_attenuated():
+    """A camera-visible area light facing up in the middle of the gradient slab (z = 0): the
+    camera sees it through z ∈ [0, 0.5], ∫ρ = 0.375, so the image is the clear image ×
+    exp(−0.375·σa) within 4 SE (the light shape's independent ratio-tracking estimate)."""
+    sigma = np.array([1.0, 2.0, 4.0])
+
+    def scene(with_slab):
+        h = base_header(12, 12, 8, world=(0, 0, 0),
+                        camera={"type": "ORTHO", "matrix_world": translation(0, 0, 3.0),
+                                "ortho_scale": 1.0, "clip_start": 0.01, "clip_end": 100.0})
+        a = {}
+        h["materials"].append(dict(FOG_ONLY, volume={"absorption": sigma.tolist(), "density_reg": 3},
+                                   program=_gradient_program(2, 1.0)))
+        if with_slab:
+            _box_with_generated(h, a, "slab", 2.0, 1.0, 0, -0.5)
+        else:
+            add_mesh(h, a, "far", *box_mesh(0.1, 0.1), material=0, matrix=translation(20, 0, 0))
+        flip = [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 0], [0, 0, 0, 1]]  # emits toward +z
+        h["lights"].append({"type": "AREA", "matrix_world": flip, "color": [1, 1, 1], "power": 50.0,
+                            "size": 4.0, "visible_camera": True})
+        return scene_from_dict(h, a)
+
+    clear = render(scene(False), threads=2).combined[..., :3].reshape(-1, 3)
+    seen = render(scene(True), threads=2).combined[..., :3].reshape(-1, 3)
+    assert clear.min() > 0 and np.allclose(clear, clear[0], rtol=1e-6)
+    _within_4se(seen / clear[0], np.exp(-0.375 * sigma))
