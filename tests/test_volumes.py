@@ -15,6 +15,7 @@ from drt.scene import SceneError, scene_from_dict
 from drt.volumes import distance as D
 from drt.volumes.media import STACK_SIZE, build_medium_data, principled_volume, volume_absorption
 from drt.volumes.phase import hg_pdf, hg_sample_rows
+from drt.materials.program_format import POINT_ROWS, empty_program_data
 from drt.volumes.stage import transmit_rows
 from scene_builders import add_mesh, base_header, box_mesh, look_at, translation, uv_sphere
 from stats_util import chi2_pvalue, chi2_test_sphere
@@ -109,7 +110,9 @@ def _segment(sigma_s, sigma_a, thr, length=1.0, n=40000):
     ld = LightSet([], np.zeros(3), None).data
     sd = Sampler("SOBOL", 0, 1).data
     tr, sc, t = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
-    transmit_rows(sd, ld, vd, stack, (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), length, tuple(thr), tr, sc, t)
+    pd = empty_program_data()
+    transmit_rows(sd, ld, vd, pd, np.zeros((1, 3)), np.zeros((POINT_ROWS, 3)), stack, (0.0, 0.0, 0.0),
+                  (0.0, 0.0, 1.0), length, tuple(thr), tr, sc, t)
     return tr, sc, t
 
 

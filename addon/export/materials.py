@@ -148,7 +148,7 @@ class MaterialExporter:
                 lobes = []
             else:
                 lobes, emission = self._shader(src, ctx, 1.0, problems, material, depth=0)
-        medium = volume_medium(self, out, problems) if tree is not None else None
+        medium = volume_medium(self, out, problems, textured=True) if tree is not None else None
         result = {"name": material.name, "lobes": [], "emission": [0.0, 0.0, 0.0]}
         if medium is not None:  # a Volume output: the mesh bounds a medium (drt.volumes)
             result["volume"] = medium
@@ -166,7 +166,8 @@ class MaterialExporter:
             result["emission"] = [float(x) for x in np.broadcast_to(emission, 3)]
         if self._normal is not None and result["lobes"]:
             result["normal_reg"] = self._b.reg_of(self._normal[1])
-        if "emission_reg" in result or "normal_reg" in result or any(
+        if "emission_reg" in result or "normal_reg" in result or "density_reg" in result.get("volume", {}) \
+                or "color_reg" in result.get("volume", {}) or any(
                 "color_reg" in lb or "roughness_reg" in lb for lb in result["lobes"]):
             result["program"] = self._b.to_dict()
         problems += self._b.problems

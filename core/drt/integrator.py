@@ -152,6 +152,10 @@ class Integrator:
         # participating media (drt.volumes): a disabled MediumData costs the kernels one flag test
         if media is None:
             media = build_medium_data([], None)
+        if media.hetero:  # density programs: coordinate maps and majorants (drt.volumes.hetero)
+            from .volumes.hetero import prepare
+
+            media = prepare(media, self.programs, geom, self.n_registers, len(point_rows()))
         if media.enabled and media.camera_stack[0] < 0:
             media = media._replace(camera_stack=camera_stack(media, tracer))
         self.media = media

@@ -60,7 +60,8 @@ from .sampling.warps import cosine_hemisphere, uniform_hemisphere
 from .trace import offset_point
 from .volumes.phase import hg_sample
 from .volumes.stack import stack_copy, stack_cross
-from .volumes.stage import D_VOLUME0, VOLUME_DIMS, pass_factor, volume_segment
+from .volumes.hetero import ratio_tracking, seed_of
+from .volumes.stage import D_VOLUME0, MODE_HETERO, VOLUME_DIMS, pass_factor, volume_segment
 
 D_PIXEL, D_LENS, D_TIME, D_BOUNCE0, DIMS_PER_BOUNCE = 0, 1, 2, 3, 4
 #: ray segments a path may cross volume-only boundaries on without a bounce (Cycles's
@@ -438,7 +439,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             length = t_geom  # a miss runs to infinity through the media (Cycles: also past clip_end)
             (v_acc, v_mode, v_sig_t, v_chp, v_g, scattered, t_s, thr, nee_ok, x, v_wi, v_dist, f_nee,
              v_lpdf, v_ph, v_ldelta) = volume_segment(
-                sd, ld, vd, paths.vstack, i, o, d, length, thr0, paths.terminate[i], direct != DIRECT_BSDF,
+                sd, ld, vd, pd, regs, point, paths.vstack, i, o, d, length, thr0, paths.terminate[i], direct != DIRECT_BSDF,
                 pixel, idx, paths.vseg[i])
             acc = add(acc, clamp(settings, v_acc, deep))
             if scattered:
@@ -456,13 +457,20 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
 
         # --- emitters along the ray: light shapes (transparent), then a sun disk and the world
         # (an SSS exit "ray" is no ray: the walk ended on the surface from inside)
+        # (through a heterogeneous medium every shape before the surface counts, weighted by an
+        # independent transmittance estimate, whatever the tracked path did: drt.volumes.hetero)
+        t_shapes = t_geom if v_mode == MODE_HETERO else t_end
         for k in range(0 if exiting else ld.n_shapes):
             t = shape_intersect(ld, k, o, d)
-            if t < t_end:
+            if t < t_shapes:
                 light, le, lpdf = shape_emission(ld, k, o, d, t, prev_p, prev_hint)
                 if camera and ld.li[light, I_VISIBLE_CAMERA] == 0:
                     continue
-                if in_medium:
+                if v_mode == MODE_HETERO:
+                    tr_k, _ = ratio_tracking(vd, pd, regs, point, paths.vstack, i, o, d, t,
+                                             seed_of(pixel, idx, 1000003 + 64 * paths.vseg[i] + k))
+                    le = mul(le, tr_k)
+                elif in_medium:
                     le = mul(le, pass_factor(v_mode, v_sig_t, v_chp, t))
                 w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
                 acc = add(acc, clamp(settings, scale(mul(thr0, le), w), deep))

@@ -429,6 +429,11 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
                 mat["emission_reg"] = _number(m, "emission_reg", p, integer=True, lo=0)
             if "normal_reg" in m:
                 mat["normal_reg"] = _number(m, "normal_reg", p, integer=True, lo=0)
+        for key in ("density_reg", "color_reg"):
+            if volume is not None and key in volume:
+                prog = mat.get("program")
+                if prog is None or not volume[key] < prog["registers"]:
+                    raise SceneError(f"{p}.volume.{key}", "must be a register of the material's program")
         out.append(mat)
     return out
 

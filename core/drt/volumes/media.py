@@ -39,6 +39,13 @@ MediumData = namedtuple("MediumData", [
     "world_key",      # int: stack key of the world medium, −1: none
     "tri_object",     # (T,) int32 object index of each global triangle ((0,) when disabled)
     "camera_stack",   # (VS,) int64: the stack of rays leaving the camera (−1: empty slot)
+    # heterogeneous media (drt.volumes.hetero; all rows −1 / zero-size when there are none):
+    "hetero",         # bool: some row's density comes from its material's program
+    "density_reg",    # (K,) int64 register of the row's density (x channel), −1: constant 1
+    "color_reg",      # (K,) int64 register of the row's colour (σs = S·c, σa = A·(1 − c)), −1: none
+    "density_prog",   # (K,) int64 the row's material program, −1: a homogeneous row
+    "majorant",       # (K,) f64 bound on the row's σt / its largest constant σt (1: homogeneous)
+    "coord_map",      # (O, 6, 4) f64 per object: shifted world → Generated (rows 0–2), → Object (3–5)
 ])
 
 
@@ -50,7 +57,7 @@ def validate_medium(v, where: str) -> dict:
     """A scene-file ``volume`` dict checked and normalised (raises ValueError naming the field)."""
     if not isinstance(v, dict):
         raise _fail(where, f"must be an object, got {type(v).__name__}")
-    unknown = set(v) - {"scatter", "absorption", "emission", "anisotropy"}
+    unknown = set(v) - {"scatter", "absorption", "emission", "anisotropy", "density_reg", "color_reg"}
     if unknown:
         raise _fail(f"{where}.{sorted(unknown)[0]}", "unknown field")
     out = {}
@@ -67,6 +74,14 @@ def validate_medium(v, where: str) -> dict:
     if isinstance(g, bool) or not isinstance(g, (int, float)) or not -1.0 <= g <= 1.0:
         raise _fail(f"{where}.anisotropy", f"must be a number in [-1, 1], got {g!r}")
     out["anisotropy"] = float(g)
+    for key in ("density_reg", "color_reg"):
+        if key in v:
+            r = v[key]
+            if isinstance(r, bool) or not isinstance(r, int) or r < 0:
+                raise _fail(f"{where}.{key}", f"must be a register index >= 0, got {r!r}")
+            if max(out["emission"]) > 0.0:
+                raise _fail(f"{where}.emission", f"must be 0 in a heterogeneous medium ({key})")
+            out[key] = r
     return out
 
 
@@ -184,11 +199,16 @@ def build_medium_data(materials: list[dict], world_volume: dict | None, tri_mate
     sigma_a = np.zeros((k, 3))
     emission = np.zeros((k, 3))
     g = np.zeros(k)
+    density_reg = np.full(k, -1, np.int64)
+    color_reg = np.full(k, -1, np.int64)
     rows = list(enumerate(mat.get("volume") for mat in materials)) + [(m, world_volume)]
     for i, v in rows:
         if has_any(v):
             sigma_s[i], sigma_a[i], emission[i] = v["scatter"], v["absorption"], v["emission"]
             g[i] = v["anisotropy"]
+            if i < m and materials[i].get("program") is not None:
+                density_reg[i] = v.get("density_reg", -1)
+                color_reg[i] = v.get("color_reg", -1)
     is_medium = np.any((sigma_s + sigma_a + emission) > 0.0, axis=1)
     pass_through = np.array([mat.get("surface", True) is False for mat in materials], dtype=bool)
     enabled = bool(is_medium.any() or pass_through.any())
@@ -203,7 +223,10 @@ def build_medium_data(materials: list[dict], world_volume: dict | None, tri_mate
         world_key=world_key,
         tri_object=np.ascontiguousarray(tri_object if enabled and tri_object is not None
                                         else np.zeros(0), dtype=np.int32),
-        camera_stack=np.ascontiguousarray(camera_stack, dtype=np.int64))
+        camera_stack=np.ascontiguousarray(camera_stack, dtype=np.int64),
+        hetero=bool(enabled and ((density_reg >= 0) | (color_reg >= 0)).any()), density_reg=density_reg,
+        color_reg=color_reg,
+        density_prog=np.full(k, -1, np.int64), majorant=np.ones(k), coord_map=np.zeros((1, 6, 4)))
 
 
 def media_for_scene(materials: list[dict], world_volume: dict | None, geom) -> MediumData:

@@ -30,6 +30,7 @@ from ..kernels.vec3 import load_col3
 from ..lights import light_sample, light_sample_full
 from ..lights.common import AREA, I_KIND, L_COS_HALF, L_NORMAL, L_POS, L_RADIUS, L_SPOT_DIR, SPOT
 from ..sampling.sequences import sample_2d
+from .hetero import ratio_tracking, seed_of, seed_of_point, stack_is_hetero, stack_scatters, track_segment
 from .distance import (channel_probs, equiangular_pdf, equiangular_sample, equiangular_setup, exp_pdf,
                        exp_sample, pick_channel)
 from ..materials.program_format import (POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH, POINT_P,
@@ -46,7 +47,9 @@ from .stack import stack_coefficients, stack_cross
 D_VOLUME0 = 1 << 20
 VOLUME_DIMS = 5
 
-MODE_NONE, MODE_ATTENUATE, MODE_SCATTER = 0, 1, 2
+#: MODE_HETERO: the segment was tracked through a heterogeneous medium (drt.volumes.hetero):
+#: emitters before its end take an independent ratio-tracking estimate, not ``pass_factor``
+MODE_NONE, MODE_ATTENUATE, MODE_SCATTER, MODE_HETERO = 0, 1, 2, 3
 
 _ZERO3 = (0.0, 0.0, 0.0)
 _NO_HINT = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
@@ -173,13 +176,52 @@ def area_interval(ld, i, o, d, t0, t1):
 
 
 @inline_kernel
-def volume_segment(sd, ld, vd, stack, i, o, d, length, thr, terminate, nee, pixel, idx, seg):
+def hetero_segment(sd, ld, vd, pd, regs, point, stack, i, o, d, length, thr, terminate, nee, pixel, idx, seg):
+    """``volume_segment`` through a stack holding a heterogeneous medium: spectral tracking for
+    the indirect vertex, next-event estimation at the real scatter point (drt.volumes.hetero).
+    Same returns as ``volume_segment`` (mode MODE_HETERO; σt and channel probabilities unused)."""
+    base = D_VOLUME0 + VOLUME_DIMS * seg
+    u_sc, u_ch = sample_2d(sd, pixel, idx, base)
+    state = seed_of(pixel, idx, seg * 65599 + int(u_sc * 1.0e9) + int(u_ch * 7.0e8))
+    attenuate = terminate or not stack_scatters(vd, stack, i)
+    acc, scattered, t_s, thr_n, g, state = track_segment(vd, pd, regs, point, stack, i, o, d, length, thr,
+                                                         attenuate, state)
+    nee_ok = False
+    x = o
+    wi = d
+    dist = 0.0
+    f_nee = _ZERO3
+    lpdf = 0.0
+    ph = 0.0
+    l_delta = False
+    if scattered:
+        x = (o[0] + d[0] * t_s, o[1] + d[1] * t_s, o[2] + d[2] * t_s)
+        if nee and ld.n_strategies > 0:
+            u_sel, _ = sample_2d(sd, pixel, idx, base + 1)
+            ul0, ul1 = sample_2d(sd, pixel, idx, base + 2)
+            wi, dist, le, lpdf, l_delta, l_valid = light_sample(ld, x, _ZERO3, _NO_HINT, u_sel, ul0, ul1)
+            if l_valid and lpdf > 0.0:
+                ph = hg_pdf(d[0] * wi[0] + d[1] * wi[1] + d[2] * wi[2], g)
+                k = ph / lpdf
+                f_nee = (thr_n[0] * le[0] * k, thr_n[1] * le[1] * k, thr_n[2] * le[2] * k)
+                nee_ok = f_nee[0] > 0.0 or f_nee[1] > 0.0 or f_nee[2] > 0.0
+    return (acc, MODE_HETERO, _ZERO3, (1.0, 0.0, 0.0), g, scattered, t_s, thr_n,
+            nee_ok, x, wi, dist, f_nee, lpdf, ph, l_delta)
+
+
+@inline_kernel
+def volume_segment(sd, ld, vd, pd, regs, point, stack, i, o, d, length, thr, terminate, nee, pixel, idx, seg):
     """One ray segment o + t·d, t ∈ [0, length), inside the media of stack row i.
 
     Returns (emission collected (3-tuple, already × thr), mode, σt, channel probabilities, g,
     scattered, t_scatter, thr after the segment (× T/P(transmit) or × σs·T/pdf at the scatter
     point), nee_ok, x, wi, dist, f_nee (thr·σs·T/pdf · phase · Le / light pdf, no MIS weight),
-    light pdf, phase pdf, light is delta). ``nee``: next-event estimation wanted."""
+    light pdf, phase pdf, light is delta). ``nee``: next-event estimation wanted. ``pd``,
+    ``regs``, ``point``: material programs, register file and point rows (heterogeneous media
+    evaluate their density there; a stack of homogeneous media never touches them)."""
+    if vd.hetero and stack_is_hetero(vd, stack, i):
+        return hetero_segment(sd, ld, vd, pd, regs, point, stack, i, o, d, length, thr, terminate, nee,
+                              pixel, idx, seg)
     sig_s, sig_t, emis, g = stack_coefficients(vd, stack, i)
     em = segment_emission(sig_t, emis, length)
     acc = (thr[0] * em[0], thr[1] * em[1], thr[2] * em[2])
@@ -327,7 +369,8 @@ def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, tra
     shading point's Is Shadow Ray set) and the ray moves past it; a pass-through boundary
     updates the stack and moves the ray past it; no hit: done. ``md``/``regs``/``point``: the
     thread's material workspace. Returns the number of rows still active (compacted to the
-    front of ``active``)."""
+    front of ``active``). A stack holding a heterogeneous medium attenuates by ratio tracking
+    (drt.volumes.hetero; it writes ``point``'s coordinate rows before the hit fills them)."""
     n_next = 0
     for k in range(count):
         s = active[k]
@@ -335,8 +378,13 @@ def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, tra
         hit = p >= 0 and t[k] < tmax[s]
         seg = t[k] if hit else tmax[s]
         if vd.enabled and stack[s, 0] >= 0:
-            _, sig_t, _, _ = stack_coefficients(vd, stack, s)
-            tr = transmittance(sig_t, seg)
+            if vd.hetero and stack_is_hetero(vd, stack, s):
+                oo = load(o, s)
+                tr, _ = ratio_tracking(vd, pd, regs, point, stack, s, oo, load(d, s), seg,
+                                       seed_of_point(oo, s))
+            else:
+                _, sig_t, _, _ = stack_coefficients(vd, stack, s)
+                tr = transmittance(sig_t, seg)
             for c in range(3):
                 trans[s, c] *= tr[c]
         if not hit:
@@ -384,13 +432,13 @@ def add_transmitted(shadow, count, blocked, trans, radiance):
 
 
 @kernel
-def transmit_rows(sd, ld, vd, stack, o, d, length, thr, out_transmit, out_scatter, out_t):
+def transmit_rows(sd, ld, vd, pd, regs, point, stack, o, d, length, thr, out_transmit, out_scatter, out_t):
     """The indirect decision of ``volume_segment`` for rows k = 0..n−1 (pixel k, sample 0) on
     the same segment, for tests: out_transmit[k] = throughput after the segment if the path
     transmitted (else 0), out_scatter[k] = throughput at the scatter point (else 0), out_t[k] =
     the scatter distance (inf: transmitted)."""
     for k in range(out_transmit.shape[0]):
-        res = volume_segment(sd, ld, vd, stack, 0, o, d, length, thr, False, False, k, 0, 0)
+        res = volume_segment(sd, ld, vd, pd, regs, point, stack, 0, o, d, length, thr, False, False, k, 0, 0)
         scattered, t_s, thr_n = res[5], res[6], res[7]
         for c in range(3):
             out_transmit[k, c] = 0.0 if scattered else thr_n[c]
