@@ -154,10 +154,15 @@ class MaterialExporter:
             result["volume"] = medium
             if src is None:
                 result["surface"] = False  # no Surface shader: rays pass its faces (Cycles)
+        index_of = {}  # id of an exported lobe dict -> its index in result["lobes"]
         for lb in lobes:
             entry = self._lobe(lb)
             if entry is not None:
+                index_of[id(lb)] = len(result["lobes"])
                 result["lobes"].append(entry)
+        for lb, entry in zip([lb for lb in lobes if id(lb) in index_of], result["lobes"]):
+            if "layer" in lb and id(lb["layer"]) in index_of:  # else the layer above was black
+                entry["layer"] = index_of[id(lb["layer"])]
         emission = constant(emission)
         if isinstance(emission, Value):
             result["emission_reg"] = self._b.reg_of(emission)
@@ -197,7 +202,7 @@ class MaterialExporter:
                 out["roughness"] = min(max(float(np.ravel(r)[0]), 0.0), 1.0)
         if "ior" in lb:
             out["ior"] = lb["ior"]
-        for key in ("radius", "method", "anisotropy"):  # SUBSURFACE lobes
+        for key in ("radius", "method", "anisotropy", "tint", "multiscatter"):  # SSS, specular
             if key in lb:
                 out[key] = lb[key]
         if "weight" in lb:
@@ -416,8 +421,13 @@ class MaterialExporter:
                 problems.append(f"'{node.name}' linked {key} ignored")
         sss = min(max(self._const_value(node, "subsurface", problems, 0.0, ctx), 0.0), 1.0)
 
+        # Cycles's "Apply IOR adjustment": Specular IOR Level rescales F0, then back to an IOR
         f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
-        f_avg = min(2.0 * spec * (f0 + (1.0 - f0) / 21.0), 1.0) if ior > 1.0 else 0.0
+        eta = ior
+        if spec != 0.5:
+            f0s = min(max(f0 * 2.0 * spec, 0.0), 0.99)
+            eta = (1.0 + np.sqrt(f0s)) / (1.0 - np.sqrt(f0s))
+        multiscatter = getattr(node, "distribution", "MULTI_GGX") == "MULTI_GGX"
         lobes = []
         wa = w * alpha
         if maybe_positive(metallic):
@@ -428,18 +438,24 @@ class MaterialExporter:
                           "roughness": rough, "ior": ior})
         opaque = wa * dielectric * (1 - trans)
         if maybe_positive(opaque):
+            # The specular layer (GGX × dielectric Fresnel) over the diffuse/subsurface base,
+            # which the core scales per hit by 1 − the layer's albedo E(wo) ("layer": the index
+            # of the specular lobe in this list; docs/materials.md)
+            layer = {}
+            if eta != 1.0:
+                top = {"type": "DIELECTRIC_SPECULAR", "color": opaque * np.ones(3),
+                       "roughness": rough, "ior": float(eta),
+                       "tint": [float(x) for x in np.broadcast_to(tint, 3)],
+                       "multiscatter": multiscatter}
+                layer = {"layer": top}  # the lobe dict itself: indices shift when lists merge
+                lobes.append(top)
             if sss < 1.0:
-                lobes.append({"type": "DIFFUSE", "color": opaque * (1 - f_avg) * (1 - sss) * base})
+                lobes.append({"type": "DIFFUSE", "color": opaque * (1 - sss) * base, **layer})
             if sss > 1e-5:  # Cycles's CLOSURE_WEIGHT_CUTOFF
-                k = opaque * (1 - f_avg) * sss
+                k = opaque * sss
                 clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
                 method = self._sss_method(node, "subsurface_method", problems)
-                # Cycles's Random Walk enters through the specular layer's IOR, which Specular IOR
-                # Level rescales (F0 × 2·level, then back to an IOR): level 0 gives IOR 1
-                eta = ior
-                if spec != 0.5:
-                    f0s = min(f0 * 2.0 * spec, 1.0 - 1e-6)
-                    eta = (1.0 + np.sqrt(f0s)) / (1.0 - np.sqrt(f0s))
+                # Cycles's Random Walk enters through the specular layer's IOR (eta above)
                 ior_sss = self._const_value(node, "Subsurface IOR", problems, 1.4, ctx) \
                     if method == "RANDOM_WALK_SKIN" else eta
                 r_entry = rough if not isinstance(rough, Value) else rough
@@ -447,9 +463,8 @@ class MaterialExporter:
                               "radius": self._sss_radius(node, "Subsurface Radius", "Subsurface Scale",
                                                          problems, ctx),
                               "method": method, "ior": float(ior_sss), "roughness": r_entry,
-                              "anisotropy": self._const_value(node, "Subsurface Anisotropy", problems, 0.0, ctx)})
-            if f_avg > 0:
-                lobes.append({"type": "GLOSSY", "color": opaque * f_avg * tint, "roughness": rough})
+                              "anisotropy": self._const_value(node, "Subsurface Anisotropy", problems, 0.0, ctx),
+                              **layer})
         if maybe_positive(1 - alpha):  # transparency: straight through (a textured alpha: cut-outs)
             lobes.append({"type": "GLASS", "color": w * (1 - alpha), "roughness": 0.0, "ior": 1.0})
         return lobes, wa * em_col * em_strength

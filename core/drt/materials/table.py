@@ -49,6 +49,8 @@ from ..kernels import inline_kernel, kernel
 from ..kernels.vec3 import load, store
 from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample
 from .diffuse import INV_PI, diffuse_eval, diffuse_sample
+from .dielectric_specular import (average_albedo, dielectric_spec_delta_weight, dielectric_spec_eval,
+                                  layer_weight)
 from .subsurface_lobe import BSSRDF_MIN_RADIUS, SSS_METHODS, effective_radius, sss_entry_sample
 from .ggx import (
     ALPHA_SQ_SINGULAR,
@@ -65,8 +67,9 @@ BSDF_DIFFUSE = 1
 BSDF_GLOSSY = 2
 BSDF_GLASS = 3
 BSDF_SUBSURFACE = 4  # random-walk SSS entry (drt.subsurface); never evaluated, only sampled
+BSDF_DIELECTRIC_SPECULAR = 5  # GGX × dielectric Fresnel, the Principled specular layer
 BSDF_TYPES = {"DIFFUSE": BSDF_DIFFUSE, "GLOSSY": BSDF_GLOSSY, "GLASS": BSDF_GLASS,
-              "SUBSURFACE": BSDF_SUBSURFACE}
+              "SUBSURFACE": BSDF_SUBSURFACE, "DIELECTRIC_SPECULAR": BSDF_DIELECTRIC_SPECULAR}
 #: name of the white Lambert material appended to tables with SSS: shades SSS exit points
 SSS_EXIT_MATERIAL = "__drt_sss_exit__"
 #: columns of lobe_sss (M, L, 8)
@@ -117,11 +120,16 @@ _ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
 #:   summary (M, 4) f64: (kd, kg, alpha, kt) as ``MaterialTable.lobe_summary`` gives;
 #:   lobe_sss (M, L, 8) f64: SUBSURFACE lobes' (effective radius r, g, b (metres, after
 #:   Cycles's bssrdf_setup_radius), anisotropy, ior, method code, weight, entry GGX alpha);
-#:   sss_exit (1,) int64: the white Lambert row shading SSS exits (−1: no SSS in the scene).
+#:   sss_exit (1,) int64: the white Lambert row shading SSS exits (−1: no SSS in the scene);
+#:   lobe_fresnel (M, L, 4) f64: DIELECTRIC_SPECULAR lobes' (f0·tint r, g, b, multiscatter 0/1)
+#:   (drt.materials.dielectric_specular); lobe_layer (M, L) int64: slot of the
+#:   DIELECTRIC_SPECULAR lobe this lobe lies under (its colour is scaled per hit by that
+#:   layer's 1 − albedo(wo)), −1: none; has_layers (M,) bool: some lobe has lobe_layer ≥ 0.
 MaterialData = namedtuple("MaterialData", [
     "lobe_type", "lobe_color", "lobe_alpha", "lobe_ior", "lobe_delta", "lobe_select", "lobe_cdf",
     "lobe_count", "emission", "has_emission", "albedo", "delta_only", "pure_diffuse",
-    "transmission_or_delta", "has_diffuse", "summary", "lobe_sss", "sss_exit"])
+    "transmission_or_delta", "has_diffuse", "summary", "lobe_sss", "sss_exit",
+    "lobe_fresnel", "lobe_layer", "has_layers"])
 
 
 #: ``ns_local`` of a surface without a bump/normal map: the shading frame's own z
@@ -176,6 +184,14 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
         t = md.lobe_type[m, s]
         if t == BSDF_NONE or md.lobe_delta[m, s]:
             continue  # a delta lobe has no density to evaluate
+        if t == BSDF_DIELECTRIC_SPECULAR:
+            fc, p = dielectric_spec_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s],
+                                         lobe_f0(md, m, s), md.lobe_fresnel[m, s, 3] > 0.0)
+            f0 += md.lobe_color[m, s, 0] * fc[0]
+            f1 += md.lobe_color[m, s, 1] * fc[1]
+            f2 += md.lobe_color[m, s, 2] * fc[2]
+            pdf += md.lobe_select[m, s] * p
+            continue
         if t == BSDF_DIFFUSE:
             v, p = diffuse_eval(wo, wi)
             v *= g_diffuse
@@ -185,11 +201,30 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
             v, p = glass_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
         else:
             continue
+        if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
+            v *= under_weight(md, m, s, wo)
         f0 += md.lobe_color[m, s, 0] * v
         f1 += md.lobe_color[m, s, 1] * v
         f2 += md.lobe_color[m, s, 2] * v
         pdf += md.lobe_select[m, s] * p
     return (f0, f1, f2), pdf
+
+
+@inline_kernel
+def lobe_f0(md, m, s):
+    """f0·tint of a DIELECTRIC_SPECULAR slot as a 3-tuple."""
+    return (md.lobe_fresnel[m, s, 0], md.lobe_fresnel[m, s, 1], md.lobe_fresnel[m, s, 2])
+
+
+@inline_kernel
+def under_weight(md, m, s, wo):
+    """Scale of slot s, which lies under the DIELECTRIC_SPECULAR slot md.lobe_layer[m, s], for
+    this wo: that layer's 1 − albedo(wo) (Cycles's closure_layering_weight)."""
+    top = md.lobe_layer[m, s]
+    if top < 0:
+        return 1.0
+    return layer_weight(md.lobe_alpha[m, top], md.lobe_ior[m, top], lobe_f0(md, m, top),
+                        md.lobe_fresnel[m, top, 3] > 0.0, wo[2])
 
 
 @inline_kernel
@@ -237,7 +272,7 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
     if t == BSDF_DIFFUSE:
         wi = diffuse_sample(wo, u0, u1)
         kind = LOBE_DIFFUSE
-    elif t == BSDF_GLOSSY:
+    elif t == BSDF_GLOSSY or t == BSDF_DIELECTRIC_SPECULAR:
         wi = glossy_sample(wo, alpha, u0, u1)
         kind = LOBE_GLOSSY
     elif t == BSDF_GLASS:
@@ -250,8 +285,9 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
                                   md.lobe_sss[m, slot, SSS_IOR], wo, u_rest, u0, u1)
         if not ok or p_sel <= 0.0:
             return wi, zero, 0.0, LOBE_NONE, False, False
-        weight = (md.lobe_color[m, slot, 0] / p_sel, md.lobe_color[m, slot, 1] / p_sel,
-                  md.lobe_color[m, slot, 2] / p_sel)
+        k = under_weight(md, m, slot, wo) / p_sel if md.has_layers[m] else 1.0 / p_sel
+        weight = (md.lobe_color[m, slot, 0] * k, md.lobe_color[m, slot, 1] * k,
+                  md.lobe_color[m, slot, 2] * k)
         return wi, weight, 1.0, LOBE_SUBSURFACE, False, True
     else:
         return zero, zero, 0.0, LOBE_NONE, False, False
@@ -267,6 +303,10 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
         if t == BSDF_GLASS:
             fr = fresnel(wo[2], 1.0 / ior if wo[2] < 0.0 else ior)
             pdf *= (1.0 - fr) if refracted else fr
+        elif t == BSDF_DIELECTRIC_SPECULAR:  # a smooth specular layer: F(cos θo) × colour
+            fc = dielectric_spec_delta_weight(wo[2], ior, lobe_f0(md, m, slot),
+                                              md.lobe_fresnel[m, slot, 3] > 0.0)
+            weight = (weight[0] * fc[0], weight[1] * fc[1], weight[2] * fc[2])
         return wi, weight, pdf, kind, True, True
 
     if md.pure_diffuse[m] and ns_local[2] >= 1.0:
@@ -354,10 +394,28 @@ def _subsurface_lobe(lobe: dict, color: np.ndarray, where: str):
     return row, color, split
 
 
+def _dielectric_specular_lobe(lobe: dict, where: str) -> np.ndarray:
+    """A DIELECTRIC_SPECULAR lobe's (f0·tint r, g, b, multiscatter, eta): ``ior`` (> 0, the IOR
+    after Specular IOR Level), ``tint`` (RGB ≥ 0, default white), ``multiscatter`` (bool,
+    default true). f0 = ((ior − 1)/(ior + 1))², f0·tint clamped to [0, 1] as Cycles."""
+    if "ior" not in lobe:
+        raise _fail(where, "ior is missing")
+    eta = _number(lobe["ior"], where, "ior")
+    if eta <= 0.0:
+        raise _fail(where, f"ior must be > 0, got {eta!r}")
+    tint = _rgb(lobe.get("tint", [1.0, 1.0, 1.0]), where, "tint")
+    ms = lobe.get("multiscatter", True)
+    if not isinstance(ms, bool):
+        raise _fail(where, f"multiscatter must be true or false, got {ms!r}")
+    f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+    return np.concatenate([np.clip(f0 * tint, 0.0, 1.0), [1.0 if ms else 0.0, eta]])
+
+
 class MaterialTable:
     """All materials of a scene; see the module docstring for the arrays."""
 
-    def __init__(self, names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission, lobe_sss=None):
+    def __init__(self, names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission, lobe_sss=None,
+                 lobe_fresnel=None, lobe_layer=None):
         self.names = list(names)
         self.lobe_type = np.asarray(lobe_type, dtype=np.int8)
         self.lobe_color = np.asarray(lobe_color, dtype=np.float64)
@@ -372,7 +430,21 @@ class MaterialTable:
             | ((self.lobe_type == BSDF_GLASS) & (np.abs(self.lobe_ior - 1.0) < IOR_ONE_EPS)))
         sss = used & (self.lobe_type == BSDF_SUBSURFACE)
         self.lobe_sss = np.zeros((m, n_slots, 8)) if lobe_sss is None else np.asarray(lobe_sss, np.float64)
-        w = np.where(used, self.lobe_color.mean(axis=2), 0.0)
+        self.lobe_fresnel = np.zeros((m, n_slots, 4)) if lobe_fresnel is None \
+            else np.asarray(lobe_fresnel, np.float64)
+        self.lobe_layer = np.full((m, n_slots), -1, np.int64) if lobe_layer is None \
+            else np.asarray(lobe_layer, np.int64)
+        # the specular layer's cosine-averaged albedo per unit colour, and the share its lower
+        # layers keep on average: lobe selection and the albedo pass use these averages (the
+        # per-hit values depend on wo; any selection probability keeps the estimator unbiased)
+        eff = np.ones((m, n_slots, 3))
+        for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_DIELECTRIC_SPECULAR))):
+            eff[i, j] = average_albedo(self.lobe_alpha[i, j], self.lobe_ior[i, j],
+                                       self.lobe_fresnel[i, j, :3], self.lobe_fresnel[i, j, 3] > 0)
+        for i, j in zip(*np.nonzero(used & (self.lobe_layer >= 0))):
+            eff[i, j] = max(1.0 - eff[i, self.lobe_layer[i, j]].max(), 0.0)
+        self.lobe_effective = self.lobe_color * eff if n_slots else self.lobe_color
+        w = np.where(used, self.lobe_effective.mean(axis=2), 0.0)
         # Cycles's bssrdf_setup: a BSSRDF's sample weight is average(weight) × its channel count
         w = np.where(sss, w * (self.lobe_sss[..., SSS_RADIUS:SSS_RADIUS + 3] > 0).sum(axis=-1), w)
         total = w.sum(axis=1, keepdims=True)
@@ -383,7 +455,7 @@ class MaterialTable:
         rows = np.nonzero(self.lobe_count > 0)[0]
         cdf[rows, last[rows]] = 1.0  # rounding must not leave a gap below u_lobe = 1
         self.has_emission = np.any(self.emission > 0.0, axis=1)
-        albedo = np.where(used[..., None], self.lobe_color, 0.0).sum(axis=1) if n_slots \
+        albedo = np.where(used[..., None], self.lobe_effective, 0.0).sum(axis=1) if n_slots \
             else np.zeros((m, 3))
         pure_diffuse = (self.lobe_count == 1) & (self.lobe_type[:, 0] == BSDF_DIFFUSE) \
             if n_slots else np.zeros(m, dtype=bool)
@@ -413,6 +485,9 @@ class MaterialTable:
             lobe_sss=c(self.lobe_sss.reshape(m, n_slots, 8), np.float64),
             sss_exit=np.array([self.names.index(SSS_EXIT_MATERIAL) if SSS_EXIT_MATERIAL in self.names
                                else -1], np.int64),
+            lobe_fresnel=c(self.lobe_fresnel.reshape(m, n_slots, 4), np.float64),
+            lobe_layer=c(np.where(used, self.lobe_layer, -1).reshape(m, n_slots), np.int64),
+            has_layers=c(np.any(used & (self.lobe_layer >= 0), axis=1), np.bool_),
         )
         self.has_subsurface = bool(sss.any())
 
@@ -420,10 +495,11 @@ class MaterialTable:
         """Per material, what light selection needs to guess where the BSDF is large (see
         `lobe_summary`): weights of the non-delta diffuse, glossy and glass lobes and the
         weight-averaged alpha of the glossy ones."""
-        weight = np.where(used & ~self.lobe_delta, self.lobe_color.mean(axis=2), 0.0) \
+        weight = np.where(used & ~self.lobe_delta, self.lobe_effective.mean(axis=2), 0.0) \
             if self.lobe_type.shape[1] else np.zeros(self.lobe_type.shape)
         kd = np.where(self.lobe_type == BSDF_DIFFUSE, weight, 0.0).sum(axis=1)
-        wg = np.where(self.lobe_type == BSDF_GLOSSY, weight, 0.0)
+        wg = np.where((self.lobe_type == BSDF_GLOSSY) | (self.lobe_type == BSDF_DIELECTRIC_SPECULAR),
+                      weight, 0.0)
         kg = wg.sum(axis=1)
         alpha = np.divide((wg * self.lobe_alpha).sum(axis=1), kg, out=np.ones_like(kg), where=kg > 0)
         kt = np.where(self.lobe_type == BSDF_GLASS, weight, 0.0).sum(axis=1)
@@ -455,7 +531,7 @@ class MaterialTable:
             if not isinstance(lobes, (list, tuple)):
                 raise _fail(where, f"lobes must be a list, got {type(lobes).__name__}")
             emissions.append(_rgb(mat.get("emission", [0.0, 0.0, 0.0]), where, "emission"))
-            rows, extra = [], []
+            rows, extra, slot_of = [], [], {}
             for j, lobe in enumerate(lobes):
                 lw = f"{where} lobe {j}"
                 if not isinstance(lobe, dict):
@@ -467,13 +543,25 @@ class MaterialTable:
                     raise _fail(lw, "color is missing")
                 color = _rgb(lobe["color"], lw, "color")
                 alpha, ior = 0.0, 1.0
-                if kind in ("GLOSSY", "GLASS"):
+                fr = np.zeros(4)
+                if kind in ("GLOSSY", "GLASS", "DIELECTRIC_SPECULAR"):
                     if "roughness" not in lobe:
                         raise _fail(lw, "roughness is missing")
                     r = _number(lobe["roughness"], lw, "roughness")
                     if not 0.0 <= r <= 1.0:
                         raise _fail(lw, f"roughness must be in [0, 1], got {r!r}")
                     alpha = r * r
+                if kind == "DIELECTRIC_SPECULAR":
+                    fr = _dielectric_specular_lobe(lobe, lw)
+                    ior = fr[4]
+                    fr = fr[:4]
+                under = -1
+                if "layer" in lobe:
+                    under = lobe["layer"]
+                    if isinstance(under, bool) or not isinstance(under, int) or not 0 <= under < len(lobes) \
+                            or not isinstance(lobes[under], dict) \
+                            or lobes[under].get("type") != "DIELECTRIC_SPECULAR":
+                        raise _fail(lw, f"layer must be the index of a DIELECTRIC_SPECULAR lobe, got {under!r}")
                 if kind == "GLASS":
                     if "ior" not in lobe:
                         raise _fail(lw, "ior is missing")
@@ -484,20 +572,23 @@ class MaterialTable:
                 if kind == "SUBSURFACE":
                     sss, color, split = _subsurface_lobe(lobe, color, lw)
                     if split is not None and split.mean() >= CLOSURE_WEIGHT_CUTOFF:
-                        extra.append((BSDF_DIFFUSE, split, 0.0, 1.0, np.zeros(8)))
+                        extra.append((BSDF_DIFFUSE, split, 0.0, 1.0, np.zeros(8), fr, under))
                     if not np.any(sss[SSS_RADIUS:SSS_RADIUS + 3] > 0):
                         continue  # every channel became Lambert
                 if color.mean() >= CLOSURE_WEIGHT_CUTOFF:
-                    rows.append((BSDF_TYPES[kind], color, alpha, ior, sss))
+                    slot_of[j] = len(rows)
+                    rows.append((BSDF_TYPES[kind], color, alpha, ior, sss, fr, under))
             # Lambert lobes split off SSS channels go last: program registers address the
             # slots of the file's own lobes
             rows += extra
+            # "layer" names a lobe of the file; the table needs its slot (−1 if it was dropped)
+            rows = [r[:6] + (slot_of.get(r[6], -1) if r[6] >= 0 else -1,) for r in rows]
             names.append(name)
             parsed.append(rows)
         if any(r[0] == BSDF_SUBSURFACE for rows in parsed for r in rows):
             # SSS exit points are shaded by a white Lambert (Cycles's subsurface_shader_data_setup)
             names.append(SSS_EXIT_MATERIAL)
-            parsed.append([(BSDF_DIFFUSE, np.ones(3), 0.0, 1.0, np.zeros(8))])
+            parsed.append([(BSDF_DIFFUSE, np.ones(3), 0.0, 1.0, np.zeros(8), np.zeros(4), -1)])
             emissions.append(np.zeros(3))
         m = len(parsed)
         n_slots = max((len(r) for r in parsed), default=0)
@@ -506,12 +597,15 @@ class MaterialTable:
         lobe_alpha = np.zeros((m, n_slots))
         lobe_ior = np.ones((m, n_slots))
         lobe_sss = np.zeros((m, n_slots, 8))
+        lobe_fresnel = np.zeros((m, n_slots, 4))
+        lobe_layer = np.full((m, n_slots), -1, np.int64)
         for i, rows in enumerate(parsed):
-            for j, (t, c, a, eta, ss) in enumerate(rows):
+            for j, (t, c, a, eta, ss, fr, under) in enumerate(rows):
                 lobe_type[i, j], lobe_color[i, j], lobe_alpha[i, j], lobe_ior[i, j] = t, c, a, eta
-                lobe_sss[i, j] = ss
+                lobe_sss[i, j], lobe_fresnel[i, j], lobe_layer[i, j] = ss, fr, under
         emission = np.array(emissions).reshape(m, 3)
-        table = cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission, lobe_sss)
+        table = cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission, lobe_sss,
+                    lobe_fresnel, lobe_layer)
         table.program_source = None
         table.images = list(images)  # a world program may read them without any material program
         if any(isinstance(mat, dict) and mat.get("program") for mat in materials):
