@@ -163,13 +163,15 @@ def test_principled_mapping(fresh):
     C.quad("Q", (0, 0, 0), 1.0, mat)
     m = _material(export_current(), "P")
     kinds = [lb["type"] for lb in m["lobes"]]
-    assert kinds == ["GLOSSY", "DIFFUSE", "GLOSSY", "GLASS"]
-    metal, diffuse, spec, clear = m["lobes"]
+    assert kinds == ["GLOSSY", "DIELECTRIC_SPECULAR", "DIFFUSE", "GLASS"]
+    metal, spec, diffuse, clear = m["lobes"]
     np.testing.assert_allclose(metal["color"], 0.8 * 0.25 * np.array([0.5, 0.2, 0.1]), rtol=1e-5)
-    f0 = (0.5 / 2.5) ** 2
-    f = f0 + (1 - f0) / 21
-    np.testing.assert_allclose(diffuse["color"], 0.8 * 0.75 * (1 - f) * np.array([0.5, 0.2, 0.1]), rtol=1e-5)
-    np.testing.assert_allclose(spec["color"], [0.8 * 0.75 * f] * 3, rtol=1e-5)
+    # Principled v2: the specular layer (weight 1 of the dielectric share) over the diffuse base,
+    # which the core scales per hit by 1 − the layer's albedo ("layer" names the specular lobe)
+    np.testing.assert_allclose(spec["color"], [0.8 * 0.75] * 3, rtol=1e-5)
+    assert spec["ior"] == pytest.approx(1.5) and spec["multiscatter"] and spec["tint"] == [1, 1, 1]
+    np.testing.assert_allclose(diffuse["color"], 0.8 * 0.75 * np.array([0.5, 0.2, 0.1]), rtol=1e-5)
+    assert diffuse["layer"] == 1
     assert clear["ior"] == 1.0 and clear["color"] == pytest.approx([0.2] * 3)
 
 
