@@ -436,7 +436,8 @@ def test_constants_fold_to_todays_lobes(fresh):
     m = _material_dict(res, "Const")
     assert "program" not in m and "images" not in res.header
     assert not any(k.endswith(("generated", "object_coords")) for k in res.arrays)
-    assert m["lobes"][0]["color"][2] > m["lobes"][0]["color"][0] > 0
+    diffuse = next(lb for lb in m["lobes"] if lb["type"] == "DIFFUSE")
+    assert diffuse["color"][2] > diffuse["color"][0] > 0
 
 
 def test_textured_principled_compiles_to_register_lobes(fresh):
@@ -452,12 +453,13 @@ def test_textured_principled_compiles_to_register_lobes(fresh):
     res = _export()
     m = _material_dict(res, "Tex")
     ops = _ops(m)
-    # one checker (shared by both outputs) fed by Generated; the lobe weights multiply it by
-    # the folded constant (1 − F) and F
+    # one checker (shared by both outputs) fed by Generated: the colour of the diffuse lobe
+    # under the (textured-roughness) specular layer, its roughness
     assert ops.count(OP_CHECKER) == 1 and ops.count(OP_GENERATED) == 1
     assert set(ops) <= {OP_CHECKER, OP_GENERATED, OP_VMATH}
     kinds = [(lb["type"], "color_reg" in lb, "roughness_reg" in lb) for lb in m["lobes"]]
-    assert kinds == [("DIFFUSE", True, False), ("GLOSSY", False, True)]
+    assert kinds == [("DIELECTRIC_SPECULAR", False, True), ("DIFFUSE", True, False)]
+    assert m["lobes"][1]["layer"] == 0
     assert "mesh0.generated" in res.arrays and "mesh0.object_coords" not in res.arrays
     assert res.arrays["mesh0.generated"].shape == (2, 3, 3)
     assert not res.warnings
