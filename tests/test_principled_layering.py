@@ -136,8 +136,9 @@ def test_validation_and_no_layer_tables():
 @pytest.mark.slow
 def test_principled_spheres_under_a_sun_match_cycles(tmp_path):
     """Principled spheres (no bounces, a delta sun: direct light is exact at one sample in both
-    engines): base colours, roughness 0.1–0.9, specular IOR levels, IORs, tints, GGX and
-    Multiscatter GGX. Each tile's mean within 1 % of Cycles's."""
+    engines): base colours, roughness 0.05–1, specular IOR levels, IORs, tints, GGX and
+    Multiscatter GGX, a textured base colour and roughness, a Mix with a Diffuse. Each tile's
+    channel means within 1 % of Cycles's (measured ≤ 0.11 %)."""
     pytest.importorskip("bpy")
     from node_parity import node, render_tiles, tile
 
@@ -149,6 +150,18 @@ def test_principled_spheres_under_a_sun_match_cycles(tmp_path):
             return n.outputs[0]
         return case
 
+    def textured(nt, uv):  # a program-driven base colour and roughness (per-hit lobe data)
+        ck = node(nt, "ShaderNodeTexChecker", {"Vector": uv, "Scale": 3.0, "Color1": (0.9, 0.3, 0.1, 1),
+                                               "Color2": (0.1, 0.3, 0.8, 1)})
+        rough = node(nt, "ShaderNodeMapRange", {0: ck.outputs["Fac"], 3: 0.2, 4: 0.7})
+        return node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": ck.outputs["Color"],
+                                                     "Roughness": rough.outputs[0]}).outputs[0]
+
+    def mixed(nt, uv):  # the layered pair inside a Mix shader with a Diffuse
+        p = principled((0.8, 0.8, 0.1, 1), 0.35)(nt, uv)
+        d = node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.2, 0.6, 0.9, 1)})
+        return node(nt, "ShaderNodeMixShader", {0: 0.4, 1: p, 2: d.outputs[0]}).outputs[0]
+
     cases = [principled((0.8, 0.1, 0.1, 1), 0.1), principled((0.1, 0.5, 0.8, 1), 0.3),
              principled((0.9, 0.9, 0.9, 1), 0.5), principled((0.05, 0.05, 0.05, 1), 0.7),
              principled((0.3, 0.7, 0.2, 1), 0.9), principled((0.8, 0.6, 0.2, 1), 0.4, level=1.0),
@@ -157,15 +170,73 @@ def test_principled_spheres_under_a_sun_match_cycles(tmp_path):
                                                                       tint=(1.0, 0.5, 0.2, 1)),
              principled((0.1, 0.1, 0.1, 1), 0.9, dist="GGX"), principled((0.8, 0.4, 0.1, 1), 0.2, dist="GGX"),
              principled((0.02, 0.02, 0.02, 1), 0.25), principled((0.4, 0.4, 0.4, 1), 0.05),
-             principled((0.9, 0.5, 0.3, 1), 1.0), principled((0.3, 0.3, 0.3, 1), 0.5, level=0.0)]
-    cycles, drt, res = render_tiles(cases, 4, tmp_path, shader=True, sun=(3.0, (0.6, 0.2, 0.3)),
+             principled((0.9, 0.5, 0.3, 1), 1.0), principled((0.3, 0.3, 0.3, 1), 0.5, level=0.0),
+             textured, mixed, principled((0.5, 0.8, 0.9, 1), 0.8, ior=1.33, level=0.8, dist="GGX"),
+             principled((0.2, 0.2, 0.6, 1), 0.85, tint=(0.3, 1.0, 0.6, 1))]
+    cycles, drt, res = render_tiles(cases, 5, tmp_path, shader=True, sun=(3.0, (0.6, 0.2, 0.3)),
                                     shape="sphere")
     assert not res.warnings, res.warnings
     errs = []
     for k in range(len(cases)):
-        a, b = tile(cycles, k, 4), tile(drt, k, 4)
+        a, b = tile(cycles, k, 5), tile(drt, k, 5)
         assert a.mean() > 0.01
         errs.append(b.reshape(-1, 3).mean(0) / a.reshape(-1, 3).mean(0) - 1)
     errs = np.array(errs)
     print("per-tile channel mean errors (%):\n", np.round(100 * errs, 2))
     assert np.abs(errs).max() < 0.01, np.round(100 * errs, 2)
+
+
+@pytest.mark.slow
+def test_principled_spheres_in_a_white_world_match_cycles(tmp_path):
+    """Indirect light: Principled spheres (and the ground between them) in a uniform white world
+    with bounces, equal samples (256): per-tile channel means within 2 % of Cycles's. Exercises
+    BSDF sampling, MIS with the world and the per-hit layering at every bounce. Measured (2048
+    spp, converged): −0.1 … −1.3 %, always darker; the same scene with the plain Glossy BSDF
+    (a lobe this work does not touch) is −0.2 … −1.7 % darker, so the residual is not the
+    layering (likely Cycles's specular-normal correction at smooth silhouettes, which DRT applies
+    only to normal-mapped hits). Before Principled v2 (constant F_avg split) the same test gave
+    up to −3.1 %."""
+    pytest.importorskip("bpy")
+    from drt.render import render
+    from drt.scene import scene_from_dict
+    from addon.export import export_depsgraph
+    from node_parity import TILE, _add_shape, _material, node, setup_scene, tile
+    import _common as C
+
+    n = 3
+    SPP = int(__import__("os").environ.get("DRT_TEST_SPP", 256))
+    cases = [(0.8, 0.1, 0.1, 0.2), (0.1, 0.5, 0.8, 0.5), (0.9, 0.9, 0.9, 0.9), (0.05, 0.05, 0.05, 0.3),
+             (0.3, 0.7, 0.2, 0.05), (0.8, 0.6, 0.2, 0.7), (0.5, 0.5, 0.5, 0.4), (0.9, 0.4, 0.6, 1.0),
+             (0.2, 0.2, 0.2, 0.15)]
+    sc = setup_scene(n)
+    size = 2.0 / n
+    for k, (r, g, b, rough) in enumerate(cases):
+        row, col = divmod(k, n)
+        _add_shape("sphere", size, (-1 + (col + 0.5) * size, 1 - (row + 0.5) * size, 0))
+
+        def case(nt, uv, base=(r, g, b, 1), rough=rough):
+            return node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": base, "Roughness": rough}).outputs[0]
+        bpy_obj = __import__("bpy").context.object
+        bpy_obj.data.materials.append(_material(f"w{k}", case, True))
+    C.reference_settings(sc, samples=SPP)
+    sc.render.filter_size = 0.01
+    sc.render.resolution_x = sc.render.resolution_y = n * TILE
+    sc.cycles.use_light_tree = False
+    sc.world.node_tree.nodes["Background"].inputs[1].default_value = 1.0
+    sc.drt.samples = SPP
+    sc.drt.max_bounces = 12
+    path = str(tmp_path / "world.exr")
+    sc.render.filepath = path
+    import bpy
+
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path)
+    w = n * TILE
+    cycles = np.array(img.pixels[:], dtype=np.float64).reshape(w, w, 4)[::-1, :, :3]
+    res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
+    drt = np.asarray(render(scene_from_dict(res.header, res.arrays), threads=2).combined, np.float64)[..., :3]
+    assert not res.warnings, res.warnings
+    errs = np.array([tile(drt, k, n).reshape(-1, 3).mean(0) / tile(cycles, k, n).reshape(-1, 3).mean(0) - 1
+                     for k in range(len(cases))])
+    print("per-tile channel mean errors (%):\n", np.round(100 * errs, 2))
+    assert np.abs(errs).max() < 0.02, np.round(100 * errs, 2)

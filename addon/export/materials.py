@@ -17,16 +17,18 @@ Mapping (see docs/addon.md, "Materials"):
 - Principled BSDF, with alpha a, metallic m, transmission t, specular level s:
     a·m          · GLOSSY(base color, roughness)                     metal
     a·(1−m)·t    · GLASS(base color, roughness, ior)                 glass
-    a·(1−m)(1−t) · [DIFFUSE(base·(1−F)) + GLOSSY(F·tint, roughness)] dielectric
+    a·(1−m)(1−t) · [DIELECTRIC_SPECULAR(white, roughness, eta, tint, multiscatter)
+                    + DIFFUSE(base, layer → the specular lobe)]      dielectric (Principled v2)
     (1−a)        · GLASS(white, 0, ior 1)                            transparency
     emission     = a · emission color × emission strength
-  where F = 2s·(F0 + (1 − F0)/21), F0 = ((ior − 1)/(ior + 1))², the cosine-weighted average of
-  Schlick's Fresnel: the core's GLOSSY lobe has no Fresnel term, so the average reflectance
-  stands in for it. Coat and sheen are ignored with a warning.
+  where eta is the IOR after Specular IOR Level (F0 × 2s, back to an IOR; no specular lobe when
+  eta = 1) and multiscatter = distribution "Multiscatter GGX". The core scales the layered
+  lobes per hit by 1 − the specular layer's albedo E(wo) (docs/materials.md, "Principled
+  dielectric layering"). Coat and sheen are ignored with a warning.
   Subsurface weight w_s splits the DIFFUSE lobe (Cycles's "Diffuse/Subsurface component"):
-    DIFFUSE(base·(1−F)·(1−w_s)) + SUBSURFACE(clamp(base)·(1−F)·w_s, radius × scale, method,
+    DIFFUSE(base·(1−w_s)) + SUBSURFACE(clamp(base)·w_s, radius × scale, method,
     ior: IOR (Random Walk) or Subsurface IOR (Skin), roughness, anisotropy, weight = the scalar
-    factor of the colour) — docs/subsurface.md. Radius, scale, IORs and anisotropy are
+    factor of the colour; both layered under the specular lobe) — docs/subsurface.md. Radius, scale, IORs and anisotropy are
     constant-only.
 - Subsurface Scattering node → SUBSURFACE(color, radius × scale, falloff, IOR, roughness:
   sqrt(Roughness) (Cycles uses the node's roughness as the GGX alpha), anisotropy).

@@ -1092,13 +1092,16 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
             t = md.lobe_type[m, l]
             md.lobe_delta[m, l] = t != 1 and (alpha * alpha <= ALPHA_SQ_SINGULAR or (
                 t == 3 and abs(md.lobe_ior[m, l] - 1.0) < IOR_ONE_EPS))
-        total += (md.lobe_color[m, l, 0] + md.lobe_color[m, l, 1] + md.lobe_color[m, l, 2]) * (1.0 / 3.0)
+        total += (md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0] + md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]
+                  + md.lobe_color[m, l, 2] * md.lobe_avg[m, l, 2]) * (1.0 / 3.0)
     cdf = 0.0
     delta_only = True
     trans_delta = False
     a0 = a1 = a2 = 0.0
     for l in range(count):
-        w = (md.lobe_color[m, l, 0] + md.lobe_color[m, l, 1] + md.lobe_color[m, l, 2]) * (1.0 / 3.0)
+        # weighted by the lobe's average share (a specular layer's albedo, what its base keeps)
+        w = (md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0] + md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]
+             + md.lobe_color[m, l, 2] * md.lobe_avg[m, l, 2]) * (1.0 / 3.0)
         p = w / total if total > 0.0 else 0.0
         md.lobe_select[m, l] = p
         cdf += p
@@ -1107,9 +1110,9 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
             delta_only = False
         if md.lobe_delta[m, l] or md.lobe_type[m, l] == 3:
             trans_delta = True
-        a0 += md.lobe_color[m, l, 0]
-        a1 += md.lobe_color[m, l, 1]
-        a2 += md.lobe_color[m, l, 2]
+        a0 += md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0]
+        a1 += md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]
+        a2 += md.lobe_color[m, l, 2] * md.lobe_avg[m, l, 2]
     md.delta_only[m] = delta_only
     md.transmission_or_delta[m] = trans_delta
     md.albedo[m, 0] = a0

@@ -124,12 +124,15 @@ _ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
 #:   lobe_fresnel (M, L, 4) f64: DIELECTRIC_SPECULAR lobes' (f0·tint r, g, b, multiscatter 0/1)
 #:   (drt.materials.dielectric_specular); lobe_layer (M, L) int64: slot of the
 #:   DIELECTRIC_SPECULAR lobe this lobe lies under (its colour is scaled per hit by that
-#:   layer's 1 − albedo(wo)), −1: none; has_layers (M,) bool: some lobe has lobe_layer ≥ 0.
+#:   layer's 1 − albedo(wo)), −1: none; has_layers (M,) bool: some lobe has lobe_layer ≥ 0;
+#:   lobe_avg (M, L, 3) f64: per unit colour, the lobe's cosine-averaged share (the specular
+#:   layer's average albedo, 1 − its max for the lobes under it, 1 otherwise): lobe selection
+#:   and the albedo pass weigh colours by it (also per hit, in ``programs.eval_material``).
 MaterialData = namedtuple("MaterialData", [
     "lobe_type", "lobe_color", "lobe_alpha", "lobe_ior", "lobe_delta", "lobe_select", "lobe_cdf",
     "lobe_count", "emission", "has_emission", "albedo", "delta_only", "pure_diffuse",
     "transmission_or_delta", "has_diffuse", "summary", "lobe_sss", "sss_exit",
-    "lobe_fresnel", "lobe_layer", "has_layers"])
+    "lobe_fresnel", "lobe_layer", "has_layers", "lobe_avg"])
 
 
 #: ``ns_local`` of a surface without a bump/normal map: the shading frame's own z
@@ -488,6 +491,7 @@ class MaterialTable:
             lobe_fresnel=c(self.lobe_fresnel.reshape(m, n_slots, 4), np.float64),
             lobe_layer=c(np.where(used, self.lobe_layer, -1).reshape(m, n_slots), np.int64),
             has_layers=c(np.any(used & (self.lobe_layer >= 0), axis=1), np.bool_),
+            lobe_avg=c(eff.reshape(m, n_slots, 3), np.float64),
         )
         self.has_subsurface = bool(sss.any())
 
