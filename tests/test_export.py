@@ -163,9 +163,11 @@ def test_principled_mapping(fresh):
     C.quad("Q", (0, 0, 0), 1.0, mat)
     m = _material(export_current(), "P")
     kinds = [lb["type"] for lb in m["lobes"]]
-    assert kinds == ["GLOSSY", "DIELECTRIC_SPECULAR", "DIFFUSE", "GLASS"]
+    assert kinds == ["METALLIC", "DIELECTRIC_SPECULAR", "DIFFUSE", "GLASS"]
     metal, spec, diffuse, clear = m["lobes"]
+    # F82-tint metal: colour = weight × the clamped base colour (its F0)
     np.testing.assert_allclose(metal["color"], 0.8 * 0.25 * np.array([0.5, 0.2, 0.1]), rtol=1e-5)
+    assert metal["weight"] == pytest.approx(0.8 * 0.25) and metal["tint"] == [1, 1, 1]
     # Principled v2: the specular layer (weight 1 of the dielectric share) over the diffuse base,
     # which the core scales per hit by 1 − the layer's albedo ("layer" names the specular lobe)
     np.testing.assert_allclose(spec["color"], [0.8 * 0.75] * 3, rtol=1e-5)

@@ -15,7 +15,9 @@ Mapping (see docs/addon.md, "Materials"):
 - Emission → emission += color × strength.
 - Mix Shader → (1 − fac)·A + fac·B; Add Shader → A + B.
 - Principled BSDF, with alpha a, metallic m, transmission t, specular level s:
-    a·m          · GLOSSY(base color, roughness)                     metal
+    a·m          · METALLIC(clamped base, roughness, F82 tint = min(specular tint, 1),
+                            multiscatter; weight a·m)                metal (GLOSSY(base) if
+                                                                     a·m is textured)
     a·(1−m)·t    · GLASS(base color, roughness, ior)                 glass
     a·(1−m)(1−t) · [DIELECTRIC_SPECULAR(white, roughness, eta, tint, multiscatter)
                     + DIFFUSE(base, layer → the specular lobe)]      dielectric (Principled v2)
@@ -433,7 +435,14 @@ class MaterialExporter:
         lobes = []
         wa = w * alpha
         if maybe_positive(metallic):
-            lobes.append({"type": "GLOSSY", "color": wa * metallic * base, "roughness": rough})
+            k = wa * metallic
+            if isinstance(k, Value):  # a textured metallic / alpha: the Fresnel-less GLOSSY stand-in
+                lobes.append({"type": "GLOSSY", "color": k * base, "roughness": rough})
+            else:  # Cycles's F82-tint metal: F0 = the clamped base colour, F82 tint = min(tint, 1)
+                clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
+                lobes.append({"type": "METALLIC", "color": k * clamped, "weight": float(k), "roughness": rough,
+                              "tint": [float(min(x, 1.0)) for x in np.broadcast_to(tint, 3)],
+                              "multiscatter": multiscatter})
         dielectric = 1.0 - metallic
         if maybe_positive(trans) and maybe_positive(dielectric):
             lobes.append({"type": "GLASS", "color": wa * dielectric * trans * base,

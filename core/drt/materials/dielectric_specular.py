@@ -184,3 +184,82 @@ def average_albedo(alpha: float, eta: float, f0t, multiscatter: bool) -> np.ndar
     if not multiscatter:
         return fss * float(table_1d(GGX_EAVG, math.sqrt(alpha)))
     return fss
+
+
+# ---------------------------------------------------------------------------------------------
+# The Principled BSDF's metallic lobe: GGX × Cycles's F82-tint conductor Fresnel
+#   F(c) = saturate(mix(F0, 1, (1 − c)⁵) − B·c·(1 − c)⁶),  B = F_schlick(1/7)·7/(f⁶)·(1 − tint)
+# with f = 6/7, F0 = the clamped base colour, tint = min(Specular Tint, 1) ("F82 tint"), and
+# Multiscatter GGX compensation with Fss = mix(F0, 1, 1/21) − B/126 (fresnel_f82_Fss).
+# ---------------------------------------------------------------------------------------------
+
+_F82_F = 6.0 / 7.0
+_F82_F5 = _F82_F ** 5
+
+
+@kernel
+def f82_b(f0, tint):
+    """B of one channel (Cycles's fresnel_f82tint_B; 0 for a white tint)."""
+    if tint == 1.0:
+        return 0.0
+    fs = f0 + (1.0 - f0) * _F82_F5
+    return fs * (7.0 / (_F82_F5 * _F82_F)) * (1.0 - tint)
+
+
+@kernel
+def f82_channel(c, f0, b):
+    s = min(max(1.0 - abs(c), 0.0), 1.0)
+    s5 = s * s * s * s * s
+    return min(max(f0 + (1.0 - f0) * s5 - b * abs(c) * s5 * s, 0.0), 1.0)
+
+
+@kernel
+def metal_energy(alpha, f0, b, multiscatter, cos_o):
+    """k(wo) per channel of the metallic lobe (1 for GGX)."""
+    if not multiscatter:
+        return (1.0, 1.0, 1.0)
+    rough = math.sqrt(alpha)
+    e = max(table_2d(GGX_E, rough, abs(cos_o)), 1e-6)
+    e_avg = table_1d(GGX_EAVG, rough)
+    missing = (1.0 - e) / e
+    return (_metal_comp(f0[0], b[0], e_avg, missing), _metal_comp(f0[1], b[1], e_avg, missing),
+            _metal_comp(f0[2], b[2], e_avg, missing))
+
+
+@kernel
+def _metal_comp(f0, b, e_avg, missing):
+    fss = f0 + (1.0 - f0) * (1.0 / 21.0) - b * (1.0 / 126.0)
+    fms = fss * e_avg / (1.0 - fss * (1.0 - e_avg))
+    return 1.0 + fms * missing
+
+
+@kernel
+def metallic_eval(wo, wi, alpha, f0, tint, multiscatter):
+    """White-weight metallic lobe: (f·|cos θi| 3-tuple, pdf of ``glossy_sample``); f0 the base
+    colour (clamped to [0, 1]), tint the F82 tint."""
+    v, p = glossy_eval(wo, wi, alpha)
+    if not v > 0.0:
+        return (0.0, 0.0, 0.0), p
+    hx = wo[0] + wi[0]
+    hy = wo[1] + wi[1]
+    hz = wo[2] + wi[2]
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    cos_h = abs(wo[0] * hx + wo[1] * hy + wo[2] * hz) / hn if hn > 0.0 else 1.0
+    b = (f82_b(f0[0], tint[0]), f82_b(f0[1], tint[1]), f82_b(f0[2], tint[2]))
+    k = metal_energy(alpha, f0, b, multiscatter, wo[2])
+    return (v * f82_channel(cos_h, f0[0], b[0]) * k[0], v * f82_channel(cos_h, f0[1], b[1]) * k[1],
+            v * f82_channel(cos_h, f0[2], b[2]) * k[2]), p
+
+
+@kernel
+def metallic_delta_weight(cos_o, f0, tint):
+    """Weight factor (3-tuple) of a smooth metal: F(cos θo)."""
+    return (f82_channel(cos_o, f0[0], f82_b(f0[0], tint[0])), f82_channel(cos_o, f0[1], f82_b(f0[1], tint[1])),
+            f82_channel(cos_o, f0[2], f82_b(f0[2], tint[2])))
+
+
+def metallic_average_albedo(f0, tint) -> np.ndarray:
+    """Fss (3,) of the metallic lobe per unit weight (for lobe selection and the albedo pass)."""
+    f0 = np.clip(np.asarray(f0, np.float64), 0.0, 1.0)
+    b = np.array([f82_b(float(a), float(t)) for a, t in zip(f0, tint)])
+    return np.clip(f0 + (1.0 - f0) / 21.0 - b / 126.0, 0.0, 1.0)

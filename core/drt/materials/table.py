@@ -50,7 +50,8 @@ from ..kernels.vec3 import load, store
 from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample
 from .diffuse import INV_PI, diffuse_eval, diffuse_sample
 from .dielectric_specular import (average_albedo, dielectric_spec_delta_weight, dielectric_spec_eval,
-                                  layer_weight)
+                                  layer_weight, metallic_average_albedo, metallic_delta_weight,
+                                  metallic_eval)
 from .subsurface_lobe import BSSRDF_MIN_RADIUS, SSS_METHODS, effective_radius, sss_entry_sample
 from .ggx import (
     ALPHA_SQ_SINGULAR,
@@ -68,8 +69,10 @@ BSDF_GLOSSY = 2
 BSDF_GLASS = 3
 BSDF_SUBSURFACE = 4  # random-walk SSS entry (drt.subsurface); never evaluated, only sampled
 BSDF_DIELECTRIC_SPECULAR = 5  # GGX × dielectric Fresnel, the Principled specular layer
+BSDF_METALLIC = 6  # GGX × F82-tint conductor Fresnel, the Principled metallic lobe
 BSDF_TYPES = {"DIFFUSE": BSDF_DIFFUSE, "GLOSSY": BSDF_GLOSSY, "GLASS": BSDF_GLASS,
-              "SUBSURFACE": BSDF_SUBSURFACE, "DIELECTRIC_SPECULAR": BSDF_DIELECTRIC_SPECULAR}
+              "SUBSURFACE": BSDF_SUBSURFACE, "DIELECTRIC_SPECULAR": BSDF_DIELECTRIC_SPECULAR,
+              "METALLIC": BSDF_METALLIC}
 #: name of the white Lambert material appended to tables with SSS: shades SSS exit points
 SSS_EXIT_MATERIAL = "__drt_sss_exit__"
 #: columns of lobe_sss (M, L, 8)
@@ -121,7 +124,9 @@ _ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
 #:   lobe_sss (M, L, 8) f64: SUBSURFACE lobes' (effective radius r, g, b (metres, after
 #:   Cycles's bssrdf_setup_radius), anisotropy, ior, method code, weight, entry GGX alpha);
 #:   sss_exit (1,) int64: the white Lambert row shading SSS exits (−1: no SSS in the scene);
-#:   lobe_fresnel (M, L, 4) f64: DIELECTRIC_SPECULAR lobes' (f0·tint r, g, b, multiscatter 0/1)
+#:   lobe_fresnel (M, L, 5) f64: DIELECTRIC_SPECULAR lobes' (f0·tint r, g, b, multiscatter 0/1,
+#:   unused); METALLIC lobes' (F82 tint r, g, b, multiscatter 0/1, scalar weight k: the colour
+#:   is k × the base colour, Fresnel F0 = min(colour / k, 1))
 #:   (drt.materials.dielectric_specular); lobe_layer (M, L) int64: slot of the
 #:   DIELECTRIC_SPECULAR lobe this lobe lies under (its colour is scaled per hit by that
 #:   layer's 1 − albedo(wo)), −1: none; has_layers (M,) bool: some lobe has lobe_layer ≥ 0;
@@ -195,6 +200,15 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
             f2 += md.lobe_color[m, s, 2] * fc[2]
             pdf += md.lobe_select[m, s] * p
             continue
+        if t == BSDF_METALLIC:
+            k = md.lobe_fresnel[m, s, 4]
+            fc, p = metallic_eval(wo, wi, md.lobe_alpha[m, s], metal_f0(md, m, s), lobe_f0(md, m, s),
+                                  md.lobe_fresnel[m, s, 3] > 0.0)
+            f0 += k * fc[0]
+            f1 += k * fc[1]
+            f2 += k * fc[2]
+            pdf += md.lobe_select[m, s] * p
+            continue
         if t == BSDF_DIFFUSE:
             v, p = diffuse_eval(wo, wi)
             v *= g_diffuse
@@ -217,6 +231,16 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
 def lobe_f0(md, m, s):
     """f0·tint of a DIELECTRIC_SPECULAR slot as a 3-tuple."""
     return (md.lobe_fresnel[m, s, 0], md.lobe_fresnel[m, s, 1], md.lobe_fresnel[m, s, 2])
+
+
+@inline_kernel
+def metal_f0(md, m, s):
+    """F0 of a METALLIC slot: its colour / its scalar weight, clamped to [0, 1] (Cycles's
+    clamped base colour)."""
+    k = md.lobe_fresnel[m, s, 4]
+    inv = 1.0 / k if k > 0.0 else 0.0
+    return (min(md.lobe_color[m, s, 0] * inv, 1.0), min(md.lobe_color[m, s, 1] * inv, 1.0),
+            min(md.lobe_color[m, s, 2] * inv, 1.0))
 
 
 @inline_kernel
@@ -275,7 +299,7 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
     if t == BSDF_DIFFUSE:
         wi = diffuse_sample(wo, u0, u1)
         kind = LOBE_DIFFUSE
-    elif t == BSDF_GLOSSY or t == BSDF_DIELECTRIC_SPECULAR:
+    elif t == BSDF_GLOSSY or t == BSDF_DIELECTRIC_SPECULAR or t == BSDF_METALLIC:
         wi = glossy_sample(wo, alpha, u0, u1)
         kind = LOBE_GLOSSY
     elif t == BSDF_GLASS:
@@ -310,6 +334,10 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
             fc = dielectric_spec_delta_weight(wo[2], ior, lobe_f0(md, m, slot),
                                               md.lobe_fresnel[m, slot, 3] > 0.0)
             weight = (weight[0] * fc[0], weight[1] * fc[1], weight[2] * fc[2])
+        elif t == BSDF_METALLIC:  # a smooth metal: k·F82(cos θo)
+            fc = metallic_delta_weight(wo[2], metal_f0(md, m, slot), lobe_f0(md, m, slot))
+            k = md.lobe_fresnel[m, slot, 4] / p_sel
+            weight = (k * fc[0], k * fc[1], k * fc[2])
         return wi, weight, pdf, kind, True, True
 
     if md.pure_diffuse[m] and ns_local[2] >= 1.0:
@@ -414,6 +442,22 @@ def _dielectric_specular_lobe(lobe: dict, where: str) -> np.ndarray:
     return np.concatenate([np.clip(f0 * tint, 0.0, 1.0), [1.0 if ms else 0.0, eta]])
 
 
+def _metallic_lobe(lobe: dict, where: str) -> np.ndarray:
+    """A METALLIC lobe's (F82 tint r, g, b, multiscatter, weight k): ``tint`` (RGB, clamped to
+    [0, 1], default white), ``multiscatter`` (default true), ``weight`` (> 0: the lobe's colour
+    is weight × base colour; F0 = min(colour / weight, 1))."""
+    tint = np.minimum(_rgb(lobe.get("tint", [1.0, 1.0, 1.0]), where, "tint"), 1.0)
+    ms = lobe.get("multiscatter", True)
+    if not isinstance(ms, bool):
+        raise _fail(where, f"multiscatter must be true or false, got {ms!r}")
+    if "weight" not in lobe:
+        raise _fail(where, "weight is missing")
+    k = _number(lobe["weight"], where, "weight")
+    if not k > 0.0:
+        raise _fail(where, f"weight must be > 0, got {k!r}")
+    return np.concatenate([tint, [1.0 if ms else 0.0, k]])
+
+
 class MaterialTable:
     """All materials of a scene; see the module docstring for the arrays."""
 
@@ -433,7 +477,7 @@ class MaterialTable:
             | ((self.lobe_type == BSDF_GLASS) & (np.abs(self.lobe_ior - 1.0) < IOR_ONE_EPS)))
         sss = used & (self.lobe_type == BSDF_SUBSURFACE)
         self.lobe_sss = np.zeros((m, n_slots, 8)) if lobe_sss is None else np.asarray(lobe_sss, np.float64)
-        self.lobe_fresnel = np.zeros((m, n_slots, 4)) if lobe_fresnel is None \
+        self.lobe_fresnel = np.zeros((m, n_slots, 5)) if lobe_fresnel is None \
             else np.asarray(lobe_fresnel, np.float64)
         self.lobe_layer = np.full((m, n_slots), -1, np.int64) if lobe_layer is None \
             else np.asarray(lobe_layer, np.int64)
@@ -444,6 +488,11 @@ class MaterialTable:
         for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_DIELECTRIC_SPECULAR))):
             eff[i, j] = average_albedo(self.lobe_alpha[i, j], self.lobe_ior[i, j],
                                        self.lobe_fresnel[i, j, :3], self.lobe_fresnel[i, j, 3] > 0)
+        for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_METALLIC))):
+            k = max(self.lobe_fresnel[i, j, 4], 1e-12)
+            f0 = np.clip(self.lobe_color[i, j] / k, 0.0, 1.0)
+            eff[i, j] = np.divide(metallic_average_albedo(f0, self.lobe_fresnel[i, j, :3]), f0,
+                                  out=np.ones(3), where=f0 > 0)
         for i, j in zip(*np.nonzero(used & (self.lobe_layer >= 0))):
             eff[i, j] = max(1.0 - eff[i, self.lobe_layer[i, j]].max(), 0.0)
         self.lobe_effective = self.lobe_color * eff if n_slots else self.lobe_color
@@ -488,7 +537,7 @@ class MaterialTable:
             lobe_sss=c(self.lobe_sss.reshape(m, n_slots, 8), np.float64),
             sss_exit=np.array([self.names.index(SSS_EXIT_MATERIAL) if SSS_EXIT_MATERIAL in self.names
                                else -1], np.int64),
-            lobe_fresnel=c(self.lobe_fresnel.reshape(m, n_slots, 4), np.float64),
+            lobe_fresnel=c(self.lobe_fresnel.reshape(m, n_slots, 5), np.float64),
             lobe_layer=c(np.where(used, self.lobe_layer, -1).reshape(m, n_slots), np.int64),
             has_layers=c(np.any(used & (self.lobe_layer >= 0), axis=1), np.bool_),
             lobe_avg=c(eff.reshape(m, n_slots, 3), np.float64),
@@ -502,8 +551,8 @@ class MaterialTable:
         weight = np.where(used & ~self.lobe_delta, self.lobe_effective.mean(axis=2), 0.0) \
             if self.lobe_type.shape[1] else np.zeros(self.lobe_type.shape)
         kd = np.where(self.lobe_type == BSDF_DIFFUSE, weight, 0.0).sum(axis=1)
-        wg = np.where((self.lobe_type == BSDF_GLOSSY) | (self.lobe_type == BSDF_DIELECTRIC_SPECULAR),
-                      weight, 0.0)
+        wg = np.where((self.lobe_type == BSDF_GLOSSY) | (self.lobe_type == BSDF_DIELECTRIC_SPECULAR)
+                      | (self.lobe_type == BSDF_METALLIC), weight, 0.0)
         kg = wg.sum(axis=1)
         alpha = np.divide((wg * self.lobe_alpha).sum(axis=1), kg, out=np.ones_like(kg), where=kg > 0)
         kt = np.where(self.lobe_type == BSDF_GLASS, weight, 0.0).sum(axis=1)
@@ -547,8 +596,8 @@ class MaterialTable:
                     raise _fail(lw, "color is missing")
                 color = _rgb(lobe["color"], lw, "color")
                 alpha, ior = 0.0, 1.0
-                fr = np.zeros(4)
-                if kind in ("GLOSSY", "GLASS", "DIELECTRIC_SPECULAR"):
+                fr = np.zeros(5)
+                if kind in ("GLOSSY", "GLASS", "DIELECTRIC_SPECULAR", "METALLIC"):
                     if "roughness" not in lobe:
                         raise _fail(lw, "roughness is missing")
                     r = _number(lobe["roughness"], lw, "roughness")
@@ -558,7 +607,9 @@ class MaterialTable:
                 if kind == "DIELECTRIC_SPECULAR":
                     fr = _dielectric_specular_lobe(lobe, lw)
                     ior = fr[4]
-                    fr = fr[:4]
+                    fr[4] = 0.0
+                if kind == "METALLIC":
+                    fr = _metallic_lobe(lobe, lw)
                 under = -1
                 if "layer" in lobe:
                     under = lobe["layer"]
@@ -592,7 +643,7 @@ class MaterialTable:
         if any(r[0] == BSDF_SUBSURFACE for rows in parsed for r in rows):
             # SSS exit points are shaded by a white Lambert (Cycles's subsurface_shader_data_setup)
             names.append(SSS_EXIT_MATERIAL)
-            parsed.append([(BSDF_DIFFUSE, np.ones(3), 0.0, 1.0, np.zeros(8), np.zeros(4), -1)])
+            parsed.append([(BSDF_DIFFUSE, np.ones(3), 0.0, 1.0, np.zeros(8), np.zeros(5), -1)])
             emissions.append(np.zeros(3))
         m = len(parsed)
         n_slots = max((len(r) for r in parsed), default=0)
@@ -601,7 +652,7 @@ class MaterialTable:
         lobe_alpha = np.zeros((m, n_slots))
         lobe_ior = np.ones((m, n_slots))
         lobe_sss = np.zeros((m, n_slots, 8))
-        lobe_fresnel = np.zeros((m, n_slots, 4))
+        lobe_fresnel = np.zeros((m, n_slots, 5))
         lobe_layer = np.full((m, n_slots), -1, np.int64)
         for i, rows in enumerate(parsed):
             for j, (t, c, a, eta, ss, fr, under) in enumerate(rows):
