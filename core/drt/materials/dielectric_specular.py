@@ -129,17 +129,29 @@ def _compensation(f0, s, e_avg, missing):
 @kernel
 def layer_weight(alpha, eta, f0t, multiscatter, cos_o):
     """Scale of the lobes under the layer for this wo: 1 − max_c albedo_c (clamped)."""
-    k = energy_factor(alpha, eta, f0t, multiscatter, cos_o)
-    if multiscatter:
-        # Cycles scales the closure weight by the darkening k·E only (energy_scale 1/E is
-        # applied at evaluation), and the layering reads that weight
-        e = max(table_2d(GGX_E, math.sqrt(alpha), abs(cos_o)), 1e-6)
-        k = (k[0] * e, k[1] * e, k[2] * e)
+    rough = math.sqrt(alpha)
     z = math.sqrt(abs((eta - 1.0) / (eta + 1.0)))
-    s = table_3d(GEN_SCHLICK_IOR_S, math.sqrt(alpha), min(abs(cos_o), 1.0), z)
-    a = max(k[0] * (f0t[0] + (1.0 - f0t[0]) * s), k[1] * (f0t[1] + (1.0 - f0t[1]) * s),
-            k[2] * (f0t[2] + (1.0 - f0t[2]) * s))
-    return min(max(1.0 - a, 0.0), 1.0)
+    s = table_3d(GEN_SCHLICK_IOR_S, rough, min(abs(cos_o), 1.0), z)
+    a0 = f0t[0] + (1.0 - f0t[0]) * s
+    a1 = f0t[1] + (1.0 - f0t[1]) * s
+    a2 = f0t[2] + (1.0 - f0t[2]) * s
+    if multiscatter:
+        # Cycles scales the closure weight by the darkening d = k·E = E + Fms·(1 − E) only
+        # (energy_scale 1/E is applied at evaluation), and the layering reads that weight
+        e = max(table_2d(GGX_E, rough, abs(cos_o)), 1e-6)
+        e_avg = table_1d(GGX_EAVG, rough)
+        s_avg = remap(fss_real(eta), f0_from_ior(eta))
+        a0 *= e + _fms(f0t[0], s_avg, e_avg) * (1.0 - e)
+        a1 *= e + _fms(f0t[1], s_avg, e_avg) * (1.0 - e)
+        a2 *= e + _fms(f0t[2], s_avg, e_avg) * (1.0 - e)
+    return min(max(1.0 - max(a0, a1, a2), 0.0), 1.0)
+
+
+@kernel
+def _fms(f0, s_avg, e_avg):
+    """Kulla-Conty Fms of one channel: Fss·E_avg / (1 − Fss·(1 − E_avg))."""
+    fss = f0 + (1.0 - f0) * s_avg
+    return fss * e_avg / (1.0 - fss * (1.0 - e_avg))
 
 
 @kernel
