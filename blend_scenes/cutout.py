@@ -3,8 +3,9 @@ an image's alpha (they cast cut-out shadows: transparent shadows), a fence cut o
 texture, a sphere with a tangent-space normal map (an image the script paints: a grid of domes,
 Non-Color), and a box bumped by a Voronoi height, under a sun and a dim world. docs/materials.md.
 
-Principled BSDFs here have Specular IOR Level 0 (matte), as in `textured.py`: DRT's Principled
-specular layer is still the simplified one.
+Principled BSDFs here have Specular IOR Level 0 (matte), as in `textured.py`, so that the scene
+measures cut-outs and normals, not the specular layer (compared on its own in
+tests/test_principled_layering.py).
 """
 
 import os

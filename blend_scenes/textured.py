@@ -4,10 +4,9 @@ sphere coloured by a Color Ramp over a Gradient texture, and a cube whose Princi
 colour is a Checker on Generated coordinates mixed (Mix, MULTIPLY) with a tint, under a sun
 and a dim world. docs/materials.md.
 
-Every Principled BSDF has Specular IOR Level 0 (matte): this scene measures texturing, and
-DRT's Principled specular layer is still the simplified one (the layered Principled v2 part of
-issue 11); with the default level 0.5 the same scene differs from Cycles by 1–5 % per channel
-for that reason alone, while with level 0 it matches to 0.01 %.
+Every Principled BSDF has Specular IOR Level 0 (matte): this scene measures texturing; the
+specular layer (Principled v2 layering) is compared on its own in
+tests/test_principled_layering.py.
 """
 
 import os
