@@ -109,9 +109,8 @@ def test_normal_mapped_bsdfs_under_a_sun_match_cycles(tmp_path):
         if k == 2:
             # Principled: Cycles tilts the specular layer's normal back above the horizon where
             # the map tilts it too far (bump map correction) but not the diffuse one's; DRT has
-            # one shading normal per material and keeps the diffuse one's (docs/materials.md);
-            # and DRT's Principled specular layer is still the simplified one (issue 11: its
-            # Fresnel-averaged weight differs from Cycles's by a few % at varying angles)
+            # one shading normal per material and keeps the diffuse one's (docs/materials.md),
+            # which moves the specular layer's highlights where the map tilts the normal far
             assert np.quantile(rel, 0.95) < 0.08, (k, np.quantile(rel, 0.95))
         elif k == 5:
             # a glossy highlight on a bumped surface: Cycles's finite difference (float32, its own
