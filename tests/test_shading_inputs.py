@@ -389,6 +389,14 @@ def test_normal_map_on_ngons_matches_cycles(tmp_path):
     _compare(cycles, drt, len(cases), n=2, outliers=10)
 
 
+def _diffuse_material(name, color):
+    mat = bpy.data.materials.new(name)
+    mat.node_tree.nodes.clear()
+    d = node(mat.node_tree, "ShaderNodeBsdfDiffuse", {"Color": color})
+    mat.node_tree.links.new(d.outputs[0], mat.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    return mat
+
+
 def _shadow_scene(make_card_material):
     """A white ground lit by a delta sun at 30°, a card above it with the material
     ``make_card_material()`` builds, seen from above (orthographic, no indirect light): the
@@ -398,10 +406,7 @@ def _shadow_scene(make_card_material):
     sc = setup_scene(2)
     card_material = make_card_material()
     sc.cycles.samples = sc.drt.samples = 16
-    ground = bpy.data.materials.new("ground")
-    ground.node_tree.nodes.clear()
-    d = node(ground.node_tree, "ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.8, 0.8, 1)})
-    ground.node_tree.links.new(d.outputs[0], ground.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    ground = _diffuse_material("ground", (0.8, 0.8, 0.8, 1))
     bpy.ops.mesh.primitive_plane_add(size=4.0, location=(0, 0, -0.5))
     bpy.context.object.data.materials.append(ground)
     bpy.ops.mesh.primitive_plane_add(size=1.2, location=(-0.2, 0.1, 0.2))
@@ -487,10 +492,7 @@ def test_half_transparent_card_under_an_area_light_matches_cycles(tmp_path):
     sc = setup_scene(2)
     sc.cycles.samples = sc.drt.samples = 64
     sc.cycles.max_bounces = sc.drt.max_bounces = 2
-    ground = bpy.data.materials.new("ground")
-    ground.node_tree.nodes.clear()
-    d = node(ground.node_tree, "ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.8, 0.8, 1)})
-    ground.node_tree.links.new(d.outputs[0], ground.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    ground = _diffuse_material("ground", (0.8, 0.8, 0.8, 1))
     card = bpy.data.materials.new("card")
     card.node_tree.nodes.clear()
     dif = node(card.node_tree, "ShaderNodeBsdfDiffuse", {"Color": (0.9, 0.2, 0.1, 1)})

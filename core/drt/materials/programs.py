@@ -863,6 +863,17 @@ def _corner3(arr, prim, b0, b1, b2):
             b0 * c[0, 2] + b1 * c[1, 2] + b2 * c[2, 2])
 
 
+@inline_kernel
+def _coordinate(corners, point, row, prim, b0, b1, b2):
+    """A per-corner coordinate input at a hit (zero when no mesh stores it), or row ``row`` of
+    ``point`` at a shading point off any triangle (prim < 0)."""
+    if prim < 0:
+        return (point[row, 0], point[row, 1], point[row, 2])
+    if corners.shape[0]:
+        return _corner3(corners, prim, b0, b1, b2)
+    return (0.0, 0.0, 0.0)
+
+
 @kernel
 def run_program(pd, regs, prog, prim, b1, b2, point):
     """Run program ``prog`` at barycentrics (b1, b2) of global triangle ``prim``; results stay
@@ -895,26 +906,14 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
             else:
                 _set1(regs, o0, 0.0)
         elif op == OP_GENERATED:
-            if prim < 0:
-                _set(regs, o0, (point[POINT_GENERATED, 0], point[POINT_GENERATED, 1], point[POINT_GENERATED, 2]))
-            elif pd.generated.shape[0]:
-                _set(regs, o0, _corner3(pd.generated, prim, b0, b1, b2))
-            else:
-                _set1(regs, o0, 0.0)
+            _set(regs, o0, _coordinate(pd.generated, point, POINT_GENERATED, prim, b0, b1, b2))
         elif op == OP_ATTRIBUTE:
-            if prim < 0:
-                _set1(regs, o0, 0.0)
-            elif param < pd.attrs.shape[0]:
+            if prim >= 0 and param < pd.attrs.shape[0]:
                 _set(regs, o0, _corner3(pd.attrs[param], prim, b0, b1, b2))
             else:
                 _set1(regs, o0, 0.0)
         elif op == OP_OBJECT:
-            if prim < 0:
-                _set(regs, o0, (point[POINT_OBJECT, 0], point[POINT_OBJECT, 1], point[POINT_OBJECT, 2]))
-            elif pd.objco.shape[0]:
-                _set(regs, o0, _corner3(pd.objco, prim, b0, b1, b2))
-            else:
-                _set1(regs, o0, 0.0)
+            _set(regs, o0, _coordinate(pd.objco, point, POINT_OBJECT, prim, b0, b1, b2))
         elif op == OP_POINT:
             if param >= 0:
                 _set1(regs, o0, point[mode, param])
