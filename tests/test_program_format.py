@@ -45,7 +45,7 @@ def test_checker_program_renders_per_pixel():
 
 @pytest.mark.parametrize("change, field", [
     (lambda p: p.update(registers=0), "registers"),
-    (lambda p: p["ops"].append([99] + [0] * 10), "unknown opcode 99"),
+    (lambda p: p["ops"].append([199] + [0] * 10), "unknown opcode 199"),
     (lambda p: p["ops"].append([F.OP_MATH, 0, 7, -1, 0, 0, 0, -1, -1, -1, 0]), "register out of range"),
     (lambda p: p["ops"].append([F.OP_IMAGE, 0, 1, 2, 0, -1, -1, -1, -1, -1, 0]), "image 0 does not exist"),
     (lambda p: p["ops"].append([F.OP_RAMP, 1, 1, 2, 0, -1, -1, -1, -1, -1, 0]), "data table"),

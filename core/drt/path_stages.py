@@ -49,7 +49,8 @@ from .lights.world_map import world_radiance_at
 from .materials import (LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, NO_BUMP, bsdf_eval_bump,
                         bsdf_sample_bump)
 from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
-                                       POINT_P, POINT_PATH, POINT_PATH2, POINT_SHADOW, POINT_XFORM)
+                                       POINT_P, POINT_PATH, POINT_PATH2, POINT_SHADOW, POINT_XFORM,
+                                       POINT_OBJECT_XFORM)
 from .materials.programs import eval_material
 from .materials.transparency import straight_lobe
 from .materials.table import LOBE_SUBSURFACE, pick_lobe
@@ -272,6 +273,17 @@ def fill_point(point, pd, surf, hits, i, prim, p, ng, ns, wo, flags, counts, ray
     for r in range(3):
         for c in range(3):
             point[POINT_XFORM + r, c] = hits.normal_xform[i, r, c] if moving else (1.0 if r == c else 0.0)
+    # the object's own normal transform (object-space inputs): a static object's from its row
+    # of the per-object table (when the scene keeps one), a moving one's at this ray's time
+    obj_rows = pd.object_of.shape[0] > prim and pd.object_info.shape[1] >= 18 and not moving
+    for r in range(3):
+        for c in range(3):
+            if moving:
+                point[POINT_OBJECT_XFORM + r, c] = hits.normal_xform[i, r, c]
+            elif obj_rows:
+                point[POINT_OBJECT_XFORM + r, c] = pd.object_info[pd.object_of[prim], 9 + 3 * r + c]
+            else:
+                point[POINT_OBJECT_XFORM + r, c] = 1.0 if r == c else 0.0
     _put(point, POINT_PATH, (1.0 if camera else 0.0, 1.0 if flags & RAY_DIFFUSE else 0.0,
                              1.0 if flags & (RAY_GLOSSY | RAY_SINGULAR) else 0.0))
     _put(point, POINT_PATH2, (1.0 if flags & RAY_SINGULAR else 0.0,

@@ -31,7 +31,8 @@ import numpy as np
 
 from ..kernels import inline_kernel, kernel
 from ..materials.program_format import (POINT_GENERATED, POINT_I, POINT_N, POINT_NG, POINT_NSMOOTH, POINT_OBJECT,
-                                        POINT_P, POINT_ROWS, POINT_SHADOW, POINT_UV, POINT_XFORM)
+                                        POINT_P, POINT_ROWS, POINT_SHADOW, POINT_UV, POINT_XFORM,
+                                        POINT_OBJECT_XFORM)
 from ..materials.programs import run_program
 from ..sampling.spherical_maps import direction_to_equirectangular, equirectangular_to_direction
 
@@ -106,6 +107,7 @@ def point_rows() -> np.ndarray:
     """A shading-point array for a direction (identity normal transform, Light Path rows 0)."""
     point = np.zeros((POINT_ROWS, 3))
     point[POINT_XFORM:POINT_XFORM + 3] = np.eye(3)
+    point[POINT_OBJECT_XFORM:POINT_OBJECT_XFORM + 3] = np.eye(3)
     return point
 
 
