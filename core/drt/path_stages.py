@@ -46,6 +46,7 @@ from .lights.common import I_VISIBLE_CAMERA
 from .lights import (emissive_pdf, light_sample_full, shape_emission, shape_intersect, sun_emission,
                      sun_in_cone, world_pdf, world_radiance)
 from .lights.world_map import world_radiance_at
+from .lights.textured import textured_light_radiance
 from .materials import (LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, NO_BUMP, bsdf_eval_bump,
                         bsdf_sample_bump)
 from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
@@ -611,12 +612,17 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         if direct != DIRECT_BSDF and ld.n_strategies > 0 and not md.delta_only[mat]:
             hint = material_hint(md, mat, n_wo, wo)
             ul0, ul1 = sample_2d(sd, pixel, idx, base + 1)
-            wi, dist, le, lpdf, l_delta, l_valid, strategy, _ = light_sample_full(
+            wi, dist, le, lpdf, l_delta, l_valid, strategy, l_tri = light_sample_full(
                 ld, p, n_wo, hint, u_light_select, ul0, ul1)
             if l_valid and lpdf > 0.0 and strategy == ld.world_index and ld.world_prog >= 0:
                 # Cycles evaluates the background for a light sample as an emission ray:
                 # every Light Path flag 0 (this hit's rows in ``point`` are no longer needed)
                 le = world_emission(ld, pd, regs, point, wi, 0, paths.counts[i], False)
+            elif (l_valid and lpdf > 0.0 and strategy == ld.emissive_index and pd.prog_of.shape[0]
+                  and pd.emission_reg[surf.material[l_tri]] >= 0):
+                # a textured emitter (drt.lights.textured): its program's emission at the point
+                le = textured_light_radiance(pd, regs, point, surf.material[l_tri], l_tri,
+                                             add(p, scale(wi, dist)))
             if l_valid and lpdf > 0.0:
                 wi_l = to_local(wi, t_ax, b_ax, ns)
                 f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local)
