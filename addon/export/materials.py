@@ -109,10 +109,10 @@ class MaterialExporter:
 
     def reads_object_info(self) -> bool:
         """Whether any material program reads Object Info (objects then carry it)."""
-        from .node_programs import OBJECT_SPACE_OPS, OP_OBJECT_INFO
+        from .node_programs import OP_OBJECT_INFO, reads_object_transform
 
         # object-space inputs read the object's transform from the same per-object table
-        return any(op[0] == OP_OBJECT_INFO or op[0] in OBJECT_SPACE_OPS for m in self.materials
+        return any(op[0] == OP_OBJECT_INFO or reads_object_transform(op) for m in self.materials
                    for op in (m.get("program") or {}).get("ops", []))
 
     def reads(self, indices) -> dict:
@@ -180,6 +180,8 @@ class MaterialExporter:
             result["emission"] = [float(x) for x in np.broadcast_to(emission, 3)]
         if self._normal is not None and result["lobes"]:
             result["normal_reg"] = self._b.reg_of(self._normal[1])
+        if getattr(getattr(material, "cycles", None), "emission_sampling", "AUTO") == "NONE":
+            result["light"] = False  # Cycles: emission found by BSDF rays only, never sampled
         if "emission_reg" in result or "normal_reg" in result or "density_reg" in result.get("volume", {}) \
                 or "color_reg" in result.get("volume", {}) or any(
                 "color_reg" in lb or "roughness_reg" in lb for lb in result["lobes"]):

@@ -31,8 +31,14 @@ OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 9
 #: Object Info outputs → OP_OBJECT_INFO mode (Material Index is the material's constant)
 OP_BUMP_OFFSET, OP_BUMP, OP_CAMERA_COORDS = 95, 96, 97
 OP_TEXCO_NORMAL, OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT, OP_SET_NORMAL = 98, 99, 100, 101
-#: opcodes that need the hit object's transform (objects then carry their per-object data)
-OBJECT_SPACE_OPS = {OP_TEXCO_NORMAL, OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT, OP_NORMAL_MAP}
+
+
+def reads_object_transform(op) -> bool:
+    """Whether operation row ``op`` needs the hit object's transform (objects then carry their
+    per-object data): Texture Coordinate Normal, and the object spaces of Normal Map
+    (Object, Blender Object), Displacement and Vector Displacement."""
+    return (op[0] == OP_TEXCO_NORMAL or (op[0] == OP_NORMAL_MAP and op[1] in (1, 3))
+            or (op[0] in (OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT) and op[1] == 1))
 OBJECT_INFO_OUTPUTS = {"Location": 0, "Color": 1, "Alpha": 2, "Object Index": 3, "Random": 4}
 # shading-point rows (drt.materials.program_format.POINT_*)
 POINT_P, POINT_N, POINT_NG, POINT_I = 3, 4, 5, 6

@@ -102,7 +102,8 @@ def _emissive_triangles(scene: Scene, geom, materials: MaterialTable, programs=N
     if programs is not None:
         from .lights.textured import textured_emitters
 
-        tex = textured_emitters(programs, geom.material, geom.static_count)
+        no_light = np.array([isinstance(m, dict) and m.get("light") is False for m in scene.materials], bool)
+        tex = textured_emitters(programs, geom.material, geom.static_count, no_light)
         if tex is not None:
             em = np.concatenate([em, tex[0]])
             radiance = np.concatenate([radiance, tex[1]])

@@ -111,15 +111,17 @@ def emission_reads_point(pd, mat: int) -> bool:
     return reg in tainted
 
 
-def textured_emitters(pd, material: np.ndarray, static_count: int):
+def textured_emitters(pd, material: np.ndarray, static_count: int, no_light=None):
     """(global triangle ids (K,), average emission estimates (K, 3)) of the static triangles
     whose material has point-independent program emission; None if there are none.
-    ``material``: (T,) material of every global triangle."""
+    ``material``: (T,) material of every global triangle; ``no_light`` (M,) bool: materials
+    that must not be lights (Emission Sampling None)."""
     if pd is None or pd.prog_of.shape[0] == 0:
         return None
     ok = np.zeros(pd.prog_of.shape[0], bool)
     for m in range(pd.prog_of.shape[0]):
-        ok[m] = pd.prog_of[m] >= 0 and pd.emission_reg[m] >= 0 and not emission_reads_point(pd, m)
+        ok[m] = pd.prog_of[m] >= 0 and pd.emission_reg[m] >= 0 and not emission_reads_point(pd, m) \
+            and not (no_light is not None and m < len(no_light) and no_light[m])
     if not ok.any():
         return None
     mat = np.asarray(material[:static_count], np.int64)
