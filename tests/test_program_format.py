@@ -131,3 +131,20 @@ def test_textured_lobes_equal_the_constant_material_at_each_hit():
     hit = np.any(img > 0, axis=2)
     assert np.all(same[0] | same[1] | ~hit)
     assert same[0][hit].mean() > 0.2 and same[1][hit].mean() > 0.2  # both cells are seen
+
+
+def test_textured_emitter_light_flag():
+    """A textured emitter joins the emissive group (drt.lights.textured) unless its material
+    says ``"light": false`` (Cycles's Emission Sampling None); the flag is validated by name."""
+    from drt.render import prepare
+
+    h, a = _checker_scene()
+    group = prepare(scene_from_dict(h, a)).integrator.lights.emissive
+    assert group is not None and len(group) == 2
+    # the 2×2 red/blue checker split by the quad's diagonal: each triangle averages to half red, half blue
+    assert np.allclose(group.radiance, [[0.5, 0, 0.5]] * 2, atol=0.05), group.radiance
+    h["materials"][-1]["light"] = False
+    assert prepare(scene_from_dict(h, a)).integrator.lights.emissive is None
+    h["materials"][-1]["light"] = "no"
+    with pytest.raises(SceneError, match=r"materials\[\d\]\.light"):
+        scene_from_dict(h, a)
