@@ -63,6 +63,8 @@ def world_radiance_at(pd, regs, prog, reg, d, point):
         point[POINT_I, c] = -d[c]
         point[POINT_NSMOOTH, c] = -d[c]
         point[POINT_SHADOW, c] = 0.0
+        for r in range(3):  # no object: Texture Coordinate Normal is N itself (a hit left its own)
+            point[POINT_OBJECT_XFORM + r, c] = 1.0 if r == c else 0.0
     run_program(pd, regs, prog, -1, 0.0, 0.0, point)
     return (max(regs[reg, 0], 0.0), max(regs[reg, 1], 0.0), max(regs[reg, 2], 0.0))
 
