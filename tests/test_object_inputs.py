@@ -150,31 +150,41 @@ def test_displaced_bsdfs_under_a_sun_match_cycles(tmp_path):
         assert np.quantile(rel, 0.95) < 0.02, (k, np.quantile(rel, 0.95), rel.max())
 
 
-def test_unsupported_displacement_warns():
-    """True displacement ('Displacement Only') and tangent-space Vector Displacement are not
-    done: a warning names them and the material keeps its undisplaced normal."""
+def test_displacement_methods_warn():
+    """True displacement is not done: 'Displacement Only' warns and keeps the undisplaced
+    normal; 'Displacement and Bump' warns and renders the bump."""
     from addon.export import export_depsgraph
     from node_parity import setup_scene
     from test_shading_inputs import _height
 
     setup_scene(1)
-    for name, method, space in (("true", "DISPLACEMENT", "WORLD"), ("tangent", "BUMP", "TANGENT")):
+    for name, method in (("true", "DISPLACEMENT"), ("both", "BOTH")):
         bpy.ops.mesh.primitive_plane_add(size=1.0)
         mat = bpy.data.materials.new(name)
         nt = mat.node_tree
         mat.displacement_method = method
         uv = nt.nodes.new("ShaderNodeTexCoord").outputs["UV"]
-        if space == "TANGENT":
-            h = _height(nt, uv)
-            vec = node(nt, "ShaderNodeCombineXYZ", {0: h, 1: h, 2: h}).outputs[0]
-            disp = node(nt, "ShaderNodeVectorDisplacement", {"Vector": vec}, space="TANGENT")
-        else:
-            disp = node(nt, "ShaderNodeDisplacement", {"Height": _height(nt, uv)}, space=space)
+        disp = node(nt, "ShaderNodeDisplacement", {"Height": _height(nt, uv)}, space="WORLD")
         nt.links.new(disp.outputs[0], nt.nodes["Material Output"].inputs["Displacement"])
         bpy.context.object.data.materials.append(mat)
     res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
     text = " ".join(res.warnings)
     assert "Material 'true'" in text and "true displacement" in text, res.warnings
-    assert "Material 'tangent'" in text and "ShaderNodeVectorDisplacement" in text, res.warnings
+    assert "Material 'both'" in text and "bump only" in text, res.warnings
     mats = {m["name"]: m for m in res.header["materials"]}
-    assert "normal_reg" not in mats["true"] and "normal_reg" not in mats["tangent"]
+    assert "normal_reg" not in mats["true"] and "normal_reg" in mats["both"]
+
+
+TANGENT_CASES = [_displaced(_vector_displacement("TANGENT")),
+                 _scaled(_displaced(_vector_displacement("TANGENT"))),
+                 _vector_displacement("TANGENT"),
+                 _scaled(_vector_displacement("TANGENT"))]
+
+
+def test_tangent_space_vector_displacement_matches_cycles(tmp_path):
+    """Vector Displacement in tangent space (the active UV map's MikkTSpace tangents, in object
+    space): its vector, and the normal its bump gives, on rotated and scaled spheres."""
+    cycles, drt, res = render_tiles(TANGENT_CASES, 2, tmp_path, shape="sphere")
+    assert not res.warnings, res.warnings
+    assert np.abs(tile(cycles, 0, 2) - tile(cycles, 1, 2)).max() > 0.02
+    _compare(cycles, drt, len(TANGENT_CASES), n=2)

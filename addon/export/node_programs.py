@@ -38,7 +38,8 @@ def reads_object_transform(op) -> bool:
     per-object data): Texture Coordinate Normal, and the object spaces of Normal Map
     (Object, Blender Object), Displacement and Vector Displacement."""
     return (op[0] == OP_TEXCO_NORMAL or (op[0] == OP_NORMAL_MAP and op[1] in (1, 3))
-            or (op[0] in (OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT) and op[1] == 1))
+            or (op[0] == OP_DISPLACEMENT and op[1] == 1)
+            or (op[0] == OP_VECTOR_DISPLACEMENT and op[1] in (0, 1)))
 OBJECT_INFO_OUTPUTS = {"Location": 0, "Color": 1, "Alpha": 2, "Object Index": 3, "Random": 4}
 # shading-point rows (drt.materials.program_format.POINT_*)
 POINT_P, POINT_N, POINT_NG, POINT_I = 3, 4, 5, 6
@@ -405,10 +406,20 @@ class ProgramBuilder:
             return self.emit(OP_DISPLACEMENT, int(node.space == "OBJECT"),
                              ins + [self._linked_or_none(node, "Normal", ctx)])
         if k == "ShaderNodeVectorDisplacement":
-            if node.space not in ("OBJECT", "WORLD"):
-                raise Unsupported(node)  # tangent space: not yet
+            spaces = ("TANGENT", "OBJECT", "WORLD")
+            if node.space not in spaces:
+                raise Unsupported(node)
             ins = [self.inp(node, "Vector", ctx)] + [self.inp(node, n, ctx, "float") for n in ("Midlevel", "Scale")]
-            return self.emit(OP_VECTOR_DISPLACEMENT, 1 if node.space == "OBJECT" else 2, ins)
+            if node.space == "TANGENT":  # the active render UV map's tangents (Cycles's default)
+                # read at the hit even in a bump offset evaluation: Cycles's node reads the
+                # attribute at the shading point (only coordinate nodes follow the offsets);
+                # the hit's evaluation always comes first, so its registers exist
+                variant, self._variant = self._variant, 0
+                try:
+                    ins += [self.attribute("tangent:"), self.attribute("tangent_sign:")]
+                finally:
+                    self._variant = variant
+            return self.emit(OP_VECTOR_DISPLACEMENT, spaces.index(node.space), ins)
         if k in ("ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry",
                  "ShaderNodeLightPath", "ShaderNodeNormalMap"):
             return self._shading_point_node(node, out, ctx)

@@ -46,8 +46,8 @@ OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 9
 OP_BUMP_OFFSET, OP_BUMP, OP_CAMERA_COORDS = 95, 96, 97
 #: object-space shading inputs (docs/materials.md, "Object spaces and displacement"):
 #: Texture Coordinate Normal (mode 0); the Displacement node (mode 0 world, 1 object; ins
-#: height, midlevel, scale, normal or −1 for N); Vector Displacement (mode 1 object, 2 world;
-#: ins vector, midlevel, scale); SET_NORMAL writes in0 (normalised) into the point's N row, so
+#: height, midlevel, scale, normal or −1 for N); Vector Displacement (mode 0 tangent, 1 object,
+#: 2 world; ins vector, midlevel, scale (+ tangent, tangent sign in tangent space)); SET_NORMAL writes in0 (normalised) into the point's N row, so
 #: the rest of the program sees the bumped normal (Cycles's ``svm_node_set_normal``)
 OP_TEXCO_NORMAL, OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT, OP_SET_NORMAL = 98, 99, 100, 101
 # procedural textures and curves (issue 11 phase 2; kernels in drt.materials.procedural). Scalar
@@ -168,7 +168,8 @@ def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> 
             raise ValueError(f"{where}.ops[{k}]: camera coordinate output out of range")
         if row[0] == OP_DISPLACEMENT and not (0 <= row[1] <= 1 and min(row[4], row[5], row[6]) >= 0):
             raise ValueError(f"{where}.ops[{k}]: displacement space or inputs out of range")
-        if row[0] == OP_VECTOR_DISPLACEMENT and not (1 <= row[1] <= 2 and min(row[4], row[5], row[6]) >= 0):
+        if row[0] == OP_VECTOR_DISPLACEMENT and not (0 <= row[1] <= 2 and min(row[4], row[5], row[6]) >= 0
+                                                     and (row[1] or min(row[7], row[8]) >= 0)):
             raise ValueError(f"{where}.ops[{k}]: vector displacement space or inputs out of range")
         if row[0] == OP_SET_NORMAL and row[4] < 0:
             raise ValueError(f"{where}.ops[{k}]: missing input")

@@ -786,6 +786,23 @@ def object_to_world_dir(point, v):
 
 
 @kernel
+def tangent_displacement(pd, prim, point, dv, tangent, sign):
+    """Vector Displacement's tangent space (Cycles's ``svm_node_vector_displacement``): dv's x,
+    y, z along the tangent, the normal and the signed bitangent, all in object space. A static
+    hit's tangent is stored in world space (by the normal transform, length kept): it is brought
+    back by Mᵀ; a moving hit's is local already. No tangent (no UV map): the y part only."""
+    n = world_to_object_normal(point, _row(point, POINT_N))
+    tl = _len(tangent)
+    t = tangent
+    if prim < pd.triangles.shape[0] and tl > 0.0:
+        u = world_to_object_normal(point, tangent)
+        t = (u[0] * tl, u[1] * tl, u[2] * tl)
+    b = _normalize((n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]))
+    return (t[0] * dv[0] + n[0] * dv[1] + b[0] * sign * dv[2], t[1] * dv[0] + n[1] * dv[1] + b[1] * sign * dv[2],
+            t[2] * dv[0] + n[2] * dv[1] + b[2] * sign * dv[2])
+
+
+@kernel
 def make_orthonormals(n):
     """Cycles's ``make_orthonormals``: tangents (a, b) of unit n, a = normalize((1,1,1) × n)
     (or (−1,1,1) × n when n's components are equal), b = n × a."""
@@ -1109,12 +1126,14 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
                 _set(regs, o0, object_to_world_dir(point, (nrm[0] * k_d, nrm[1] * k_d, nrm[2] * k_d)))
             else:
                 _set(regs, o0, (nrm[0] * k_d, nrm[1] * k_d, nrm[2] * k_d))
-        elif op == OP_VECTOR_DISPLACEMENT:  # svm_node_vector_displacement, object / world space
+        elif op == OP_VECTOR_DISPLACEMENT:  # svm_node_vector_displacement
             v = _reg(regs, i0)
             mid = regs[i1, 0]
             sc = regs[i2, 0]
             dv = ((v[0] - mid) * sc, (v[1] - mid) * sc, (v[2] - mid) * sc)
-            _set(regs, o0, object_to_world_dir(point, dv) if mode == 1 else dv)
+            if mode == 0:  # tangent space: (T, N, B) in object space, then to world
+                dv = tangent_displacement(pd, prim, point, dv, _reg(regs, i3), regs[i4, 0])
+            _set(regs, o0, object_to_world_dir(point, dv) if mode != 2 else dv)
         elif op == OP_SET_NORMAL:  # the displacement's bump becomes the shading point's N
             nm = _normalize(_reg(regs, i0))
             if nm[0] == 0.0 and nm[1] == 0.0 and nm[2] == 0.0:
