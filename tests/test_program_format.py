@@ -148,3 +148,35 @@ def test_textured_emitter_light_flag():
     h["materials"][-1]["light"] = "no"
     with pytest.raises(SceneError, match=r"materials\[\d\]\.light"):
         scene_from_dict(h, a)
+
+
+def test_textured_emitter_in_the_viewport_matches_the_final_render():
+    """A LiveScene makes the same textured emitter a light and renders the final render's image
+    (same seed); editing the emitter's texture rebuilds the light set."""
+    from drt.interactive import LiveScene
+    from drt.scene import MeshData
+
+    h, a = _checker_scene(width=16)
+    a["mesh0.positions"] = a["mesh0.positions"] * 0.4
+    floor = B.add_material(h, "floor", [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}])
+    pos, tri = B.quad((0, 0, -0.5), (2, 0, 0), (0, 2, 0))
+    B.add_mesh(h, a, "floor", pos, tri, material=floor)
+    scene = scene_from_dict(h, a)
+    want = render(scene, spp=8, threads=1).combined
+    assert want[..., :3].mean() > 0.01
+    live = LiveScene(scene.render, scene.materials, [], scene.world_color)
+    for o in scene.objects:
+        m = scene.meshes[o.mesh]
+        live.set_object(o.name, o.name, MeshData(o.name, m.positions, m.triangles, m.material_index, uvs=m.uvs),
+                        o.matrix)
+    s, ctx = live.context(scene.camera, 16, 16, spp=8)
+    assert len(ctx.integrator.lights.emissive) == 2
+    got = render(s, spp=8, context=ctx, threads=1).combined
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+    builds = live.counters.light_builds
+    mats = copy.deepcopy(scene.materials)
+    mats[0]["program"]["constants"][0, 1:] = [0.0, 1.0, 0.0]  # red cells → green
+    live.set_materials(mats)
+    s, ctx = live.context(scene.camera, 16, 16, spp=1)
+    assert live.counters.light_builds == builds + 1
+    assert np.allclose(ctx.integrator.lights.emissive.radiance, [[0, 0.5, 0.5]] * 2, atol=0.05)

@@ -90,10 +90,12 @@ class RenderContext:
     warnings: list = field(default_factory=list)
 
 
-def _emissive_triangles(scene: Scene, geom, materials: MaterialTable, programs=None) -> EmissiveTriangles | None:
+def _emissive_triangles(scene: Scene, geom, materials: MaterialTable, programs=None,
+                        material_dicts=None) -> EmissiveTriangles | None:
     """Static emissive triangles become lights (sampled by NEE); moving ones are only hit.
     With ``programs`` (the scene's ProgramData) textured emitters join them, weighted by their
-    estimated average emission (``drt.lights.textured``)."""
+    estimated average emission (``drt.lights.textured``); ``material_dicts``: the material
+    list (default ``scene.materials``)."""
     if geom.static_count == 0:
         return None
     mat = geom.material[: geom.static_count]
@@ -102,7 +104,8 @@ def _emissive_triangles(scene: Scene, geom, materials: MaterialTable, programs=N
     if programs is not None:
         from .lights.textured import textured_emitters
 
-        no_light = np.array([isinstance(m, dict) and m.get("light") is False for m in scene.materials], bool)
+        dicts = material_dicts if material_dicts is not None else scene.materials
+        no_light = np.array([isinstance(m, dict) and m.get("light") is False for m in dicts], bool)
         tex = textured_emitters(programs, geom.material, geom.static_count, no_light)
         if tex is not None:
             em = np.concatenate([em, tex[0]])
@@ -114,8 +117,13 @@ def _emissive_triangles(scene: Scene, geom, materials: MaterialTable, programs=N
 
 
 def _has_textured_emission(scene: Scene) -> bool:
+    return textured_emission_in(scene.materials)
+
+
+def textured_emission_in(materials) -> bool:
+    """Whether a material list has program-driven emission (candidate textured emitters)."""
     return any(isinstance(m, dict) and m.get("program") and m.get("emission_reg") is not None
-               for m in scene.materials)
+               for m in materials)
 
 
 def _textured_world(scene: Scene, geom, materials: MaterialTable, camera: Camera):
