@@ -346,7 +346,15 @@ def _principled_checker(nt, uv):
     return p.outputs[0]
 
 
+def _not_a_light(nt):
+    """Emission Sampling None on the tile's material: its coplanar neighbours cannot see it
+    (Cycles's light tree gives it no probability there), but DRT's light selection has no
+    orientation bounds and would spend sun samples on it: noise at the one sample compared."""
+    next(m for m in bpy.data.materials if m.node_tree == nt).cycles.emission_sampling = "NONE"
+
+
 def _principled_emission(nt, uv):
+    _not_a_light(nt)
     g = node(nt, "ShaderNodeTexGradient", {"Vector": uv})
     ramp = node(nt, "ShaderNodeValToRGB", {0: g.outputs["Fac"]})
     p = node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": (0, 0, 0, 1), "Specular IOR Level": 0.0,
@@ -356,6 +364,7 @@ def _principled_emission(nt, uv):
 
 
 def _mix_shader_fac(nt, uv):
+    _not_a_light(nt)
     ck = node(nt, "ShaderNodeTexChecker", {"Scale": 3.0})
     a = node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.8, 0.2, 0.2, 1)})
     b = node(nt, "ShaderNodeEmission", {"Color": (0.2, 0.3, 0.9, 1), "Strength": 1.5})

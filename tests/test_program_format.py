@@ -45,7 +45,7 @@ def test_checker_program_renders_per_pixel():
 
 @pytest.mark.parametrize("change, field", [
     (lambda p: p.update(registers=0), "registers"),
-    (lambda p: p["ops"].append([99] + [0] * 10), "unknown opcode 99"),
+    (lambda p: p["ops"].append([199] + [0] * 10), "unknown opcode 199"),
     (lambda p: p["ops"].append([F.OP_MATH, 0, 7, -1, 0, 0, 0, -1, -1, -1, 0]), "register out of range"),
     (lambda p: p["ops"].append([F.OP_IMAGE, 0, 1, 2, 0, -1, -1, -1, -1, -1, 0]), "image 0 does not exist"),
     (lambda p: p["ops"].append([F.OP_RAMP, 1, 1, 2, 0, -1, -1, -1, -1, -1, 0]), "data table"),
@@ -131,3 +131,52 @@ def test_textured_lobes_equal_the_constant_material_at_each_hit():
     hit = np.any(img > 0, axis=2)
     assert np.all(same[0] | same[1] | ~hit)
     assert same[0][hit].mean() > 0.2 and same[1][hit].mean() > 0.2  # both cells are seen
+
+
+def test_textured_emitter_light_flag():
+    """A textured emitter joins the emissive group (drt.lights.textured) unless its material
+    says ``"light": false`` (Cycles's Emission Sampling None); the flag is validated by name."""
+    from drt.render import prepare
+
+    h, a = _checker_scene()
+    group = prepare(scene_from_dict(h, a)).integrator.lights.emissive
+    assert group is not None and len(group) == 2
+    # the 2×2 red/blue checker split by the quad's diagonal: each triangle averages to half red, half blue
+    assert np.allclose(group.radiance, [[0.5, 0, 0.5]] * 2, atol=0.05), group.radiance
+    h["materials"][-1]["light"] = False
+    assert prepare(scene_from_dict(h, a)).integrator.lights.emissive is None
+    h["materials"][-1]["light"] = "no"
+    with pytest.raises(SceneError, match=r"materials\[\d\]\.light"):
+        scene_from_dict(h, a)
+
+
+def test_textured_emitter_in_the_viewport_matches_the_final_render():
+    """A LiveScene makes the same textured emitter a light and renders the final render's image
+    (same seed); editing the emitter's texture rebuilds the light set."""
+    from drt.interactive import LiveScene
+    from drt.scene import MeshData
+
+    h, a = _checker_scene(width=16)
+    a["mesh0.positions"] = a["mesh0.positions"] * 0.4
+    floor = B.add_material(h, "floor", [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}])
+    pos, tri = B.quad((0, 0, -0.5), (2, 0, 0), (0, 2, 0))
+    B.add_mesh(h, a, "floor", pos, tri, material=floor)
+    scene = scene_from_dict(h, a)
+    want = render(scene, spp=8, threads=1).combined
+    assert want[..., :3].mean() > 0.01
+    live = LiveScene(scene.render, scene.materials, [], scene.world_color)
+    for o in scene.objects:
+        m = scene.meshes[o.mesh]
+        live.set_object(o.name, o.name, MeshData(o.name, m.positions, m.triangles, m.material_index, uvs=m.uvs),
+                        o.matrix)
+    s, ctx = live.context(scene.camera, 16, 16, spp=8)
+    assert len(ctx.integrator.lights.emissive) == 2
+    got = render(s, spp=8, context=ctx, threads=1).combined
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+    builds = live.counters.light_builds
+    mats = copy.deepcopy(scene.materials)
+    mats[0]["program"]["constants"][0, 1:] = [0.0, 1.0, 0.0]  # red cells → green
+    live.set_materials(mats)
+    s, ctx = live.context(scene.camera, 16, 16, spp=1)
+    assert live.counters.light_builds == builds + 1
+    assert np.allclose(ctx.integrator.lights.emissive.radiance, [[0, 0.5, 0.5]] * 2, atol=0.05)

@@ -109,9 +109,10 @@ class MaterialExporter:
 
     def reads_object_info(self) -> bool:
         """Whether any material program reads Object Info (objects then carry it)."""
-        from .node_programs import OP_OBJECT_INFO
+        from .node_programs import OP_OBJECT_INFO, reads_object_transform
 
-        return any(op[0] == OP_OBJECT_INFO for m in self.materials
+        # object-space inputs read the object's transform from the same per-object table
+        return any(op[0] == OP_OBJECT_INFO or reads_object_transform(op) for m in self.materials
                    for op in (m.get("program") or {}).get("ops", []))
 
     def reads(self, indices) -> dict:
@@ -151,7 +152,11 @@ class MaterialExporter:
                 # Cycles renders an unconnected surface black.
                 lobes = []
             else:
+                # first: the displacement's bump sets the N every later input reads
+                disp_normal = self._displacement(material, out, problems)
                 lobes, emission = self._shader(src, ctx, 1.0, problems, material, depth=0)
+                if disp_normal is not None and self._normal is None:
+                    self._normal = (None, disp_normal)
         medium = volume_medium(self, out, problems, textured=True) if tree is not None else None
         result = {"name": material.name, "lobes": [], "emission": [0.0, 0.0, 0.0]}
         if medium is not None:  # a Volume output: the mesh bounds a medium (drt.volumes)
@@ -175,6 +180,8 @@ class MaterialExporter:
             result["emission"] = [float(x) for x in np.broadcast_to(emission, 3)]
         if self._normal is not None and result["lobes"]:
             result["normal_reg"] = self._b.reg_of(self._normal[1])
+        if getattr(getattr(material, "cycles", None), "emission_sampling", "AUTO") == "NONE":
+            result["light"] = False  # Cycles: emission found by BSDF rays only, never sampled
         if "emission_reg" in result or "normal_reg" in result or "density_reg" in result.get("volume", {}) \
                 or "color_reg" in result.get("volume", {}) or any(
                 "color_reg" in lb or "roughness_reg" in lb for lb in result["lobes"]):
@@ -184,6 +191,28 @@ class MaterialExporter:
             uniq = list(dict.fromkeys(problems))
             self.warnings.append(f"Material '{material.name}': " + "; ".join(uniq))
         return result
+
+    def _displacement(self, material, out, problems):
+        """The Material Output's Displacement rendered as bump, as Cycles's displacement method
+        Bump Only (docs/materials.md, "Displacement"): the bumped normal Value, or None."""
+        sock = out.inputs.get("Displacement") if out is not None else None
+        if sock is None or resolve(sock, ())[0] is None:
+            return None
+        method = getattr(material, "displacement_method", None)
+        if method is None:  # Blender < 4.1 kept it in the Cycles settings
+            method = getattr(getattr(material, "cycles", None), "displacement_method", "BUMP")
+        if method == "DISPLACEMENT":
+            problems.append("displacement method 'Displacement Only' needs true displacement, which DRT "
+                            "does not do: displacement ignored")
+            return None
+        if method == "BOTH":
+            problems.append("displacement method 'Displacement and Bump': true displacement is not done, "
+                            "rendered as bump only")
+        try:
+            return self._b.displacement_bump(out, sock)
+        except Unsupported as e:
+            problems.append(f"Displacement is driven by {e} (unsupported), ignored")
+            return None
 
     def _lobe(self, lb: dict) -> dict | None:
         """A lobe with Value entries → the header's lobe dict (None if constant black)."""

@@ -30,6 +30,16 @@ OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB =
 OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 92, 93, 94
 #: Object Info outputs → OP_OBJECT_INFO mode (Material Index is the material's constant)
 OP_BUMP_OFFSET, OP_BUMP, OP_CAMERA_COORDS = 95, 96, 97
+OP_TEXCO_NORMAL, OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT, OP_SET_NORMAL = 98, 99, 100, 101
+
+
+def reads_object_transform(op) -> bool:
+    """Whether operation row ``op`` needs the hit object's transform (objects then carry their
+    per-object data): Texture Coordinate Normal, and the object spaces of Normal Map
+    (Object, Blender Object), Displacement and Vector Displacement."""
+    return (op[0] == OP_TEXCO_NORMAL or (op[0] == OP_NORMAL_MAP and op[1] in (1, 3))
+            or (op[0] == OP_DISPLACEMENT and op[1] == 1)
+            or (op[0] == OP_VECTOR_DISPLACEMENT and op[1] in (0, 1)))
 OBJECT_INFO_OUTPUTS = {"Location": 0, "Color": 1, "Alpha": 2, "Object Index": 3, "Random": 4}
 # shading-point rows (drt.materials.program_format.POINT_*)
 POINT_P, POINT_N, POINT_NG, POINT_I = 3, 4, 5, 6
@@ -98,7 +108,7 @@ SUPPORTED_NODES = {
     "ShaderNodeTexNoise", "ShaderNodeTexWhiteNoise", "ShaderNodeTexVoronoi", "ShaderNodeTexWave",
     "ShaderNodeTexMagic", "ShaderNodeTexBrick", "ShaderNodeRGBCurve", "ShaderNodeVectorCurve",
     "ShaderNodeFloatCurve", "ShaderNodeVertexColor", "ShaderNodeAttribute",
-    "ShaderNodeTexEnvironment",
+    "ShaderNodeTexEnvironment", "ShaderNodeDisplacement", "ShaderNodeVectorDisplacement",
 }
 
 
@@ -391,6 +401,25 @@ class ProgramBuilder:
             return hit
         if k == "ShaderNodeBump":
             return self._bump(node, ctx)
+        if k == "ShaderNodeDisplacement":  # Cycles's svm_node_displacement (object / world space)
+            ins = [self.inp(node, n, ctx, "float") for n in ("Height", "Midlevel", "Scale")]
+            return self.emit(OP_DISPLACEMENT, int(node.space == "OBJECT"),
+                             ins + [self._linked_or_none(node, "Normal", ctx)])
+        if k == "ShaderNodeVectorDisplacement":
+            spaces = ("TANGENT", "OBJECT", "WORLD")
+            if node.space not in spaces:
+                raise Unsupported(node)
+            ins = [self.inp(node, "Vector", ctx)] + [self.inp(node, n, ctx, "float") for n in ("Midlevel", "Scale")]
+            if node.space == "TANGENT":  # the active render UV map's tangents (Cycles's default)
+                # read at the hit even in a bump offset evaluation: Cycles's node reads the
+                # attribute at the shading point (only coordinate nodes follow the offsets);
+                # the hit's evaluation always comes first, so its registers exist
+                variant, self._variant = self._variant, 0
+                try:
+                    ins += [self.attribute("tangent:"), self.attribute("tangent_sign:")]
+                finally:
+                    self._variant = variant
+            return self.emit(OP_VECTOR_DISPLACEMENT, spaces.index(node.space), ins)
         if k in ("ShaderNodeFresnel", "ShaderNodeLayerWeight", "ShaderNodeNewGeometry",
                  "ShaderNodeLightPath", "ShaderNodeNormalMap"):
             return self._shading_point_node(node, out, ctx)
@@ -516,8 +545,8 @@ class ProgramBuilder:
             return self.point(*row)
         # Normal Map
         space = node.space
-        if space not in ("TANGENT", "WORLD", "BLENDER_WORLD"):
-            raise Unsupported(node)  # object spaces need the object's transform at the hit
+        if space not in NORMAL_MAP_SPACES:
+            raise Unsupported(node)
         ins = [self.inp(node, "Strength", ctx, "float"), self.inp(node, "Color", ctx)]
         if space == "TANGENT":
             uv = getattr(node, "uv_map", "")
@@ -554,6 +583,39 @@ class ProgramBuilder:
         # param: 2 × the filter width's register + invert (OP_BUMP has no seventh input)
         return self.emit(OP_BUMP, 0, ins, param=2 * self.reg_of(fw) + int(bool(getattr(node, "invert", False))))
 
+    def displacement_bump(self, out_node, sock):
+        """The Material Output's Displacement as bump (Cycles's ``bump_from_displacement``,
+        displacement method Bump): the displacement vector's sub-graph is compiled at the hit and
+        at the two Bump offsets, dotted with N, and fed to a Bump of strength 1, distance 1,
+        filter width 0.1 on N; ``OP_SET_NORMAL`` makes the result the shading point's N, which
+        everything compiled afterwards reads (the node caches are cleared: nodes shared with
+        the surface are evaluated again on the bumped normal, as Cycles's copies are). Returns
+        the bumped normal, or None when the displacement is constant (no bump)."""
+        src, sctx = resolve(sock, ())
+        if src is None:
+            return None
+        d_c = self.output(src, sctx)
+        if d_c.is_const:
+            return None
+        dot = VMATH_OPS.index("DOT_PRODUCT")
+        heights = [self.emit(OP_VMATH, dot, [d_c, self.point(POINT_N, -1)])]
+        fw = Value(self, const=0.1)
+        for variant in (1, 2):
+            self.emit(OP_BUMP_OFFSET, variant, [fw])
+            self._variant = variant
+            try:
+                heights.append(self.emit(OP_VMATH, dot, [self.output(src, sctx), self.point(POINT_N, -1)]))
+            finally:
+                self._variant = 0
+        self.emit(OP_BUMP_OFFSET, 0, [])
+        one = Value(self, const=1.0)
+        bumped = self.emit(OP_BUMP, 0, heights + [one, one, None], param=2 * self.reg_of(fw))
+        normal = self.emit(OP_SET_NORMAL, 0, [bumped])
+        self._cache.clear()
+        self._geometry = {k: v for k, v in self._geometry.items()
+                          if not (isinstance(k, tuple) and k[0] in ("point", "texco_normal"))}
+        return normal
+
     def _tex_coord(self, node, oname):
         """Texture Coordinate outputs (Cycles's ``svm_node_tex_coord``)."""
         other = getattr(node, "object", None)
@@ -579,7 +641,13 @@ class ProgramBuilder:
             if hit is None:
                 hit = self._geometry[key] = self.emit(OP_CAMERA_COORDS, int(oname == "Window"), [])
             return hit
-        raise Unsupported(node)  # Normal (object space): needs the object's transform per hit
+        if oname == "Normal":  # the shading normal in object space (svm_node_tex_coord)
+            key = ("texco_normal", self._variant)
+            hit = self._geometry.get(key)
+            if hit is None:
+                hit = self._geometry[key] = self.emit(OP_TEXCO_NORMAL, 0, [])
+            return hit
+        raise Unsupported(node)
 
     def point(self, row: int, component: int) -> Value:
         """A shading-point input (row of the point array, one component or −1: the vector)."""
@@ -638,8 +706,6 @@ class ProgramBuilder:
             raise Unsupported(node)
         sock = socket(node.inputs, "Vector")
         src, sctx = resolve(sock, ctx)
-        if src is None and not self.world:
-            raise Unsupported(node)
         try:
             idx = self.images.index_of(image)
         except ValueError as e:
@@ -649,7 +715,10 @@ class ProgramBuilder:
             self.problems.append(f"image '{image.name}' has no pixels (missing file?), rendered "
                                  f"magenta as in Cycles")
             return magenta
-        vec = self.geometry(OP_GENERATED) if src is None else self.output(src, sctx)
+        if src is not None:
+            vec = self.output(src, sctx)
+        else:  # the shading position: the ray direction in the world, P (world) on a surface
+            vec = self.geometry(OP_GENERATED) if self.world else self.point(POINT_P, -1)
         interp = min(INTERPOLATIONS.index(node.interpolation), 2)  # Smart: Cubic (Cycles's CPU)
         mode = ENV_PROJECTIONS.index(node.projection) * ENV_PROJECTION_STRIDE + interp * 8
         col, alpha = self.emit(OP_ENVIRONMENT, mode, [vec], param=idx, outputs=2)

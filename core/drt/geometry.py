@@ -212,8 +212,9 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     if any(o.info is not None for o in scene.objects):
         geom.object_of = cat(obj_static + obj_moving, np.zeros(0, np.int32))
         geom.object_info = np.array([np.concatenate([np.asarray(o.matrix, np.float64)[:3, 3],
-                                                     o.info if o.info is not None else [1, 1, 1, 1, 0, 0]])
-                                     for o in scene.objects], np.float64).reshape(-1, 9)
+                                                     o.info if o.info is not None else [1, 1, 1, 1, 0, 0],
+                                                     _normal_matrix(o.matrix).reshape(9)])
+                                     for o in scene.objects], np.float64).reshape(-1, 18)
     if any(isinstance(m, dict) and m.get("volume") for m in scene.materials):
         geom.object_id = cat(obj_static + obj_moving, np.zeros(0, np.int32))  # volume stack keys
     names = getattr(scene, "attributes", [])
@@ -234,6 +235,16 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         center = 0.5 * (lo + hi)
         geom.scene_radius = float(max(np.linalg.norm(hi - center), 1e-3))
     return geom
+
+
+def _normal_matrix(matrix) -> np.ndarray:
+    """inv(M)ᵀ of a 4×4 matrix's 3×3 part (object → world normals; the object's normal
+    transform the shading inputs use, docs/materials.md); identity for a singular M."""
+    m = np.asarray(matrix, np.float64)[:3, :3]
+    try:
+        return np.linalg.inv(m).T
+    except np.linalg.LinAlgError:
+        return np.eye(3)
 
 
 def static_triangle_vertices(geom: SceneGeometry, prims: np.ndarray) -> np.ndarray:

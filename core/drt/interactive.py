@@ -50,7 +50,7 @@ from .integrator import Integrator
 from .lights import LightSet
 from .materials import MaterialTable
 from .motion import RigidMotion
-from .render import RenderContext, _emissive_triangles, render
+from .render import RenderContext, _emissive_triangles, render, textured_emission_in
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
 from .scene import MAX_TRANSFORM_ENTRY, CameraSpec, MeshData, RenderSettings, Scene, SceneError
@@ -103,6 +103,14 @@ def _matrix(m) -> np.ndarray:
     if np.any(np.abs(a) > MAX_TRANSFORM_ENTRY):
         raise SceneError("matrix", f"entries must be within ±{MAX_TRANSFORM_ENTRY:g}")
     return a
+
+
+def _program_key(prog) -> tuple | None:
+    """A program's operations, constants and tables as bytes (a comparable key)."""
+    if not prog:
+        return None
+    return (prog.get("registers"),) + tuple(np.asarray(prog.get(k, []), np.float64).tobytes()
+                                            for k in ("constants", "ops", "data"))
 
 
 def _is_rigid(m: np.ndarray) -> bool:
@@ -223,7 +231,7 @@ class LiveScene:
         """Replace the material list (same indices; appended ones are new), with the images and
         attribute names their programs read (``scene.images`` / ``scene.attributes`` of a
         validated scene; meshes carry the attributes as ``MeshData.corner_attrs``)."""
-        emission_before = self._emission_signature()
+        emission_before = self._light_signature()
         self.materials = list(materials)
         if images is not None:
             self.images = list(images)
@@ -232,7 +240,7 @@ class LiveScene:
                 self._static_dirty = self._tables_dirty = True  # tangents are mapped per name
             self.attributes = list(attributes)
         self._material_table = None
-        if self._emission_signature() != emission_before:
+        if self._light_signature() != emission_before:
             self._lights_dirty = True
             # an object that became emissive must be static (only static triangles are lights)
             for key, obj in self.objects.items():
@@ -316,8 +324,17 @@ class LiveScene:
             if self._world_map is None:
                 self._world_map = world_setup(self.world_program, programs)
                 self._lights_dirty = True
+        media = media_for_scene(self.materials, getattr(self, "world_volume", None), geom)
+        mats = self._materials_or_default()
+        # textured emitters are lights as in the final render (render.prepare); none with media
+        textured = textured_emission_in(mats) and not media.enabled
+        if textured and programs is None:
+            from .integrator import program_data_for
+
+            programs = program_data_for(self._material_table, geom, cam)
         if self._lights_dirty or self._light_set is None:
-            emissive = _emissive_triangles(None, geom, self._material_table)
+            emissive = _emissive_triangles(None, geom, self._material_table, programs if textured else None,
+                                           material_dicts=mats)
             wprog, wmap = self._world_map if self.world_program is not None else (None, None)
             try:
                 self._light_set = LightSet(self.lights, self.world_color, emissive,
@@ -333,7 +350,7 @@ class LiveScene:
         integ = Integrator(settings, geom, tracer, self._material_table, self._light_set, cam,
                            Sampler(settings.sampler, settings.seed, settings.spp), self._filter,
                            direct=settings.direct, indirect=settings.indirect,
-                           media=media_for_scene(self.materials, getattr(self, "world_volume", None), geom),
+                           media=media,
                            programs=programs, world_registers=world_regs)
         scene = Scene(settings, camera, self.world_color, self.materials, self.lights, [], [],
                       world_program=self.world_program)
@@ -353,6 +370,14 @@ class LiveScene:
             return self.materials
         return [{"name": "default", "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}],
                  "emission": [0, 0, 0]}]
+
+    def _light_signature(self) -> tuple:
+        """What the light set takes from the materials: each one's emission (the textured
+        emitters' estimates come from their programs), program emission and ``light`` flag."""
+        return tuple((tuple(np.asarray(m.get("emission", (0, 0, 0)), np.float64).ravel().tolist()),
+                      m.get("emission_reg") is not None, m.get("light", True),
+                      _program_key(m.get("program")) if m.get("emission_reg") is not None else None)
+                     for m in self.materials)
 
     def _emission_signature(self) -> tuple:
         return tuple(bool(np.any(np.asarray(m.get("emission", (0, 0, 0))) > 0)) for m in self.materials)

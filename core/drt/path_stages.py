@@ -46,10 +46,12 @@ from .lights.common import I_VISIBLE_CAMERA
 from .lights import (emissive_pdf, light_sample_full, shape_emission, shape_intersect, sun_emission,
                      sun_in_cone, world_pdf, world_radiance)
 from .lights.world_map import world_radiance_at
+from .lights.textured import textured_light_radiance
 from .materials import (LOBE_DIFFUSE, LOBE_GLOSSY, LOBE_TRANSMISSION, NO_BUMP, bsdf_eval_bump,
                         bsdf_sample_bump)
 from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
-                                       POINT_P, POINT_PATH, POINT_PATH2, POINT_SHADOW, POINT_XFORM)
+                                       POINT_P, POINT_PATH, POINT_PATH2, POINT_SHADOW, POINT_XFORM,
+                                       POINT_OBJECT_XFORM)
 from .materials.programs import eval_material
 from .materials.transparency import straight_lobe
 from .materials.table import LOBE_SUBSURFACE, pick_lobe
@@ -272,6 +274,17 @@ def fill_point(point, pd, surf, hits, i, prim, p, ng, ns, wo, flags, counts, ray
     for r in range(3):
         for c in range(3):
             point[POINT_XFORM + r, c] = hits.normal_xform[i, r, c] if moving else (1.0 if r == c else 0.0)
+    # the object's own normal transform (object-space inputs): a static object's from its row
+    # of the per-object table (when the scene keeps one), a moving one's at this ray's time
+    obj_rows = pd.object_of.shape[0] > prim and pd.object_info.shape[1] >= 18 and not moving
+    for r in range(3):
+        for c in range(3):
+            if moving:
+                point[POINT_OBJECT_XFORM + r, c] = hits.normal_xform[i, r, c]
+            elif obj_rows:
+                point[POINT_OBJECT_XFORM + r, c] = pd.object_info[pd.object_of[prim], 9 + 3 * r + c]
+            else:
+                point[POINT_OBJECT_XFORM + r, c] = 1.0 if r == c else 0.0
     _put(point, POINT_PATH, (1.0 if camera else 0.0, 1.0 if flags & RAY_DIFFUSE else 0.0,
                              1.0 if flags & (RAY_GLOSSY | RAY_SINGULAR) else 0.0))
     _put(point, POINT_PATH2, (1.0 if flags & RAY_SINGULAR else 0.0,
@@ -599,12 +612,17 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         if direct != DIRECT_BSDF and ld.n_strategies > 0 and not md.delta_only[mat]:
             hint = material_hint(md, mat, n_wo, wo)
             ul0, ul1 = sample_2d(sd, pixel, idx, base + 1)
-            wi, dist, le, lpdf, l_delta, l_valid, strategy, _ = light_sample_full(
+            wi, dist, le, lpdf, l_delta, l_valid, strategy, l_tri = light_sample_full(
                 ld, p, n_wo, hint, u_light_select, ul0, ul1)
             if l_valid and lpdf > 0.0 and strategy == ld.world_index and ld.world_prog >= 0:
                 # Cycles evaluates the background for a light sample as an emission ray:
                 # every Light Path flag 0 (this hit's rows in ``point`` are no longer needed)
                 le = world_emission(ld, pd, regs, point, wi, 0, paths.counts[i], False)
+            elif (l_valid and lpdf > 0.0 and strategy == ld.emissive_index and pd.prog_of.shape[0]
+                  and pd.emission_reg[surf.material[l_tri]] >= 0):
+                # a textured emitter (drt.lights.textured): its program's emission at the point
+                le = textured_light_radiance(pd, regs, point, surf.material[l_tri], l_tri,
+                                             add(p, scale(wi, dist)))
             if l_valid and lpdf > 0.0:
                 wi_l = to_local(wi, t_ax, b_ax, ns)
                 f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local)

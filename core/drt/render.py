@@ -90,16 +90,40 @@ class RenderContext:
     warnings: list = field(default_factory=list)
 
 
-def _emissive_triangles(scene: Scene, geom, materials: MaterialTable) -> EmissiveTriangles | None:
-    """Static emissive triangles become lights (sampled by NEE); moving ones are only hit."""
-    if geom.static_count == 0 or not np.any(materials.has_emission):
+def _emissive_triangles(scene: Scene, geom, materials: MaterialTable, programs=None,
+                        material_dicts=None) -> EmissiveTriangles | None:
+    """Static emissive triangles become lights (sampled by NEE); moving ones are only hit.
+    With ``programs`` (the scene's ProgramData) textured emitters join them, weighted by their
+    estimated average emission (``drt.lights.textured``); ``material_dicts``: the material
+    list (default ``scene.materials``)."""
+    if geom.static_count == 0:
         return None
     mat = geom.material[: geom.static_count]
-    em = np.nonzero(materials.has_emission[mat])[0]
+    em = np.nonzero(materials.has_emission[mat])[0] if np.any(materials.has_emission) else np.zeros(0, np.int64)
+    radiance = materials.emission[mat[em]]
+    if programs is not None:
+        from .lights.textured import textured_emitters
+
+        dicts = material_dicts if material_dicts is not None else scene.materials
+        no_light = np.array([isinstance(m, dict) and m.get("light") is False for m in dicts], bool)
+        tex = textured_emitters(programs, geom.material, geom.static_count, no_light)
+        if tex is not None:
+            em = np.concatenate([em, tex[0]])
+            radiance = np.concatenate([radiance, tex[1]])
     if len(em) == 0:
         return None
     verts = geom.static_positions[geom.static_triangles[em]].astype(np.float64)
-    return EmissiveTriangles(verts, materials.emission[mat[em]], em)
+    return EmissiveTriangles(verts, radiance, em)
+
+
+def _has_textured_emission(scene: Scene) -> bool:
+    return textured_emission_in(scene.materials)
+
+
+def textured_emission_in(materials) -> bool:
+    """Whether a material list has program-driven emission (candidate textured emitters)."""
+    return any(isinstance(m, dict) and m.get("program") and m.get("emission_reg") is not None
+               for m in materials)
 
 
 def _textured_world(scene: Scene, geom, materials: MaterialTable, camera: Camera):
@@ -139,12 +163,20 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
         materials = MaterialTable.from_scene(scene.materials, scene.images, scene.attributes)
     except ValueError as e:
         raise SceneError("materials", str(e)) from None
-    emissive = _emissive_triangles(scene, geom, materials)
     camera = Camera(scene.camera, settings, geom.origin_shift)
     programs, world_program, world_map, world_regs = None, None, None, 0
     if scene.world_program is not None:
         programs, world_program, world_map = _textured_world(scene, geom, materials, camera)
         world_regs = scene.world_program["registers"]
+    media = media_for_scene(scene.materials, scene.world_volume, geom)
+    # textured emitters are lights (NEE) except in scenes with media, whose light sampling
+    # evaluates no programs (they keep the BSDF-hit-only path there)
+    textured = _has_textured_emission(scene) and not media.enabled
+    if textured and programs is None:
+        from .integrator import program_data_for
+
+        programs = program_data_for(materials, geom, camera)
+    emissive = _emissive_triangles(scene, geom, materials, programs if textured else None)
     try:
         # a constant-colour world is found by BSDF rays only, as in Cycles (see LightSet); a
         # textured one is importance-sampled (drt.lights.world_map)
@@ -160,7 +192,7 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
         PixelFilter(settings.filter_type, settings.filter_width),
         direct=settings.direct,
         indirect=settings.indirect,
-        media=media_for_scene(scene.materials, scene.world_volume, geom),
+        media=media,
         programs=programs,
         world_registers=world_regs,
     )

@@ -429,6 +429,8 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
             mat["volume"] = volume
         if "surface" in m:
             mat["surface"] = _bool(m, "surface", p)
+        if "light" in m:  # false: emission found by BSDF rays only (Cycles's Emission Sampling None)
+            mat["light"] = _bool(m, "light", p)
         if m.get("program") is not None:
             try:
                 mat["program"] = validate_program(m["program"], n_images, f"{p}.program", n_attributes)

@@ -31,7 +31,8 @@ import numpy as np
 
 from ..kernels import inline_kernel, kernel
 from ..materials.program_format import (POINT_GENERATED, POINT_I, POINT_N, POINT_NG, POINT_NSMOOTH, POINT_OBJECT,
-                                        POINT_P, POINT_ROWS, POINT_SHADOW, POINT_UV, POINT_XFORM)
+                                        POINT_P, POINT_ROWS, POINT_SHADOW, POINT_UV, POINT_XFORM,
+                                        POINT_OBJECT_XFORM)
 from ..materials.programs import run_program
 from ..sampling.spherical_maps import direction_to_equirectangular, equirectangular_to_direction
 
@@ -62,6 +63,8 @@ def world_radiance_at(pd, regs, prog, reg, d, point):
         point[POINT_I, c] = -d[c]
         point[POINT_NSMOOTH, c] = -d[c]
         point[POINT_SHADOW, c] = 0.0
+        for r in range(3):  # no object: Texture Coordinate Normal is N itself (a hit left its own)
+            point[POINT_OBJECT_XFORM + r, c] = 1.0 if r == c else 0.0
     run_program(pd, regs, prog, -1, 0.0, 0.0, point)
     return (max(regs[reg, 0], 0.0), max(regs[reg, 1], 0.0), max(regs[reg, 2], 0.0))
 
@@ -106,6 +109,7 @@ def point_rows() -> np.ndarray:
     """A shading-point array for a direction (identity normal transform, Light Path rows 0)."""
     point = np.zeros((POINT_ROWS, 3))
     point[POINT_XFORM:POINT_XFORM + 3] = np.eye(3)
+    point[POINT_OBJECT_XFORM:POINT_OBJECT_XFORM + 3] = np.eye(3)
     return point
 
 

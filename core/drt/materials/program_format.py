@@ -44,13 +44,19 @@ ENV_PROJECTION_STRIDE = 32
 # shading-point inputs of surface hits (docs/materials.md, "Shading-point inputs")
 OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 92, 93, 94
 OP_BUMP_OFFSET, OP_BUMP, OP_CAMERA_COORDS = 95, 96, 97
+#: object-space shading inputs (docs/materials.md, "Object spaces and displacement"):
+#: Texture Coordinate Normal (mode 0); the Displacement node (mode 0 world, 1 object; ins
+#: height, midlevel, scale, normal or −1 for N); Vector Displacement (mode 0 tangent, 1 object,
+#: 2 world; ins vector, midlevel, scale (+ tangent, tangent sign in tangent space)); SET_NORMAL writes in0 (normalised) into the point's N row, so
+#: the rest of the program sees the bumped normal (Cycles's ``svm_node_set_normal``)
+OP_TEXCO_NORMAL, OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT, OP_SET_NORMAL = 98, 99, 100, 101
 # procedural textures and curves (issue 11 phase 2; kernels in drt.materials.procedural). Scalar
 # inputs travel packed three to a register (the compiler's COMBINE), see programs.run_program.
 OP_NOISE, OP_WHITE_NOISE, OP_VORONOI, OP_WAVE, OP_MAGIC, OP_BRICK, OP_CURVES = 50, 51, 52, 53, 54, 55, 56
 PROCEDURAL_OPCODES = {OP_NOISE, OP_WHITE_NOISE, OP_VORONOI, OP_WAVE, OP_MAGIC, OP_BRICK, OP_CURVES}
 #: opcodes whose ``param`` is an offset into ``data`` and how many floats they read there
 DATA_OPS = {OP_RAMP: 4 * RAMP_TABLE_SIZE, OP_BRICK: 4, OP_CURVES: 4 + 4 * RAMP_TABLE_SIZE}
-OPCODES = PROCEDURAL_OPCODES | {OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_BUMP_OFFSET, OP_BUMP,
+OPCODES = PROCEDURAL_OPCODES | {OP_TEXCO_NORMAL, OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT, OP_SET_NORMAL, OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_BUMP_OFFSET, OP_BUMP,
            OP_CAMERA_COORDS, OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
            OP_CHECKER, OP_GRADIENT, OP_RAMP, OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA,
            OP_BRIGHT_CONTRAST, OP_HSV, OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE,
@@ -75,7 +81,11 @@ POINT_DEPTH = 10   # (ray depth, diffuse depth, glossy depth)
 POINT_MISC = 11    # (transmission depth, ray length, backfacing)
 POINT_XFORM = 12   # rows 12..14
 POINT_SHADOW = 15  # (is shadow ray, 0, 0): 1 only where a shadow ray meets a transparent surface
-POINT_ROWS = 16
+#: rows 16..18: the hit object's normal transform (object → world normals, inv(M)ᵀ of its 3×3
+#: matrix M): the moving object's normal transform, a static object's from ``object_info``
+#: columns 9..17 (filled only when the scene keeps per-object data), identity otherwise
+POINT_OBJECT_XFORM = 16
+POINT_ROWS = 19
 #: Normal Map spaces (Blender's enum order)
 NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WORLD")
 #: Rec.709 luminance weights (Blender's default working space): Cycles's colour → float
@@ -104,7 +114,8 @@ ProgramData = namedtuple("ProgramData", [
     "normal_reg",       # (M,) int64 register of the shading normal (Normal Map), −1: none
     "origin",           # (3,) float64 Blender world position of the renderer's origin (P rows)
     "object_of",        # (T,) int32 object of each global triangle ((0,): no Object Info)
-    "object_info",      # (O, 9) float64 [location xyz, colour rgb, alpha, pass index, random]
+    "object_info",      # (O, 18) float64 [location xyz, colour rgb, alpha, pass index, random,
+                        # normal transform inv(M)ᵀ row-major (9)] ((0, 9): none)
     "positions",        # (V, 3) float32 static world-space vertices (the Bump node's tangents)
     "triangles",        # (S, 3) int32 static triangles (global ids < S)
     "footprint",        # (4, 3) float64 a pixel's right/up extent at a hit: abs + t·rel rows
@@ -155,6 +166,13 @@ def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> 
             raise ValueError(f"{where}.ops[{k}]: missing filter width")
         if row[0] == OP_CAMERA_COORDS and not 0 <= row[1] <= 1:
             raise ValueError(f"{where}.ops[{k}]: camera coordinate output out of range")
+        if row[0] == OP_DISPLACEMENT and not (0 <= row[1] <= 1 and min(row[4], row[5], row[6]) >= 0):
+            raise ValueError(f"{where}.ops[{k}]: displacement space or inputs out of range")
+        if row[0] == OP_VECTOR_DISPLACEMENT and not (0 <= row[1] <= 2 and min(row[4], row[5], row[6]) >= 0
+                                                     and (row[1] or min(row[7], row[8]) >= 0)):
+            raise ValueError(f"{where}.ops[{k}]: vector displacement space or inputs out of range")
+        if row[0] == OP_SET_NORMAL and row[4] < 0:
+            raise ValueError(f"{where}.ops[{k}]: missing input")
         if row[0] == OP_OBJECT_INFO and not 0 <= row[1] < 5:
             raise ValueError(f"{where}.ops[{k}]: object info output out of range")
         if row[0] in (OP_FRESNEL, OP_LAYER_WEIGHT) and row[4] < 0 or row[0] == OP_LAYER_WEIGHT and row[3] < 0:
@@ -181,7 +199,8 @@ def _reg(v, n, where):
 
 #: opcodes that read the shading-point rows a surface hit fills
 POINT_OPS = frozenset({OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_BUMP_OFFSET, OP_BUMP,
-                       OP_CAMERA_COORDS})
+                       OP_CAMERA_COORDS, OP_TEXCO_NORMAL, OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT,
+                       OP_SET_NORMAL})
 
 
 def build_program_data(materials: list[dict], table, images: list[tuple[dict, np.ndarray]],

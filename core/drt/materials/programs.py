@@ -45,7 +45,8 @@ from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, PO
                              OP_HSV, OP_HSV_TO_RGB, OP_IMAGE, OP_INVERT, OP_MAP_RANGE,
                              OP_ATTRIBUTE, OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
                              OP_TO_GRAY, OP_UV, OP_VMATH, RAMP_TABLE_SIZE, OP_ENVIRONMENT,
-                             ENV_PROJECTION_STRIDE)
+                             ENV_PROJECTION_STRIDE, OP_DISPLACEMENT, OP_SET_NORMAL, OP_TEXCO_NORMAL,
+                             OP_VECTOR_DISPLACEMENT, POINT_OBJECT_XFORM)
 from ..sampling.spherical_maps import direction_to_uv
 
 
@@ -735,7 +736,7 @@ def normal_map(space, strength, color, tangent, sign, point):
             c = (c[0], -c[1], -c[2])
         nm = _normalize(c)
         if space == 1 or space == 3:  # object space: through the object's normal transform
-            x = point[POINT_XFORM:POINT_XFORM + 3]
+            x = point[POINT_OBJECT_XFORM:POINT_OBJECT_XFORM + 3]
             nm = _normalize((x[0, 0] * nm[0] + x[0, 1] * nm[1] + x[0, 2] * nm[2],
                              x[1, 0] * nm[0] + x[1, 1] * nm[1] + x[1, 2] * nm[2],
                              x[2, 0] * nm[0] + x[2, 1] * nm[1] + x[2, 2] * nm[2]))
@@ -748,6 +749,57 @@ def normal_map(space, strength, color, tangent, sign, point):
     if not (math.isfinite(nm[0]) and math.isfinite(nm[1]) and math.isfinite(nm[2])):
         return (0.0, 0.0, 0.0)
     return nm
+
+
+@kernel
+def object_inverse(point):
+    """M ᵀ (world → object normals; its transpose maps object directions to world) as nine
+    row-major values, from the hit object's normal transform inv(M)ᵀ in ``point``
+    (``POINT_OBJECT_XFORM``): the inverse of that 3×3 matrix (identity if singular)."""
+    a = point[POINT_OBJECT_XFORM:POINT_OBJECT_XFORM + 3]
+    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+    c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+    c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+    if det == 0.0 or not math.isfinite(det):
+        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    k = 1.0 / det
+    return (c00 * k, (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) * k, (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) * k,
+            c01 * k, (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) * k, (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) * k,
+            c02 * k, (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) * k, (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) * k)
+
+
+@kernel
+def world_to_object_normal(point, n):
+    """Cycles's ``object_inverse_normal_transform``: normalize(Mᵀ n)."""
+    b = object_inverse(point)
+    return _normalize((b[0] * n[0] + b[1] * n[1] + b[2] * n[2], b[3] * n[0] + b[4] * n[1] + b[5] * n[2],
+                       b[6] * n[0] + b[7] * n[1] + b[8] * n[2]))
+
+
+@kernel
+def object_to_world_dir(point, v):
+    """Cycles's ``object_dir_transform``: M v (M = (Mᵀ)ᵀ from ``object_inverse``)."""
+    b = object_inverse(point)
+    return (b[0] * v[0] + b[3] * v[1] + b[6] * v[2], b[1] * v[0] + b[4] * v[1] + b[7] * v[2],
+            b[2] * v[0] + b[5] * v[1] + b[8] * v[2])
+
+
+@kernel
+def tangent_displacement(pd, prim, point, dv, tangent, sign):
+    """Vector Displacement's tangent space (Cycles's ``svm_node_vector_displacement``): dv's x,
+    y, z along the tangent, the normal and the signed bitangent, all in object space. A static
+    hit's tangent is stored in world space (by the normal transform, length kept): it is brought
+    back by Mᵀ; a moving hit's is local already. No tangent (no UV map): the y part only."""
+    n = world_to_object_normal(point, _row(point, POINT_N))
+    tl = _len(tangent)
+    t = tangent
+    if prim < pd.triangles.shape[0] and tl > 0.0:
+        u = world_to_object_normal(point, tangent)
+        t = (u[0] * tl, u[1] * tl, u[2] * tl)
+    b = _normalize((n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]))
+    return (t[0] * dv[0] + n[0] * dv[1] + b[0] * sign * dv[2], t[1] * dv[0] + n[1] * dv[1] + b[1] * sign * dv[2],
+            t[2] * dv[0] + n[2] * dv[1] + b[2] * sign * dv[2])
 
 
 @kernel
@@ -1064,6 +1116,30 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
             _set(regs, o0, rgb_to_hsv(_reg(regs, i0)))
         elif op == OP_HSV_TO_RGB:
             _set(regs, o0, hsv_to_rgb(_reg(regs, i0)))
+        elif op == OP_TEXCO_NORMAL:  # Texture Coordinate Normal: N in object space
+            _set(regs, o0, world_to_object_normal(point, _row(point, POINT_N)))
+        elif op == OP_DISPLACEMENT:  # Cycles's svm_node_displacement
+            nrm = _reg(regs, i3) if i3 >= 0 else _row(point, POINT_N)
+            k_d = (regs[i0, 0] - regs[i1, 0]) * regs[i2, 0]
+            if mode == 1:
+                nrm = world_to_object_normal(point, nrm)
+                _set(regs, o0, object_to_world_dir(point, (nrm[0] * k_d, nrm[1] * k_d, nrm[2] * k_d)))
+            else:
+                _set(regs, o0, (nrm[0] * k_d, nrm[1] * k_d, nrm[2] * k_d))
+        elif op == OP_VECTOR_DISPLACEMENT:  # svm_node_vector_displacement
+            v = _reg(regs, i0)
+            mid = regs[i1, 0]
+            sc = regs[i2, 0]
+            dv = ((v[0] - mid) * sc, (v[1] - mid) * sc, (v[2] - mid) * sc)
+            if mode == 0:  # tangent space: (T, N, B) in object space, then to world
+                dv = tangent_displacement(pd, prim, point, dv, _reg(regs, i3), regs[i4, 0])
+            _set(regs, o0, object_to_world_dir(point, dv) if mode != 2 else dv)
+        elif op == OP_SET_NORMAL:  # the displacement's bump becomes the shading point's N
+            nm = _normalize(_reg(regs, i0))
+            if nm[0] == 0.0 and nm[1] == 0.0 and nm[2] == 0.0:
+                nm = _row(point, POINT_N)
+            _set(point, POINT_N, nm)
+            _set(regs, o0, nm)
         elif 50 <= op < 70:  # procedural textures and curves (drt.materials.procedural)
             procedural_op(regs, pd.data, op, mode, o0, o1, i0, i1, i2, i3, i4, i5, param)
 

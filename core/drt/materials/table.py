@@ -663,6 +663,11 @@ class MaterialTable:
                     lobe_fresnel, lobe_layer)
         table.program_source = None
         table.images = list(images)  # a world program may read them without any material program
+        for i, mat in enumerate(materials):
+            if isinstance(mat, dict) and mat.get("light") is False and table.has_emission[i]:
+                # Emission Sampling None: not a light for NEE; hits still collect the emission
+                table.has_emission[i] = False
+                table.data.has_emission[i] = True
         if any(isinstance(mat, dict) and mat.get("program") for mat in materials):
             table.program_source = (list(materials), list(images), list(attributes))
             for i, mat in enumerate(materials):

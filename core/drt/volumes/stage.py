@@ -34,7 +34,7 @@ from .hetero import ratio_tracking, seed_of, seed_of_point, stack_is_hetero, sta
 from .distance import (channel_probs, equiangular_pdf, equiangular_sample, equiangular_setup, exp_pdf,
                        exp_sample, pick_channel)
 from ..materials.program_format import (POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH, POINT_P,
-                                        POINT_SHADOW, POINT_XFORM)
+                                        POINT_SHADOW, POINT_XFORM, POINT_OBJECT_XFORM)
 from ..materials.programs import eval_material
 from ..materials.transparency import transparency
 from .phase import hg_pdf
@@ -353,6 +353,7 @@ def fill_shadow_point(point, pd, o, d, t, ng):
         point[POINT_NSMOOTH, c] = ng[c]
         point[POINT_I, c] = -d[c]
         point[POINT_XFORM + c, c] = 1.0
+        point[POINT_OBJECT_XFORM + c, c] = 1.0
     point[POINT_MISC, 1] = t
     point[POINT_MISC, 2] = 1.0 if back else 0.0
     point[POINT_SHADOW, 0] = 1.0
