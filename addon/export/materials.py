@@ -235,6 +235,8 @@ class MaterialExporter:
                 out["roughness"] = min(max(float(np.ravel(r)[0]), 0.0), 1.0)
         if "ior" in lb:
             out["ior"] = lb["ior"]
+        if "reflection_weight" in lb:
+            out["reflection_weight"] = lb["reflection_weight"]
         for key in ("radius", "method", "anisotropy", "tint", "multiscatter"):  # SSS, specular
             if key in lb:
                 out[key] = lb[key]
@@ -345,6 +347,14 @@ class MaterialExporter:
             return [{"type": "GLASS", "color": w * self._color(node, "Color", problems, ctx=ctx),
                      "roughness": self._roughness(node, problems, ctx),
                      "ior": max(self._const_value(node, "IOR", problems, 1.45, ctx), 1.0)}], np.zeros(3)
+        if kind == "ShaderNodeBsdfTranslucent":
+            return [{"type": "TRANSLUCENT", "color": w * self._color(node, "Color", problems, ctx=ctx)}], np.zeros(3)
+        if kind == "ShaderNodeBsdfRefraction":
+            return [{"type": "REFRACTION", "color": w * self._color(node, "Color", problems, ctx=ctx),
+                     "roughness": self._roughness(node, problems, ctx),
+                     "ior": max(self._const_value(node, "IOR", problems, 1.45, ctx), 1e-5)}], np.zeros(3)
+        if kind == "ShaderNodeHoldout":
+            return [{"type": "HOLDOUT", "color": w * np.ones(3)}], np.zeros(3)
         if kind == "ShaderNodeBsdfTransparent":
             return [{"type": "GLASS", "color": w * self._color(node, "Color", problems, ctx=ctx),
                      "roughness": 0.0, "ior": 1.0}], np.zeros(3)
@@ -382,8 +392,10 @@ class MaterialExporter:
                      "roughness": float(np.sqrt(r)),
                      "anisotropy": self._const_value(node, "Anisotropy", problems, 0.0, ctx)}], np.zeros(3)
 
-        # Unsupported: its (base) color as diffuse.
-        problems.append(f"unsupported shader '{node.name}' ({kind}), rendered as diffuse")
+        # Unsupported (Toon, Hair, Principled Hair, Specular BSDF (EEVEE), Ray Portal...): its
+        # (base) color as diffuse (docs/materials.md, "Unsupported shader nodes")
+        problems.append(f"unsupported shader '{node.name}' ({kind}), rendered as a Diffuse BSDF of its "
+                        f"{'Base Color' if node.inputs.get('Base Color') is not None else 'Color'}")
         for name in ("Base Color", "Color"):
             if node.inputs.get(name) is not None:
                 col = self._color(node, name, problems, ctx=ctx)
@@ -426,6 +438,30 @@ class MaterialExporter:
         if method == "BURLEY":
             problems.append(f"'{node.name}' Christensen-Burley subsurface rendered as Random Walk")
         return method if method in ("RANDOM_WALK", "RANDOM_WALK_SKIN", "BURLEY") else "RANDOM_WALK"
+
+    def _principled_glass(self, node, k, base, tint, rough, ior, problems):
+        """The Principled transmission as Cycles 5.0 builds it: a GGX glass of weight k whose
+        generalized-Schlick Fresnel (exponent −IOR, i.e. the real dielectric curve) reflects
+        untinted and refracts tinted by sqrt(clamped base colour). A GLASS lobe with colour
+        k·sqrt(base) and reflection_weight k; a textured k (alpha, transmission, metallic)
+        tints both (the old GLASS), with a warning."""
+        clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
+        if isinstance(clamped, Value):
+            root = self._b.emit(OP_VMATH, VMATH_OPS.index("POWER"), [clamped, Value(self._b, const=0.5)])
+            if clamped.fallback is not None:
+                root.fallback = np.sqrt(np.clip(clamped.fallback, 0.0, 1.0))
+        else:  # (a black base still reflects: keep the lobe with a negligible transmission)
+            root = np.maximum(np.sqrt(clamped), MIN_PLACEHOLDER)
+        if isinstance(tint, Value) or np.any(np.abs(np.broadcast_to(tint, 3) - 1.0) > 1e-6):
+            problems.append(f"'{node.name}' specular tint on the transmission ignored (reflection untinted)")
+        lobe = {"type": "GLASS", "color": k * root, "roughness": rough, "ior": ior}
+        k = constant(k)
+        if isinstance(k, Value):
+            problems.append(f"'{node.name}' textured weight of the transmission: its reflection is tinted "
+                            f"by sqrt(base colour) too")
+        else:
+            lobe["reflection_weight"] = float(np.ravel(k)[0])
+        return lobe
 
     def _principled(self, node, w, problems, ctx):
         base = self._color(node, "Base Color", problems, ctx=ctx)
@@ -474,8 +510,7 @@ class MaterialExporter:
                               "multiscatter": multiscatter})
         dielectric = 1.0 - metallic
         if maybe_positive(trans) and maybe_positive(dielectric):
-            lobes.append({"type": "GLASS", "color": wa * dielectric * trans * base,
-                          "roughness": rough, "ior": ior})
+            lobes.append(self._principled_glass(node, wa * dielectric * trans, base, tint, rough, ior, problems))
         opaque = wa * dielectric * (1 - trans)
         if maybe_positive(opaque):
             # The specular layer (GGX × dielectric Fresnel) over the diffuse/subsurface base,
