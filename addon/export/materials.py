@@ -86,6 +86,13 @@ def _representative(v: Value, floor: float) -> list:
     return [float(max(x, floor)) for x in np.broadcast_to(fb, 3)]
 
 
+def _multiscatter_tint(color) -> list:
+    """Fss of Cycles's Multiscatter GGX glass compensation, in [0, 1]: the colour, or for a
+    program-driven one its constant stand-in (the compensation is per material, not per hit)."""
+    c = _representative(color, 0.0) if isinstance(color, Value) else np.broadcast_to(color, 3)
+    return [float(min(max(x, 0.0), 1.0)) for x in c]
+
+
 class MaterialExporter:
     """Converts Blender materials to core material dicts, once each; collects warnings."""
 
@@ -237,7 +244,7 @@ class MaterialExporter:
             out["ior"] = lb["ior"]
         if "reflection_weight" in lb:
             out["reflection_weight"] = lb["reflection_weight"]
-        for key in ("radius", "method", "anisotropy", "tint", "multiscatter"):  # SSS, specular
+        for key in ("radius", "method", "anisotropy", "tint", "multiscatter", "multiscatter_tint"):  # SSS, specular
             if key in lb:
                 out[key] = lb[key]
         if "weight" in lb:
@@ -344,9 +351,12 @@ class MaterialExporter:
             return [{"type": "GLOSSY", "color": w * self._color(node, "Color", problems, ctx=ctx),
                      "roughness": self._roughness(node, problems, ctx)}], np.zeros(3)
         if kind == "ShaderNodeBsdfGlass":
-            return [{"type": "GLASS", "color": w * self._color(node, "Color", problems, ctx=ctx),
-                     "roughness": self._roughness(node, problems, ctx),
-                     "ior": max(self._const_value(node, "IOR", problems, 1.45, ctx), 1.0)}], np.zeros(3)
+            col = self._color(node, "Color", problems, ctx=ctx)
+            lobe = {"type": "GLASS", "color": w * col, "roughness": self._roughness(node, problems, ctx),
+                    "ior": max(self._const_value(node, "IOR", problems, 1.45, ctx), 1.0)}
+            if getattr(node, "distribution", "") == "MULTI_GGX":  # Cycles's compensation, Fss = colour
+                lobe["multiscatter_tint"] = _multiscatter_tint(col)
+            return [lobe], np.zeros(3)
         if kind == "ShaderNodeBsdfTranslucent":
             return [{"type": "TRANSLUCENT", "color": w * self._color(node, "Color", problems, ctx=ctx)}], np.zeros(3)
         if kind == "ShaderNodeBsdfRefraction":
@@ -455,6 +465,8 @@ class MaterialExporter:
         if isinstance(tint, Value) or np.any(np.abs(np.broadcast_to(tint, 3) - 1.0) > 1e-6):
             problems.append(f"'{node.name}' specular tint on the transmission ignored (reflection untinted)")
         lobe = {"type": "GLASS", "color": k * root, "roughness": rough, "ior": ior}
+        if getattr(node, "distribution", "") == "MULTI_GGX":  # Fss = the transmission tint
+            lobe["multiscatter_tint"] = _multiscatter_tint(root)
         k = constant(k)
         if isinstance(k, Value):
             problems.append(f"'{node.name}' textured weight of the transmission: its reflection is tinted "

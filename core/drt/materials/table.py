@@ -52,6 +52,7 @@ from .diffuse import INV_PI, diffuse_eval, diffuse_sample, translucent_eval, tra
 from .dielectric_specular import (average_albedo, dielectric_spec_delta_weight, dielectric_spec_eval,
                                   layer_weight, metallic_average_albedo, metallic_delta_weight,
                                   metallic_eval)
+from .glass_ms import glass_energy_factor
 from .subsurface_lobe import BSSRDF_MIN_RADIUS, SSS_METHODS, effective_radius, sss_entry_sample
 from .ggx import (
     ALPHA_SQ_SINGULAR,
@@ -226,15 +227,22 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
             v, p = glossy_eval(wo, wi, md.lobe_alpha[m, s])
         elif t == BSDF_GLASS:
             v, p = glass_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
+            c0, c1, c2 = md.lobe_color[m, s, 0], md.lobe_color[m, s, 1], md.lobe_color[m, s, 2]
             if md.lobe_fresnel[m, s, 3] > 0.0 and wo[2] * wi[2] > 0.0:
                 # a Principled transmission: the reflection is weighted by the lobe's
                 # scalar weight (untinted), only the refraction by its colour
-                k = md.lobe_fresnel[m, s, 4]
-                f0 += k * v
-                f1 += k * v
-                f2 += k * v
-                pdf += md.lobe_select[m, s] * p
-                continue
+                c0 = c1 = c2 = md.lobe_fresnel[m, s, 4]
+            fss = (md.lobe_fresnel[m, s, 0], md.lobe_fresnel[m, s, 1], md.lobe_fresnel[m, s, 2])
+            if fss[0] + fss[1] + fss[2] > 0.0:  # Multiscatter GGX glass (drt.materials.glass_ms)
+                k = glass_energy_factor(md.lobe_alpha[m, s], md.lobe_ior[m, s], wo[2], fss)
+                c0, c1, c2 = c0 * k[0], c1 * k[1], c2 * k[2]
+            if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
+                v *= under_weight(md, m, s, wo)
+            f0 += c0 * v
+            f1 += c1 * v
+            f2 += c2 * v
+            pdf += md.lobe_select[m, s] * p
+            continue
         elif t == BSDF_TRANSLUCENT:
             v, p = translucent_eval(wo, wi)
         elif t == BSDF_REFRACTION:
@@ -665,6 +673,9 @@ class MaterialTable:
                     if k < 0.0:
                         raise _fail(lw, f"reflection_weight must be >= 0, got {k!r}")
                     fr[3], fr[4] = 1.0, k
+                if kind == "GLASS" and "multiscatter_tint" in lobe:
+                    # Cycles's Multiscatter GGX glass: Fss of its energy compensation
+                    fr[:3] = np.clip(_rgb(lobe["multiscatter_tint"], lw, "multiscatter_tint"), 0.0, 1.0)
                 if kind in ("GLASS", "REFRACTION"):
                     if "ior" not in lobe:
                         raise _fail(lw, "ior is missing")
