@@ -1,6 +1,7 @@
 """Blender materials (shader node trees) → the core's lobe lists.
 
-A core material is a SUM of lobes (DIFFUSE, GLOSSY, GLASS) plus an emitted radiance. Node trees
+A core material is a SUM of lobes (DIFFUSE, GLOSSY, GLASS, ... see docs/scene-format.md) plus
+an emitted radiance. Node trees
 are evaluated symbolically from the active Material Output's Surface input, carrying a scalar
 weight down Mix/Add shaders. Only constant inputs are read; a linked input that is not an RGB or
 Value node falls back to the socket's own value with a warning.
@@ -10,15 +11,23 @@ Mapping (see docs/addon.md, "Materials"):
 - Diffuse BSDF → DIFFUSE(color) (roughness > 0, Oren-Nayar in Cycles, is rendered as Lambert).
 - Glossy BSDF → GLOSSY(color, roughness) (GGX; Cycles's Multiscatter GGX keeps slightly more
   energy at high roughness).
-- Glass BSDF → GLASS(color, roughness, ior). Transparent BSDF → GLASS(color, 0, ior 1), a
-  dielectric with no Fresnel and no bending, i.e. straight transmission.
+- Glass BSDF → GLASS(color, roughness, ior; Multiscatter GGX: multiscatter_tint = color, Cycles's
+  energy compensation). Transparent BSDF → GLASS(color, 0, ior 1), a dielectric with no Fresnel
+  and no bending, i.e. straight transmission.
+- Translucent BSDF → TRANSLUCENT(color), Lambert transmission.
+- Refraction BSDF → REFRACTION(color, roughness, ior): GGX refraction only, no Fresnel factor
+  (Beckmann is rendered as GGX, with a warning).
+- Holdout → HOLDOUT(weight): cuts camera-visible hits out of the film alpha (docs/materials.md,
+  "More shader nodes").
 - Emission → emission += color × strength.
 - Mix Shader → (1 − fac)·A + fac·B; Add Shader → A + B.
 - Principled BSDF, with alpha a, metallic m, transmission t, specular level s:
     a·m          · METALLIC(clamped base, roughness, F82 tint = min(specular tint, 1),
                             multiscatter; weight a·m)                metal (GLOSSY(base) if
                                                                      a·m is textured)
-    a·(1−m)·t    · GLASS(base color, roughness, ior)                 glass
+    a·(1−m)·t    · GLASS(sqrt(clamped base), roughness, ior,         glass (Cycles's
+                         reflection_weight a·(1−m)·t,                generalized-Schlick
+                         multiscatter_tint sqrt(base))               glass: untinted reflection)
     a·(1−m)(1−t) · [DIELECTRIC_SPECULAR(white, roughness, eta, tint, multiscatter)
                     + DIFFUSE(base, layer → the specular lobe)]      dielectric (Principled v2)
     (1−a)        · GLASS(white, 0, ior 1)                            transparency
@@ -34,8 +43,9 @@ Mapping (see docs/addon.md, "Materials"):
     constant-only.
 - Subsurface Scattering node → SUBSURFACE(color, radius × scale, falloff, IOR, roughness:
   sqrt(Roughness) (Cycles uses the node's roughness as the GGX alpha), anisotropy).
-- Anything else: one warning per material, and a DIFFUSE lobe of the node's color/base color
-  (or the material's viewport color).
+- Anything else (Toon, Hair, Principled Hair, Specular BSDF (EEVEE), Ray Portal, ...): one
+  warning per material naming the node, and a DIFFUSE lobe of the node's color/base color (or
+  the material's viewport color); docs/materials.md lists the fallbacks.
 
 Textures (docs/materials.md): a linked input is compiled by ``node_programs`` into the
 material's *program*; the arithmetic above is written on ``Value``s, so a textured base colour,
@@ -404,8 +414,7 @@ class MaterialExporter:
 
         # Unsupported (Toon, Hair, Principled Hair, Specular BSDF (EEVEE), Ray Portal...): its
         # (base) color as diffuse (docs/materials.md, "Unsupported shader nodes")
-        problems.append(f"unsupported shader '{node.name}' ({kind}), rendered as a Diffuse BSDF of its "
-                        f"{'Base Color' if node.inputs.get('Base Color') is not None else 'Color'}")
+        problems.append(f"unsupported shader '{node.name}' ({kind}), rendered as diffuse")
         for name in ("Base Color", "Color"):
             if node.inputs.get(name) is not None:
                 col = self._color(node, name, problems, ctx=ctx)

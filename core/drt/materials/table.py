@@ -7,7 +7,9 @@ colours carry the mix weight. Arrays, M materials × L lobe slots (L = most lobe
 lobes whose average colour is below 1e-5 are dropped, like Cycles's CLOSURE_WEIGHT_CUTOFF, and
 the remaining lobes are packed into the first slots):
 
-    lobe_type   (M, L) int8     BSDF_NONE / BSDF_DIFFUSE / BSDF_GLOSSY / BSDF_GLASS
+    lobe_type   (M, L) int8     BSDF_NONE / BSDF_DIFFUSE / BSDF_GLOSSY / BSDF_GLASS / ... (the
+                                BSDF_* constants below; TRANSLUCENT, REFRACTION and HOLDOUT:
+                                docs/materials.md, "More shader nodes")
     lobe_color  (M, L, 3)       linear RGB weight of the lobe
     lobe_alpha  (M, L)          GGX alpha = roughness² (0 for diffuse)
     lobe_ior    (M, L)          index of refraction of GLASS lobes (1 otherwise)
@@ -137,7 +139,8 @@ _ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
 #:   sss_exit (1,) int64: the white Lambert row shading SSS exits (−1: no SSS in the scene);
 #:   lobe_fresnel (M, L, 5) f64: DIELECTRIC_SPECULAR lobes' (f0·tint r, g, b, multiscatter 0/1,
 #:   unused); METALLIC lobes' (F82 tint r, g, b, multiscatter 0/1, scalar weight k: the colour
-#:   is k × the base colour, Fresnel F0 = min(colour / k, 1))
+#:   is k × the base colour, Fresnel F0 = min(colour / k, 1)); GLASS lobes' (multiscatter Fss
+#:   r, g, b (0: none, drt.materials.glass_ms), reflection_weight set 0/1, reflection weight k)
 #:   (drt.materials.dielectric_specular); lobe_layer (M, L) int64: slot of the
 #:   DIELECTRIC_SPECULAR lobe this lobe lies under (its colour is scaled per hit by that
 #:   layer's 1 − albedo(wo)), −1: none; has_layers (M,) bool: some lobe has lobe_layer ≥ 0;
