@@ -352,6 +352,16 @@ def _cases():
         n.distribution = "GGX"
         return n.outputs[0]
 
+    def textured_principled(name, inputs, dist="GGX"):
+        """A Principled BSDF whose input ``name`` is a checker (0.1 / 0.9): a per-hit weight."""
+        def case(nt, uv):
+            ck = node(nt, "ShaderNodeTexChecker", {"Vector": uv, "Scale": 3.0, "Color1": (0.9, 0.9, 0.9, 1),
+                                                   "Color2": (0.1, 0.1, 0.1, 1)})
+            n = node(nt, "ShaderNodeBsdfPrincipled", dict(inputs, **{name: ck.outputs["Fac"]}))
+            n.distribution = dist
+            return n.outputs[0]
+        return case
+
     def glass(col, rough, dist):
         def case(nt, uv):
             n = node(nt, "ShaderNodeBsdfGlass", {"Color": col, "Roughness": rough, "IOR": 1.5})
@@ -366,11 +376,16 @@ def _cases():
             principled_glass((0.8, 0.4, 0.2, 1), 0.3, dist="MULTI_GGX"),
             principled_glass((0.5, 0.8, 0.3, 1), 0.7, dist="MULTI_GGX"),
             glass((0.9, 0.6, 0.3, 1), 0.6, "MULTI_GGX"), glass((1, 1, 1, 1), 0.9, "MULTI_GGX"),
-            glass((0.9, 0.6, 0.3, 1), 0.6, "GGX")]
+            glass((0.9, 0.6, 0.3, 1), 0.6, "GGX"),
+            textured_principled("Metallic", {"Base Color": (0.9, 0.6, 0.3, 1), "Roughness": 0.4}),
+            textured_principled("Alpha", {"Base Color": (0.8, 0.8, 0.8, 1), "Metallic": 1.0, "Roughness": 0.3}),
+            textured_principled("Transmission Weight", {"Base Color": (0.8, 0.4, 0.2, 1), "Roughness": 0.35}),
+            textured_principled("Metallic", {"Base Color": (0.3, 0.6, 0.9, 1), "Roughness": 0.6,
+                                             "Transmission Weight": 1.0}, dist="MULTI_GGX")]
 
 
 #: per-case tolerance of the channel means (measured ≤ 0.4 %)
-_TOL = [0.01] * 15
+_TOL = [0.01] * 19
 
 
 @pytest.mark.parametrize("shape, side", [("plane", "behind"), ("plane", "front"), ("sphere", "front")])
@@ -384,7 +399,7 @@ def test_shader_nodes_under_a_sun_match_cycles(tmp_path, shape, side):
 
     cases = _cases()
     rot = (math.pi - 0.5, 0.2, 0.0) if side == "behind" else (0.6, 0.2, 0.3)
-    cycles, drt, res = render_tiles(cases, 4, tmp_path, shader=True, sun=(3.0, rot), shape=shape)
+    cycles, drt, res = render_tiles(cases, 5, tmp_path, shader=True, sun=(3.0, rot), shape=shape)
     warn = [w for w in res.warnings if "Multiscatter" not in w]
     assert not warn, warn
     # Cycles's shadow rays from a plane lit from behind hit the plane's other triangle along
@@ -394,7 +409,7 @@ def test_shader_nodes_under_a_sun_match_cycles(tmp_path, shape, side):
         keep[np.add.outer(np.arange(16), np.arange(16)) == 15] = False
     errs, means = [], []
     for k in range(len(cases)):
-        a, b = tile(cycles, k, 4)[keep].mean(0), tile(drt, k, 4)[keep].mean(0)
+        a, b = tile(cycles, k, 5)[keep].mean(0), tile(drt, k, 5)[keep].mean(0)
         means.append(a)
         errs.append(np.where(a > 1e-4, b / np.maximum(a, 1e-12) - 1, b - a))
     errs = np.array(errs)

@@ -23,8 +23,8 @@ Mapping (see docs/addon.md, "Materials"):
 - Mix Shader → (1 − fac)·A + fac·B; Add Shader → A + B.
 - Principled BSDF, with alpha a, metallic m, transmission t, specular level s:
     a·m          · METALLIC(clamped base, roughness, F82 tint = min(specular tint, 1),
-                            multiscatter; weight a·m)                metal (GLOSSY(base) if
-                                                                     a·m is textured)
+                            multiscatter; weight a·m)                metal (a textured a·m:
+                                                                     weight_reg, per hit)
     a·(1−m)·t    · GLASS(sqrt(clamped base), roughness, ior,         glass (Cycles's
                          reflection_weight a·(1−m)·t,                generalized-Schlick
                          multiscatter_tint sqrt(base))               glass: untinted reflection)
@@ -252,17 +252,21 @@ class MaterialExporter:
                 out["roughness"] = min(max(float(np.ravel(r)[0]), 0.0), 1.0)
         if "ior" in lb:
             out["ior"] = lb["ior"]
-        if "reflection_weight" in lb:
-            out["reflection_weight"] = lb["reflection_weight"]
         for key in ("radius", "method", "anisotropy", "tint", "multiscatter", "multiscatter_tint"):  # SSS, specular
             if key in lb:
                 out[key] = lb[key]
-        if "weight" in lb:
-            k = constant(lb["weight"])
-            k = _representative(k, 0.0)[0] if isinstance(k, Value) else float(np.ravel(k)[0])
-            if not k > 0.0:
-                return None
-            out["weight"] = k
+        for key in ("weight", "reflection_weight"):  # METALLIC, SUBSURFACE / Principled glass
+            if key not in lb:
+                continue
+            k = constant(lb[key])
+            if isinstance(k, Value):  # per hit from a register (METALLIC, glass); SSS: constant
+                out[key] = max(_representative(k, 1e-3)[0], 1e-3)
+                if lb["type"] in ("METALLIC", "GLASS"):
+                    out["weight_reg"] = self._b.reg_of(k)
+            else:
+                out[key] = float(np.ravel(k)[0])
+                if key == "weight" and not out[key] > 0.0:
+                    return None
         return out
 
     @staticmethod
@@ -462,8 +466,8 @@ class MaterialExporter:
         """The Principled transmission as Cycles 5.0 builds it: a GGX glass of weight k whose
         generalized-Schlick Fresnel (exponent −IOR, i.e. the real dielectric curve) reflects
         untinted and refracts tinted by sqrt(clamped base colour). A GLASS lobe with colour
-        k·sqrt(base) and reflection_weight k; a textured k (alpha, transmission, metallic)
-        tints both (the old GLASS), with a warning."""
+        k·sqrt(base) and reflection_weight k (a textured k — alpha, transmission, metallic —
+        comes per hit from a register: ``weight_reg``)."""
         clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
         if isinstance(clamped, Value):
             root = self._b.emit(OP_VMATH, VMATH_OPS.index("POWER"), [clamped, Value(self._b, const=0.5)])
@@ -473,15 +477,9 @@ class MaterialExporter:
             root = np.maximum(np.sqrt(clamped), MIN_PLACEHOLDER)
         if isinstance(tint, Value) or np.any(np.abs(np.broadcast_to(tint, 3) - 1.0) > 1e-6):
             problems.append(f"'{node.name}' specular tint on the transmission ignored (reflection untinted)")
-        lobe = {"type": "GLASS", "color": k * root, "roughness": rough, "ior": ior}
+        lobe = {"type": "GLASS", "color": k * root, "roughness": rough, "ior": ior, "reflection_weight": k}
         if getattr(node, "distribution", "") == "MULTI_GGX":  # Fss = the transmission tint
             lobe["multiscatter_tint"] = _multiscatter_tint(root)
-        k = constant(k)
-        if isinstance(k, Value):
-            problems.append(f"'{node.name}' textured weight of the transmission: its reflection is tinted "
-                            f"by sqrt(base colour) too")
-        else:
-            lobe["reflection_weight"] = float(np.ravel(k)[0])
         return lobe
 
     def _principled(self, node, w, problems, ctx):
@@ -522,13 +520,12 @@ class MaterialExporter:
         wa = w * alpha
         if maybe_positive(metallic):
             k = wa * metallic
-            if isinstance(k, Value):  # a textured metallic / alpha: the Fresnel-less GLOSSY stand-in
-                lobes.append({"type": "GLOSSY", "color": k * base, "roughness": rough})
-            else:  # Cycles's F82-tint metal: F0 = the clamped base colour, F82 tint = min(tint, 1)
-                clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
-                lobes.append({"type": "METALLIC", "color": k * clamped, "weight": float(k), "roughness": rough,
-                              "tint": [float(min(x, 1.0)) for x in np.broadcast_to(tint, 3)],
-                              "multiscatter": multiscatter})
+            # Cycles's F82-tint metal: F0 = the clamped base colour, F82 tint = min(tint, 1); a
+            # textured metallic / alpha gives the weight per hit from a register (weight_reg)
+            clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
+            lobes.append({"type": "METALLIC", "color": k * clamped, "weight": k, "roughness": rough,
+                          "tint": [float(min(x, 1.0)) for x in np.broadcast_to(tint, 3)],
+                          "multiscatter": multiscatter})
         dielectric = 1.0 - metallic
         if maybe_positive(trans) and maybe_positive(dielectric):
             lobes.append(self._principled_glass(node, wa * dielectric * trans, base, tint, rough, ior, problems))

@@ -1159,6 +1159,9 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
             md.lobe_color[m, l, 0] = max(regs[r, 0], 0.0)
             md.lobe_color[m, l, 1] = max(regs[r, 1], 0.0)
             md.lobe_color[m, l, 2] = max(regs[r, 2], 0.0)
+        wr = pd.lobe_weight_reg[m, l]
+        if wr >= 0:  # a textured METALLIC weight / Principled glass reflection weight
+            md.lobe_fresnel[m, l, 4] = max(regs[wr, 0], 0.0)
         rr = pd.lobe_rough_reg[m, l]
         if rr >= 0:
             rough = saturate(regs[rr, 0])
