@@ -1,6 +1,7 @@
 """Blender materials (shader node trees) → the core's lobe lists.
 
-A core material is a SUM of lobes (DIFFUSE, GLOSSY, GLASS) plus an emitted radiance. Node trees
+A core material is a SUM of lobes (DIFFUSE, GLOSSY, GLASS, ... see docs/scene-format.md) plus
+an emitted radiance. Node trees
 are evaluated symbolically from the active Material Output's Surface input, carrying a scalar
 weight down Mix/Add shaders. Only constant inputs are read; a linked input that is not an RGB or
 Value node falls back to the socket's own value with a warning.
@@ -10,15 +11,23 @@ Mapping (see docs/addon.md, "Materials"):
 - Diffuse BSDF → DIFFUSE(color) (roughness > 0, Oren-Nayar in Cycles, is rendered as Lambert).
 - Glossy BSDF → GLOSSY(color, roughness) (GGX; Cycles's Multiscatter GGX keeps slightly more
   energy at high roughness).
-- Glass BSDF → GLASS(color, roughness, ior). Transparent BSDF → GLASS(color, 0, ior 1), a
-  dielectric with no Fresnel and no bending, i.e. straight transmission.
+- Glass BSDF → GLASS(color, roughness, ior; Multiscatter GGX: multiscatter_tint = color, Cycles's
+  energy compensation). Transparent BSDF → GLASS(color, 0, ior 1), a dielectric with no Fresnel
+  and no bending, i.e. straight transmission.
+- Translucent BSDF → TRANSLUCENT(color), Lambert transmission.
+- Refraction BSDF → REFRACTION(color, roughness, ior): GGX refraction only, no Fresnel factor
+  (Beckmann is rendered as GGX, with a warning).
+- Holdout → HOLDOUT(weight): cuts camera-visible hits out of the film alpha (docs/materials.md,
+  "More shader nodes").
 - Emission → emission += color × strength.
 - Mix Shader → (1 − fac)·A + fac·B; Add Shader → A + B.
 - Principled BSDF, with alpha a, metallic m, transmission t, specular level s:
     a·m          · METALLIC(clamped base, roughness, F82 tint = min(specular tint, 1),
-                            multiscatter; weight a·m)                metal (GLOSSY(base) if
-                                                                     a·m is textured)
-    a·(1−m)·t    · GLASS(base color, roughness, ior)                 glass
+                            multiscatter; weight a·m)                metal (a textured a·m:
+                                                                     weight_reg, per hit)
+    a·(1−m)·t    · GLASS(sqrt(clamped base), roughness, ior,         glass (Cycles's
+                         reflection_weight a·(1−m)·t,                generalized-Schlick
+                         multiscatter_tint sqrt(base))               glass: untinted reflection)
     a·(1−m)(1−t) · [DIELECTRIC_SPECULAR(white, roughness, eta, tint, multiscatter)
                     + DIFFUSE(base, layer → the specular lobe)]      dielectric (Principled v2)
     (1−a)        · GLASS(white, 0, ior 1)                            transparency
@@ -34,8 +43,9 @@ Mapping (see docs/addon.md, "Materials"):
     constant-only.
 - Subsurface Scattering node → SUBSURFACE(color, radius × scale, falloff, IOR, roughness:
   sqrt(Roughness) (Cycles uses the node's roughness as the GGX alpha), anisotropy).
-- Anything else: one warning per material, and a DIFFUSE lobe of the node's color/base color
-  (or the material's viewport color).
+- Anything else (Toon, Hair, Principled Hair, Specular BSDF (EEVEE), Ray Portal, ...): one
+  warning per material naming the node, and a DIFFUSE lobe of the node's color/base color (or
+  the material's viewport color); docs/materials.md lists the fallbacks.
 
 Textures (docs/materials.md): a linked input is compiled by ``node_programs`` into the
 material's *program*; the arithmetic above is written on ``Value``s, so a textured base colour,
@@ -84,6 +94,13 @@ def _representative(v: Value, floor: float) -> list:
     component at least ``floor``."""
     fb = v.fallback if v.fallback is not None else np.full(3, 0.5)
     return [float(max(x, floor)) for x in np.broadcast_to(fb, 3)]
+
+
+def _multiscatter_tint(color) -> list:
+    """Fss of Cycles's Multiscatter GGX glass compensation, in [0, 1]: the colour, or for a
+    program-driven one its constant stand-in (the compensation is per material, not per hit)."""
+    c = _representative(color, 0.0) if isinstance(color, Value) else np.broadcast_to(color, 3)
+    return [float(min(max(x, 0.0), 1.0)) for x in c]
 
 
 class MaterialExporter:
@@ -235,15 +252,21 @@ class MaterialExporter:
                 out["roughness"] = min(max(float(np.ravel(r)[0]), 0.0), 1.0)
         if "ior" in lb:
             out["ior"] = lb["ior"]
-        for key in ("radius", "method", "anisotropy", "tint", "multiscatter"):  # SSS, specular
+        for key in ("radius", "method", "anisotropy", "tint", "multiscatter", "multiscatter_tint"):  # SSS, specular
             if key in lb:
                 out[key] = lb[key]
-        if "weight" in lb:
-            k = constant(lb["weight"])
-            k = _representative(k, 0.0)[0] if isinstance(k, Value) else float(np.ravel(k)[0])
-            if not k > 0.0:
-                return None
-            out["weight"] = k
+        for key in ("weight", "reflection_weight"):  # METALLIC, SUBSURFACE / Principled glass
+            if key not in lb:
+                continue
+            k = constant(lb[key])
+            if isinstance(k, Value):  # per hit from a register (METALLIC, glass); SSS: constant
+                out[key] = max(_representative(k, 1e-3)[0], 1e-3)
+                if lb["type"] in ("METALLIC", "GLASS"):
+                    out["weight_reg"] = self._b.reg_of(k)
+            else:
+                out[key] = float(np.ravel(k)[0])
+                if key == "weight" and not out[key] > 0.0:
+                    return None
         return out
 
     @staticmethod
@@ -342,9 +365,20 @@ class MaterialExporter:
             return [{"type": "GLOSSY", "color": w * self._color(node, "Color", problems, ctx=ctx),
                      "roughness": self._roughness(node, problems, ctx)}], np.zeros(3)
         if kind == "ShaderNodeBsdfGlass":
-            return [{"type": "GLASS", "color": w * self._color(node, "Color", problems, ctx=ctx),
+            col = self._color(node, "Color", problems, ctx=ctx)
+            lobe = {"type": "GLASS", "color": w * col, "roughness": self._roughness(node, problems, ctx),
+                    "ior": max(self._const_value(node, "IOR", problems, 1.45, ctx), 1.0)}
+            if getattr(node, "distribution", "") == "MULTI_GGX":  # Cycles's compensation, Fss = colour
+                lobe["multiscatter_tint"] = _multiscatter_tint(col)
+            return [lobe], np.zeros(3)
+        if kind == "ShaderNodeBsdfTranslucent":
+            return [{"type": "TRANSLUCENT", "color": w * self._color(node, "Color", problems, ctx=ctx)}], np.zeros(3)
+        if kind == "ShaderNodeBsdfRefraction":
+            return [{"type": "REFRACTION", "color": w * self._color(node, "Color", problems, ctx=ctx),
                      "roughness": self._roughness(node, problems, ctx),
-                     "ior": max(self._const_value(node, "IOR", problems, 1.45, ctx), 1.0)}], np.zeros(3)
+                     "ior": max(self._const_value(node, "IOR", problems, 1.45, ctx), 1e-5)}], np.zeros(3)
+        if kind == "ShaderNodeHoldout":
+            return [{"type": "HOLDOUT", "color": w * np.ones(3)}], np.zeros(3)
         if kind == "ShaderNodeBsdfTransparent":
             return [{"type": "GLASS", "color": w * self._color(node, "Color", problems, ctx=ctx),
                      "roughness": 0.0, "ior": 1.0}], np.zeros(3)
@@ -382,7 +416,8 @@ class MaterialExporter:
                      "roughness": float(np.sqrt(r)),
                      "anisotropy": self._const_value(node, "Anisotropy", problems, 0.0, ctx)}], np.zeros(3)
 
-        # Unsupported: its (base) color as diffuse.
+        # Unsupported (Toon, Hair, Principled Hair, Specular BSDF (EEVEE), Ray Portal...): its
+        # (base) color as diffuse (docs/materials.md, "Unsupported shader nodes")
         problems.append(f"unsupported shader '{node.name}' ({kind}), rendered as diffuse")
         for name in ("Base Color", "Color"):
             if node.inputs.get(name) is not None:
@@ -427,6 +462,26 @@ class MaterialExporter:
             problems.append(f"'{node.name}' Christensen-Burley subsurface rendered as Random Walk")
         return method if method in ("RANDOM_WALK", "RANDOM_WALK_SKIN", "BURLEY") else "RANDOM_WALK"
 
+    def _principled_glass(self, node, k, base, tint, rough, ior, problems):
+        """The Principled transmission as Cycles 5.0 builds it: a GGX glass of weight k whose
+        generalized-Schlick Fresnel (exponent −IOR, i.e. the real dielectric curve) reflects
+        untinted and refracts tinted by sqrt(clamped base colour). A GLASS lobe with colour
+        k·sqrt(base) and reflection_weight k (a textured k — alpha, transmission, metallic —
+        comes per hit from a register: ``weight_reg``)."""
+        clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
+        if isinstance(clamped, Value):
+            root = self._b.emit(OP_VMATH, VMATH_OPS.index("POWER"), [clamped, Value(self._b, const=0.5)])
+            if clamped.fallback is not None:
+                root.fallback = np.sqrt(np.clip(clamped.fallback, 0.0, 1.0))
+        else:  # (a black base still reflects: keep the lobe with a negligible transmission)
+            root = np.maximum(np.sqrt(clamped), MIN_PLACEHOLDER)
+        if isinstance(tint, Value) or np.any(np.abs(np.broadcast_to(tint, 3) - 1.0) > 1e-6):
+            problems.append(f"'{node.name}' specular tint on the transmission ignored (reflection untinted)")
+        lobe = {"type": "GLASS", "color": k * root, "roughness": rough, "ior": ior, "reflection_weight": k}
+        if getattr(node, "distribution", "") == "MULTI_GGX":  # Fss = the transmission tint
+            lobe["multiscatter_tint"] = _multiscatter_tint(root)
+        return lobe
+
     def _principled(self, node, w, problems, ctx):
         base = self._color(node, "Base Color", problems, ctx=ctx)
         metallic = clamp01(self._value(node, "Metallic", problems, 0.0, ctx))
@@ -465,17 +520,15 @@ class MaterialExporter:
         wa = w * alpha
         if maybe_positive(metallic):
             k = wa * metallic
-            if isinstance(k, Value):  # a textured metallic / alpha: the Fresnel-less GLOSSY stand-in
-                lobes.append({"type": "GLOSSY", "color": k * base, "roughness": rough})
-            else:  # Cycles's F82-tint metal: F0 = the clamped base colour, F82 tint = min(tint, 1)
-                clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
-                lobes.append({"type": "METALLIC", "color": k * clamped, "weight": float(k), "roughness": rough,
-                              "tint": [float(min(x, 1.0)) for x in np.broadcast_to(tint, 3)],
-                              "multiscatter": multiscatter})
+            # Cycles's F82-tint metal: F0 = the clamped base colour, F82 tint = min(tint, 1); a
+            # textured metallic / alpha gives the weight per hit from a register (weight_reg)
+            clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
+            lobes.append({"type": "METALLIC", "color": k * clamped, "weight": k, "roughness": rough,
+                          "tint": [float(min(x, 1.0)) for x in np.broadcast_to(tint, 3)],
+                          "multiscatter": multiscatter})
         dielectric = 1.0 - metallic
         if maybe_positive(trans) and maybe_positive(dielectric):
-            lobes.append({"type": "GLASS", "color": wa * dielectric * trans * base,
-                          "roughness": rough, "ior": ior})
+            lobes.append(self._principled_glass(node, wa * dielectric * trans, base, tint, rough, ior, problems))
         opaque = wa * dielectric * (1 - trans)
         if maybe_positive(opaque):
             # The specular layer (GGX × dielectric Fresnel) over the diffuse/subsurface base,

@@ -54,7 +54,8 @@ from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N
                                        POINT_OBJECT_XFORM)
 from .materials.programs import eval_material
 from .materials.transparency import straight_lobe
-from .materials.table import LOBE_SUBSURFACE, pick_lobe
+from .materials.holdout import holdout_weight
+from .materials.table import LOBE_SUBSURFACE, LOBE_TRANSLUCENT, pick_lobe
 from .subsurface import SSS_DEAD, SSS_EXIT, SSS_EXIT_FLAT, SSS_NONE, SSS_WALK, sss_coefficients
 from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_5d
@@ -586,6 +587,15 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                         nm = valid_specular_normal(scale(ng, side), wo, nm)
                     ns = scale(nm, side)
                     mapped = True
+        if camera and not exiting and md.transmission_or_delta[mat]:
+            # a holdout lobe (always delta) cuts a camera-visible hit out of the alpha, as
+            # Cycles's integrate_surface_holdout; a full holdout ends the path
+            h = holdout_weight(md, mat)
+            if h > 0.0:
+                out.alpha[slot] -= h * (thr[0] + thr[1] + thr[2]) * (1.0 / 3.0)
+                if h >= 1.0:
+                    store(out.radiance, slot, add(load(out.radiance, slot), acc))
+                    continue
         if md.has_emission[mat] and not exiting:
             le = load(md.emission, mat)
             lpdf = emissive_pdf(ld, prim, prev_p, p, ng, prev_hint)
@@ -686,9 +696,10 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # entering SSS is no bounce (Cycles's subsurface_bounce skips path_state_next)
         entering = kind == LOBE_SUBSURFACE
         n_bounce = bounce + (0 if entering else 1)
+        # (Cycles counts a translucent bounce, TRANSMIT | DIFFUSE, as a transmission bounce only)
         n_diffuse = paths.counts[i, 1] + (1 if kind == LOBE_DIFFUSE else 0)
         n_glossy = paths.counts[i, 2] + (1 if kind == LOBE_GLOSSY else 0)
-        n_transmission = paths.counts[i, 3] + (1 if kind == LOBE_TRANSMISSION else 0)
+        n_transmission = paths.counts[i, 3] + (1 if kind == LOBE_TRANSMISSION or kind == LOBE_TRANSLUCENT else 0)
         limit = (n_bounce > settings.max_bounces or n_diffuse > settings.diffuse_bounces
                  or n_glossy > settings.glossy_bounces or n_transmission > settings.transmission_bounces)
         if vertex + 1 >= RR_START_BOUNCE and not exiting:  # one roulette per SSS event, as Cycles
@@ -731,7 +742,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         store(paths.prev_n, j, n_wo)
         store(paths.prev_wo, j, wo)
         paths.prev_mat[j] = mat
-        paths.prev_flags[j] = ((RAY_SINGULAR if b_delta else (RAY_DIFFUSE if kind == LOBE_DIFFUSE else RAY_GLOSSY))
+        paths.prev_flags[j] = ((RAY_SINGULAR if b_delta else (RAY_DIFFUSE if kind == LOBE_DIFFUSE or kind == LOBE_TRANSLUCENT
+                                                              else RAY_GLOSSY))
                                | (0 if refl_sh else RAY_TRANSMIT))
         paths.counts[j, 0] = n_bounce
         paths.counts[j, 1] = n_diffuse

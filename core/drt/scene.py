@@ -22,7 +22,8 @@ SUPPORTED_VERSIONS = (1, 2)  # 2: adds SUBSURFACE lobes (docs/scene-format.md)
 
 LIGHT_TYPES = ("POINT", "SPOT", "SUN", "AREA")
 AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
-LOBE_TYPES = ("DIFFUSE", "GLOSSY", "GLASS", "SUBSURFACE", "DIELECTRIC_SPECULAR", "METALLIC")
+LOBE_TYPES = ("DIFFUSE", "GLOSSY", "GLASS", "SUBSURFACE", "DIELECTRIC_SPECULAR", "METALLIC", "TRANSLUCENT",
+              "REFRACTION", "HOLDOUT")
 SSS_METHODS = ("RANDOM_WALK", "RANDOM_WALK_SKIN", "BURLEY")  # = drt.materials.subsurface_lobe
 FILTER_TYPES = ("BLACKMAN_HARRIS", "GAUSSIAN", "BOX")
 SAMPLER_KINDS = ("SOBOL", "STRATIFIED", "RANDOM")
@@ -392,8 +393,9 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
             lp = f"{p}.lobes[{j}]"
             t = _enum(lobe, "type", lp, LOBE_TYPES)
             entry = {"type": t, "color": _vector(lobe, "color", lp, 3, lo=0.0).tolist()}
-            if t in ("GLOSSY", "GLASS", "DIELECTRIC_SPECULAR", "METALLIC"):
-                entry["roughness"] = _number(lobe, "roughness", lp, 0.0 if t == "GLASS" else 0.5, lo=0, hi=1)
+            if t in ("GLOSSY", "GLASS", "DIELECTRIC_SPECULAR", "METALLIC", "REFRACTION"):
+                entry["roughness"] = _number(lobe, "roughness", lp, 0.0 if t in ("GLASS", "REFRACTION") else 0.5,
+                                             lo=0, hi=1)
             if t == "DIELECTRIC_SPECULAR":  # the Principled BSDF's specular layer (issue 11)
                 entry["ior"] = _number(lobe, "ior", lp, 1.5, lo=0, lo_open=True, hi=100)
                 entry["tint"] = _vector(lobe, "tint", lp, 3, default=[1, 1, 1], lo=0.0).tolist()
@@ -404,8 +406,12 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
                 entry["weight"] = _number(lobe, "weight", lp, 1.0, lo=0, lo_open=True)
             if "layer" in lobe:  # the index of the DIELECTRIC_SPECULAR lobe this one lies under
                 entry["layer"] = _number(lobe, "layer", lp, integer=True, lo=0, hi=len(lobes) - 1)
-            if t == "GLASS":
+            if t in ("GLASS", "REFRACTION"):
                 entry["ior"] = _number(lobe, "ior", lp, 1.45, lo=0, lo_open=True, hi=100)
+            if t == "GLASS" and "reflection_weight" in lobe:  # a Principled transmission (issue 11)
+                entry["reflection_weight"] = _number(lobe, "reflection_weight", lp, 1.0, lo=0)
+            if t == "GLASS" and "multiscatter_tint" in lobe:  # Multiscatter GGX glass: Fss (issue 11)
+                entry["multiscatter_tint"] = _vector(lobe, "multiscatter_tint", lp, 3, lo=0.0).tolist()
             if t == "SUBSURFACE":
                 if version < 2:
                     raise SceneError(lp + ".type", "SUBSURFACE lobes need scene version >= 2")
@@ -415,7 +421,7 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
                 entry["roughness"] = _number(lobe, "roughness", lp, 1.0, lo=0, hi=1)
                 entry["anisotropy"] = _number(lobe, "anisotropy", lp, 0.0, lo=-1, hi=1)
                 entry["weight"] = _number(lobe, "weight", lp, 1.0, lo=0, lo_open=True)
-            for key in ("color_reg", "roughness_reg"):
+            for key in ("color_reg", "roughness_reg", "weight_reg"):
                 if key in lobe:
                     entry[key] = _number(lobe, key, lp, integer=True, lo=0)
             clean.append(entry)

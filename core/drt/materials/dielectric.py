@@ -36,8 +36,12 @@ Delta limit: alpha² ≤ ``ALPHA_SQ_SINGULAR`` (roughness ≤ 0.00376), as for t
 Cycles, a refraction with |ior − 1| < 1e-4 is treated as a delta (the rough transmission lobe is
 degenerate there): the material table marks such glass lobes delta.
 
+Refraction BSDF (Cycles's refraction-only microfacet closure, ``refraction_eval`` /
+``refraction_sample``): the transmission half of the above with no Fresnel factor — every sample
+refracts, weight G2/G1 — except under total internal reflection, which gives nothing.
+
 Scalar kernels (one sample, 3-tuples): ``fresnel``, ``refract_through``, ``glass_eval``,
-``glass_sample``; ``fresnel_dielectric``, ``refract``, ``eval_glass`` and ``sample_glass`` apply
+``glass_sample``, ``refraction_eval``, ``refraction_sample``; ``fresnel_dielectric``, ``refract``, ``eval_glass`` and ``sample_glass`` apply
 them to arrays.
 """
 
@@ -102,6 +106,21 @@ def glass_eval(wo, wi, alpha, ior):
     """White rough dielectric. wo, wi: local unit 3-tuples; alpha above the singular threshold;
     ior > 0, not ≈ 1. Returns (f·|cos θi|, pdf per unit solid angle of ``glass_sample``),
     reflection when wi is on wo's side, transmission otherwise."""
+    return dielectric_eval(wo, wi, alpha, ior, False)
+
+
+@kernel
+def refraction_eval(wo, wi, alpha, ior):
+    """Cycles's Refraction BSDF (``bsdf_microfacet_ggx_refraction_setup``: Fresnel NONE on a
+    refraction-only closure): the glass transmission term without the (1 − F) factor, zero
+    under total internal reflection, no reflection at all. Same arguments as ``glass_eval``;
+    the pdf is ``refraction_sample``'s (every sample refracts)."""
+    return dielectric_eval(wo, wi, alpha, ior, True)
+
+
+@kernel
+def dielectric_eval(wo, wi, alpha, ior, refraction_only):
+    """``glass_eval`` (refraction_only False) or ``refraction_eval`` (True)."""
     # Upper frame: wo on +z, eta = index of the −z side relative to the +z side.
     flip = wo[2] < 0.0
     eta = 1.0 / ior if flip else ior
@@ -112,6 +131,8 @@ def glass_eval(wo, wi, alpha, ior):
     wo_u = (wo[0], wo[1], cos_o)
     wi_u = (wi[0], wi[1], cos_i)
     is_t = cos_i < 0.0
+    if refraction_only and not is_t:
+        return 0.0, 0.0
     if is_t:  # generalised half vector of a refraction (Walter et al. eq. 16)
         hv = (wo_u[0] + eta * wi_u[0], wo_u[1] + eta * wi_u[1], wo_u[2] + eta * wi_u[2])
     else:
@@ -131,6 +152,8 @@ def glass_eval(wo, wi, alpha, ior):
     if not (c_i < 0.0 if is_t else c_i > 0.0):
         return 0.0, 0.0
     f = fresnel(c_o, eta)
+    if refraction_only:  # no Fresnel factor, but nothing refracts under TIR (Cycles)
+        f = 1.0 if f >= 1.0 else 0.0
     d = ggx_ndf(h[2], alpha)
     lam_o = ggx_smith_lambda(cos_o, alpha)
     lam_i = ggx_smith_lambda(cos_i, alpha)
@@ -163,6 +186,23 @@ def glass_sample(wo, alpha, ior, u_choice, u0, u1):
     if flip:
         return (wi[0], wi[1], -wi[2]), refracted
     return wi, refracted
+
+
+@kernel
+def refraction_sample(wo, alpha, ior, u0, u1):
+    """Cycles's Refraction BSDF: h from the visible normals of wo (delta: h = z), then always
+    refract. Returns (wi, ok); ok is False under total internal reflection at h (Cycles returns
+    no sample). Weight of a white lobe: G2/G1(wo) (1 in the delta case)."""
+    flip = wo[2] < 0.0
+    eta = 1.0 / ior if flip else ior
+    wo_u = (wo[0], wo[1], abs(wo[2]))
+    h = microfacet_normal(wo_u, alpha, u0, u1)
+    if fresnel(dot(wo_u, h), eta) >= 1.0:
+        return (0.0, 0.0, 0.0), False
+    wi = refract_through(wo_u, h, eta)
+    if flip:
+        return (wi[0], wi[1], -wi[2]), True
+    return wi, True
 
 
 # ---------------------------------------------------------------------------------------------

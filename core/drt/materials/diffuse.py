@@ -1,4 +1,5 @@
-"""Lambertian (Cycles's Diffuse BSDF at roughness 0): f = color / π.
+"""Lambertian (Cycles's Diffuse BSDF at roughness 0): f = color / π; and its transmitting twin,
+Cycles's Translucent BSDF: f = color / π for wi on the *other* side of the surface from wo.
 
 Frame-free: every direction is a unit vector in the *local shading frame* (z = shading normal on
 the geometric front side, see docs/architecture.md). ``wo`` points away from the surface toward
@@ -7,6 +8,10 @@ where the path came from, ``wi`` away from the surface toward the next vertex.
 The lobe is two-sided: it reflects on whichever side ``wo`` is (the computation is mirrored when
 ``wo.z < 0``); a ``wi`` on the other side from ``wo`` gets 0. The functions here are colourless
 (the colour multiplies outside, in the material table).
+
+The translucent lobe (``translucent_eval`` / ``translucent_sample``) is the same cosine lobe
+mirrored through the surface (Cycles's ``bsdf_translucent``: a cosine hemisphere about −N, N on
+wo's side); it is a diffuse *transmission* (Cycles's label TRANSMIT | DIFFUSE).
 
 ``diffuse_eval`` / ``diffuse_sample`` are the scalar kernels (3-tuples, one sample);
 ``eval_diffuse`` / ``sample_diffuse`` apply them to (n, 3) arrays.
@@ -42,6 +47,26 @@ def diffuse_sample(wo, u0, u1):
     (pdf |cos θi| / π, weight f·|cos θi| / pdf = 1 for a white lobe)."""
     wi = cosine_hemisphere(u0, u1)
     if wo[2] < 0.0:
+        return (wi[0], wi[1], -wi[2])
+    return wi
+
+
+@kernel
+def translucent_eval(wo, wi):
+    """wo, wi: local unit 3-tuples. Returns (f·|cos θi| for a white lobe, pdf per unit solid
+    angle of ``translucent_sample``); both 0 unless wi is on the other side from wo."""
+    if wo[2] * wi[2] < 0.0:
+        value = abs(wi[2]) * INV_PI
+        return value, value
+    return 0.0, 0.0
+
+
+@kernel
+def translucent_sample(wo, u0, u1):
+    """wo: local unit 3-tuple; (u0, u1) in [0, 1)². Returns wi cosine-distributed on the side
+    opposite wo (pdf |cos θi| / π, weight 1 for a white lobe)."""
+    wi = cosine_hemisphere(u0, u1)
+    if wo[2] > 0.0:
         return (wi[0], wi[1], -wi[2])
     return wi
 

@@ -1159,14 +1159,19 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
             md.lobe_color[m, l, 0] = max(regs[r, 0], 0.0)
             md.lobe_color[m, l, 1] = max(regs[r, 1], 0.0)
             md.lobe_color[m, l, 2] = max(regs[r, 2], 0.0)
+        wr = pd.lobe_weight_reg[m, l]
+        if wr >= 0:  # a textured METALLIC weight / Principled glass reflection weight
+            md.lobe_fresnel[m, l, 4] = max(regs[wr, 0], 0.0)
         rr = pd.lobe_rough_reg[m, l]
         if rr >= 0:
             rough = saturate(regs[rr, 0])
             alpha = rough * rough
             md.lobe_alpha[m, l] = alpha
             t = md.lobe_type[m, l]
-            md.lobe_delta[m, l] = t != 1 and (alpha * alpha <= ALPHA_SQ_SINGULAR or (
-                t == 3 and abs(md.lobe_ior[m, l] - 1.0) < IOR_ONE_EPS))
+            # (as MaterialTable: Lambert (1) and translucent (7) never, glass (3) and refraction
+            # (8) also at IOR ≈ 1, a holdout (11) always)
+            md.lobe_delta[m, l] = t == 11 or (t != 1 and t != 7 and (alpha * alpha <= ALPHA_SQ_SINGULAR or (
+                (t == 3 or t == 8) and abs(md.lobe_ior[m, l] - 1.0) < IOR_ONE_EPS)))
         total += (md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0] + md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]
                   + md.lobe_color[m, l, 2] * md.lobe_avg[m, l, 2]) * (1.0 / 3.0)
     cdf = 0.0
@@ -1183,7 +1188,8 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
         md.lobe_cdf[m, l] = 1.0 if l == count - 1 else cdf
         if not md.lobe_delta[m, l]:
             delta_only = False
-        if md.lobe_delta[m, l] or md.lobe_type[m, l] == 3:
+        t = md.lobe_type[m, l]
+        if md.lobe_delta[m, l] or t == 3 or t == 7 or t == 8:  # transmitting or delta
             trans_delta = True
         a0 += md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0]
         a1 += md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]

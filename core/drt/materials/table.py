@@ -7,7 +7,9 @@ colours carry the mix weight. Arrays, M materials × L lobe slots (L = most lobe
 lobes whose average colour is below 1e-5 are dropped, like Cycles's CLOSURE_WEIGHT_CUTOFF, and
 the remaining lobes are packed into the first slots):
 
-    lobe_type   (M, L) int8     BSDF_NONE / BSDF_DIFFUSE / BSDF_GLOSSY / BSDF_GLASS
+    lobe_type   (M, L) int8     BSDF_NONE / BSDF_DIFFUSE / BSDF_GLOSSY / BSDF_GLASS / ... (the
+                                BSDF_* constants below; TRANSLUCENT, REFRACTION and HOLDOUT:
+                                docs/materials.md, "More shader nodes")
     lobe_color  (M, L, 3)       linear RGB weight of the lobe
     lobe_alpha  (M, L)          GGX alpha = roughness² (0 for diffuse)
     lobe_ior    (M, L)          index of refraction of GLASS lobes (1 otherwise)
@@ -47,11 +49,12 @@ import numpy as np
 
 from ..kernels import inline_kernel, kernel
 from ..kernels.vec3 import load, store
-from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample
-from .diffuse import INV_PI, diffuse_eval, diffuse_sample
+from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample, refraction_eval, refraction_sample
+from .diffuse import INV_PI, diffuse_eval, diffuse_sample, translucent_eval, translucent_sample
 from .dielectric_specular import (average_albedo, dielectric_spec_delta_weight, dielectric_spec_eval,
                                   layer_weight, metallic_average_albedo, metallic_delta_weight,
                                   metallic_eval)
+from .glass_ms import glass_energy_factor
 from .subsurface_lobe import BSSRDF_MIN_RADIUS, SSS_METHODS, effective_radius, sss_entry_sample
 from .ggx import (
     ALPHA_SQ_SINGULAR,
@@ -70,9 +73,17 @@ BSDF_GLASS = 3
 BSDF_SUBSURFACE = 4  # random-walk SSS entry (drt.subsurface); never evaluated, only sampled
 BSDF_DIELECTRIC_SPECULAR = 5  # GGX × dielectric Fresnel, the Principled specular layer
 BSDF_METALLIC = 6  # GGX × F82-tint conductor Fresnel, the Principled metallic lobe
+BSDF_TRANSLUCENT = 7  # Lambert transmission (Cycles's Translucent BSDF)
+BSDF_REFRACTION = 8  # GGX refraction only, no Fresnel factor (Cycles's Refraction BSDF)
+# 9, 10: reserved (sheen)
+BSDF_HOLDOUT = 11  # Cycles's Holdout closure: never sampled or evaluated; its colour (a grey
+#                    weight) cuts camera-visible hits out of the film's alpha (drt.path_stages)
 BSDF_TYPES = {"DIFFUSE": BSDF_DIFFUSE, "GLOSSY": BSDF_GLOSSY, "GLASS": BSDF_GLASS,
               "SUBSURFACE": BSDF_SUBSURFACE, "DIELECTRIC_SPECULAR": BSDF_DIELECTRIC_SPECULAR,
-              "METALLIC": BSDF_METALLIC}
+              "METALLIC": BSDF_METALLIC, "TRANSLUCENT": BSDF_TRANSLUCENT,
+              "REFRACTION": BSDF_REFRACTION, "HOLDOUT": BSDF_HOLDOUT}
+#: lobe types that transmit (wi on the other side from wo)
+TRANSMITTING = (BSDF_GLASS, BSDF_TRANSLUCENT, BSDF_REFRACTION)
 #: name of the white Lambert material appended to tables with SSS: shades SSS exit points
 SSS_EXIT_MATERIAL = "__drt_sss_exit__"
 #: columns of lobe_sss (M, L, 8)
@@ -87,6 +98,8 @@ LOBE_DIFFUSE = 1
 LOBE_GLOSSY = 2          # glossy reflection and glass reflection
 LOBE_TRANSMISSION = 3    # glass refraction
 LOBE_SUBSURFACE = 4      # entered a SUBSURFACE lobe: the path continues with a random walk
+LOBE_TRANSLUCENT = 5     # diffuse transmission (Cycles's TRANSMIT | DIFFUSE label: counts as a
+#                          transmission bounce, and the ray is a diffuse + transmission ray)
 
 
 @dataclass
@@ -126,7 +139,8 @@ _ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
 #:   sss_exit (1,) int64: the white Lambert row shading SSS exits (−1: no SSS in the scene);
 #:   lobe_fresnel (M, L, 5) f64: DIELECTRIC_SPECULAR lobes' (f0·tint r, g, b, multiscatter 0/1,
 #:   unused); METALLIC lobes' (F82 tint r, g, b, multiscatter 0/1, scalar weight k: the colour
-#:   is k × the base colour, Fresnel F0 = min(colour / k, 1))
+#:   is k × the base colour, Fresnel F0 = min(colour / k, 1)); GLASS lobes' (multiscatter Fss
+#:   r, g, b (0: none, drt.materials.glass_ms), reflection_weight set 0/1, reflection weight k)
 #:   (drt.materials.dielectric_specular); lobe_layer (M, L) int64: slot of the
 #:   DIELECTRIC_SPECULAR lobe this lobe lies under (its colour is scaled per hit by that
 #:   layer's 1 − albedo(wo)), −1: none; has_layers (M,) bool: some lobe has lobe_layer ≥ 0;
@@ -216,6 +230,26 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
             v, p = glossy_eval(wo, wi, md.lobe_alpha[m, s])
         elif t == BSDF_GLASS:
             v, p = glass_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
+            c0, c1, c2 = md.lobe_color[m, s, 0], md.lobe_color[m, s, 1], md.lobe_color[m, s, 2]
+            if md.lobe_fresnel[m, s, 3] > 0.0 and wo[2] * wi[2] > 0.0:
+                # a Principled transmission: the reflection is weighted by the lobe's
+                # scalar weight (untinted), only the refraction by its colour
+                c0 = c1 = c2 = md.lobe_fresnel[m, s, 4]
+            fss = (md.lobe_fresnel[m, s, 0], md.lobe_fresnel[m, s, 1], md.lobe_fresnel[m, s, 2])
+            if fss[0] + fss[1] + fss[2] > 0.0:  # Multiscatter GGX glass (drt.materials.glass_ms)
+                k = glass_energy_factor(md.lobe_alpha[m, s], md.lobe_ior[m, s], wo[2], fss)
+                c0, c1, c2 = c0 * k[0], c1 * k[1], c2 * k[2]
+            if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
+                v *= under_weight(md, m, s, wo)
+            f0 += c0 * v
+            f1 += c1 * v
+            f2 += c2 * v
+            pdf += md.lobe_select[m, s] * p
+            continue
+        elif t == BSDF_TRANSLUCENT:
+            v, p = translucent_eval(wo, wi)
+        elif t == BSDF_REFRACTION:
+            v, p = refraction_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
         else:
             continue
         if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
@@ -305,6 +339,16 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
     elif t == BSDF_GLASS:
         wi, refracted = glass_sample(wo, alpha, ior, u_rest, u0, u1)
         kind = LOBE_TRANSMISSION if refracted else LOBE_GLOSSY
+    elif t == BSDF_TRANSLUCENT:
+        wi = translucent_sample(wo, u0, u1)
+        refracted = True
+        kind = LOBE_TRANSLUCENT
+    elif t == BSDF_REFRACTION:
+        wi, ok = refraction_sample(wo, alpha, ior, u0, u1)
+        if not ok:
+            return wi, zero, 0.0, LOBE_NONE, False, False
+        refracted = True
+        kind = LOBE_TRANSMISSION
     elif t == BSDF_SUBSURFACE:
         # Cycles's subsurface_bounce: weight = closure weight / selection probability, the
         # entry direction only (no Fresnel, no f/pdf); pdf 1 marks "not for MIS"
@@ -330,6 +374,9 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
         if t == BSDF_GLASS:
             fr = fresnel(wo[2], 1.0 / ior if wo[2] < 0.0 else ior)
             pdf *= (1.0 - fr) if refracted else fr
+            if not refracted and md.lobe_fresnel[m, slot, 3] > 0.0:  # untinted reflection
+                k = md.lobe_fresnel[m, slot, 4] / p_sel
+                weight = (k, k, k)
         elif t == BSDF_DIELECTRIC_SPECULAR:  # a smooth specular layer: F(cos θo) × colour
             fc = dielectric_spec_delta_weight(wo[2], ior, lobe_f0(md, m, slot),
                                               md.lobe_fresnel[m, slot, 3] > 0.0)
@@ -472,9 +519,13 @@ class MaterialTable:
         m, n_slots = self.lobe_type.shape
         used = self.lobe_type != BSDF_NONE
         self.lobe_count = used.sum(axis=1)
-        self.lobe_delta = used & (self.lobe_type != BSDF_DIFFUSE) & (
+        lambert = (self.lobe_type == BSDF_DIFFUSE) | (self.lobe_type == BSDF_TRANSLUCENT)
+        # a holdout "lobe" is marked delta: never evaluated, and no reason for NEE
+        self.lobe_delta = used & ~lambert & (
             (self.lobe_alpha ** 2 <= ALPHA_SQ_SINGULAR)
-            | ((self.lobe_type == BSDF_GLASS) & (np.abs(self.lobe_ior - 1.0) < IOR_ONE_EPS)))
+            | (((self.lobe_type == BSDF_GLASS) | (self.lobe_type == BSDF_REFRACTION))
+               & (np.abs(self.lobe_ior - 1.0) < IOR_ONE_EPS))
+            | (self.lobe_type == BSDF_HOLDOUT))
         sss = used & (self.lobe_type == BSDF_SUBSURFACE)
         self.lobe_sss = np.zeros((m, n_slots, 8)) if lobe_sss is None else np.asarray(lobe_sss, np.float64)
         self.lobe_fresnel = np.zeros((m, n_slots, 5)) if lobe_fresnel is None \
@@ -495,6 +546,8 @@ class MaterialTable:
                                   out=np.ones(3), where=f0 > 0)
         for i, j in zip(*np.nonzero(used & (self.lobe_layer >= 0))):
             eff[i, j] = max(1.0 - eff[i, self.lobe_layer[i, j]].max(), 0.0)
+        # a holdout is no BSDF: never selected, no albedo
+        eff[used & (self.lobe_type == BSDF_HOLDOUT)] = 0.0
         self.lobe_effective = self.lobe_color * eff if n_slots else self.lobe_color
         w = np.where(used, self.lobe_effective.mean(axis=2), 0.0)
         # Cycles's bssrdf_setup: a BSSRDF's sample weight is average(weight) × its channel count
@@ -530,7 +583,7 @@ class MaterialTable:
             delta_only=c(~np.any(used & ~self.lobe_delta & ~sss, axis=1), np.bool_),
             pure_diffuse=c(pure_diffuse, np.bool_),
             transmission_or_delta=c(
-                np.any(used & ((self.lobe_type == BSDF_GLASS) | self.lobe_delta | sss), axis=1),
+                np.any(used & (np.isin(self.lobe_type, TRANSMITTING) | self.lobe_delta | sss), axis=1),
                 np.bool_),
             has_diffuse=c(np.any(self.lobe_type == BSDF_DIFFUSE, axis=1), np.bool_),
             summary=c(np.stack(self._summarise_lobes(used), axis=1).reshape(m, 4), np.float64),
@@ -555,7 +608,7 @@ class MaterialTable:
                       | (self.lobe_type == BSDF_METALLIC), weight, 0.0)
         kg = wg.sum(axis=1)
         alpha = np.divide((wg * self.lobe_alpha).sum(axis=1), kg, out=np.ones_like(kg), where=kg > 0)
-        kt = np.where(self.lobe_type == BSDF_GLASS, weight, 0.0).sum(axis=1)
+        kt = np.where(np.isin(self.lobe_type, TRANSMITTING), weight, 0.0).sum(axis=1)
         return kd, kg, alpha, kt
 
     # ------------------------------------------------------------------ construction
@@ -597,7 +650,7 @@ class MaterialTable:
                 color = _rgb(lobe["color"], lw, "color")
                 alpha, ior = 0.0, 1.0
                 fr = np.zeros(5)
-                if kind in ("GLOSSY", "GLASS", "DIELECTRIC_SPECULAR", "METALLIC"):
+                if kind in ("GLOSSY", "GLASS", "DIELECTRIC_SPECULAR", "METALLIC", "REFRACTION"):
                     if "roughness" not in lobe:
                         raise _fail(lw, "roughness is missing")
                     r = _number(lobe["roughness"], lw, "roughness")
@@ -617,7 +670,16 @@ class MaterialTable:
                             or not isinstance(lobes[under], dict) \
                             or lobes[under].get("type") != "DIELECTRIC_SPECULAR":
                         raise _fail(lw, f"layer must be the index of a DIELECTRIC_SPECULAR lobe, got {under!r}")
-                if kind == "GLASS":
+                if kind == "GLASS" and "reflection_weight" in lobe:
+                    # a Principled transmission: reflection × this weight, refraction × colour
+                    k = _number(lobe["reflection_weight"], lw, "reflection_weight")
+                    if k < 0.0:
+                        raise _fail(lw, f"reflection_weight must be >= 0, got {k!r}")
+                    fr[3], fr[4] = 1.0, k
+                if kind == "GLASS" and "multiscatter_tint" in lobe:
+                    # Cycles's Multiscatter GGX glass: Fss of its energy compensation
+                    fr[:3] = np.clip(_rgb(lobe["multiscatter_tint"], lw, "multiscatter_tint"), 0.0, 1.0)
+                if kind in ("GLASS", "REFRACTION"):
                     if "ior" not in lobe:
                         raise _fail(lw, "ior is missing")
                     ior = _number(lobe["ior"], lw, "ior")
