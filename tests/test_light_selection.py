@@ -230,3 +230,35 @@ def test_constant_world_is_found_by_bsdf_rays_not_sampled():
     a_mean, b_mean = without.combined[..., :3].mean(), with_world.combined[..., :3].mean()
     assert abs(a_mean / b_mean - 1) < 0.01
     assert without.variance.mean() < with_world.variance.mean() / 3
+
+
+@pytest.mark.parametrize("count", [12, 20])
+def test_cached_selection_walk_chooses_exactly_as_the_two_pass_walk(count):
+    """`select_strategy` keeps each strategy's weights between its passes when there are at most
+    CACHED_STRATEGIES (else it recomputes them): either way (index, probability, rescaled u)
+    must equal, bit for bit, a walk over `strategy_prob` after `selection_totals`."""
+    from drt.lights import selection as sel
+
+    rng = np.random.default_rng(12)
+    ls = LightSet([sphere(*rng.uniform(-3, 3, 3), power=float(rng.uniform(1, 20))) for _ in range(count)])
+    ld = ls.data
+    assert ld.per_point and ld.n_strategies == count
+    for k in range(60):
+        p = tuple(rng.uniform(-3, 3, 3))
+        n = tuple(rng.normal(size=3) / 1.7)
+        guided = k % 3 != 0
+        hint = (n, (0.0, 0.6, 0.8), 0.3 if guided else 0.0, 0.5 if guided else 0.0, 0.2, 0.0)
+        u = float(rng.random())
+        totals = sel.selection_totals(ld, p, hint, sel.hint_known(hint))
+        c, want = 0.0, None
+        last = (-1, 0.0, 0.0)
+        for j in range(count):
+            pj = sel.strategy_prob(ld, j, p, hint, sel.hint_known(hint), totals)
+            c += pj
+            cj = 1.0 if j == count - 1 else c
+            if u < cj or j == count - 1:
+                want = sel._finish_select(u, j, pj, cj, *last)
+                break
+            if pj > 0.0:
+                last = (j, pj, cj)
+        assert sel.select_strategy(ld, p, hint, u) == want

@@ -24,15 +24,22 @@ def _rot(x, k):
 
 
 def _lookup3_numpy(keys):
-    """Jenkins lookup3 hash_uint{1,2,3} on uint32 arrays (numpy wraps)."""
+    """Jenkins lookup3 hash_uint{1,2,3,4} on uint32 arrays (numpy wraps)."""
     n = len(keys)
     a, b, c = (np.full(keys[0].shape, 0xDEADBEEF + (n << 2) + 13, np.uint32) for _ in range(3))
     with np.errstate(over="ignore"):
-        if n == 3:
-            c = c + keys[2]
-        if n >= 2:
-            b = b + keys[1]
-        a = a + keys[0]
+        if n == 4:  # mix(a, b, c) of the first three keys, then the fourth into a
+            a, b, c = a + keys[0], b + keys[1], c + keys[2]
+            a -= c; a ^= _rot(c, 4); c += b; b -= a; b ^= _rot(a, 6); a += c  # noqa: E702
+            c -= b; c ^= _rot(b, 8); b += a; a -= c; a ^= _rot(c, 16); c += b  # noqa: E702
+            b -= a; b ^= _rot(a, 19); a += c; c -= b; c ^= _rot(b, 4); b += a  # noqa: E702
+            a = a + keys[3]
+        else:
+            if n == 3:
+                c = c + keys[2]
+            if n >= 2:
+                b = b + keys[1]
+            a = a + keys[0]
         c ^= b; c -= _rot(b, 14); a ^= c; a -= _rot(c, 11); b ^= a; b -= _rot(a, 25)  # noqa: E702
         c ^= b; c -= _rot(b, 16); a ^= c; a -= _rot(c, 4); b ^= a; b -= _rot(a, 14)  # noqa: E702
         c ^= b; c -= _rot(b, 24)  # noqa: E702
@@ -41,11 +48,12 @@ def _lookup3_numpy(keys):
 
 def test_lookup3_matches_wrapping_uint32():
     rng = np.random.default_rng(4)
-    k = rng.integers(-2**31, 2**31, (3, 300)).astype(np.int64)
+    k = rng.integers(-2**31, 2**31, (4, 300)).astype(np.int64)
     ku = (k & 0xFFFFFFFF).astype(np.uint32)
     np.testing.assert_array_equal([P.hash_uint(int(x)) for x in k[0]], _lookup3_numpy([ku[0]]))
     np.testing.assert_array_equal([P.hash_uint2(int(x), int(y)) for x, y in k[:2].T], _lookup3_numpy([ku[0], ku[1]]))
-    np.testing.assert_array_equal([P.hash_uint3(*map(int, v)) for v in k.T], _lookup3_numpy(list(ku)))
+    np.testing.assert_array_equal([P.hash_uint3(*map(int, v)) for v in k[:3].T], _lookup3_numpy(list(ku[:3])))
+    np.testing.assert_array_equal([P.hash_uint4(*map(int, v)) for v in k.T], _lookup3_numpy(list(ku)))
 
 
 def test_pcg3d_matches_wrapping_int32():

@@ -263,6 +263,80 @@ def select_in(pmf, cdf, u, use_cdf):
     return -1, 0.0, 0.0
 
 
+#: strategies up to which `select_strategy` keeps each one's weights between its two passes
+CACHED_STRATEGIES = 16
+
+
+@scalar_kernel
+def _weights(ld, j, p, hint, guided):
+    """(E_j, E_j · B_j) of strategy j at p as `selection_totals` and `strategy_prob` compute
+    them ((0, 0) past the last strategy; B_j only when guided)."""
+    if j >= ld.n_strategies:
+        return 0.0, 0.0
+    w, rel = distance_weight(ld, j, p)
+    g = w * strategy_bsdf_factor(ld, j, rel, hint) if guided else 0.0
+    return w, g
+
+
+@scalar_kernel
+def _prob_given(ld, j, w, g, guided, totals):
+    """`strategy_prob` from strategy j's weights (w, g) already computed."""
+    pw, tw, ok_w, pg, tg, ok_g = totals
+    if ok_w:
+        dist_pmf = (min(w, _FMAX) / pw) / tw
+    else:
+        dist_pmf = ld.pmf[j]
+    if not guided:
+        return dist_pmf
+    guided_pmf = (min(g, _FMAX) / pg) / tg if ok_g else dist_pmf
+    return _GUIDED_SHARE * guided_pmf + DEFENSIVE_SHARE * dist_pmf
+
+
+@scalar_kernel
+def _select_cached(ld, p, hint, u, guided):
+    """`select_strategy` for at most CACHED_STRATEGIES strategies, each strategy's weights
+    computed once (held in two tuples: kernels allocate no arrays) instead of once for the totals
+    and again along the cdf walk — the same operations on the same values, so the same choice
+    bit for bit; the weights' acos/asin/cos are most of a many-light light sample."""
+    w0, g0 = _weights(ld, 0, p, hint, guided)
+    w1, g1 = _weights(ld, 1, p, hint, guided)
+    w2, g2 = _weights(ld, 2, p, hint, guided)
+    w3, g3 = _weights(ld, 3, p, hint, guided)
+    w4, g4 = _weights(ld, 4, p, hint, guided)
+    w5, g5 = _weights(ld, 5, p, hint, guided)
+    w6, g6 = _weights(ld, 6, p, hint, guided)
+    w7, g7 = _weights(ld, 7, p, hint, guided)
+    w8, g8 = _weights(ld, 8, p, hint, guided)
+    w9, g9 = _weights(ld, 9, p, hint, guided)
+    w10, g10 = _weights(ld, 10, p, hint, guided)
+    w11, g11 = _weights(ld, 11, p, hint, guided)
+    w12, g12 = _weights(ld, 12, p, hint, guided)
+    w13, g13 = _weights(ld, 13, p, hint, guided)
+    w14, g14 = _weights(ld, 14, p, hint, guided)
+    w15, g15 = _weights(ld, 15, p, hint, guided)
+    W = (w0, w1, w2, w3, w4, w5, w6, w7, w8, w9, w10, w11, w12, w13, w14, w15)
+    G = (g0, g1, g2, g3, g4, g5, g6, g7, g8, g9, g10, g11, g12, g13, g14, g15)
+    k = ld.n_strategies
+    pw = tw = pg = tg = 0.0
+    bw = bg = False
+    for j in range(k):
+        pw, tw, bw = _accumulate(pw, tw, bw, W[j])
+        if guided:
+            pg, tg, bg = _accumulate(pg, tg, bg, G[j])
+    totals = (pw, tw, pw > 0.0 and not bw, pg, tg, pg > 0.0 and not bg)
+    c = 0.0
+    last, last_prob, last_top = -1, 0.0, 0.0
+    for j in range(k):
+        pj = _prob_given(ld, j, W[j], G[j], guided, totals)
+        c += pj
+        cj = 1.0 if j == k - 1 else c
+        if u < cj or j == k - 1:
+            return _finish_select(u, j, pj, cj, last, last_prob, last_top)
+        if pj > 0.0:
+            last, last_prob, last_top = j, pj, cj
+    return -1, 0.0, 0.0
+
+
 @scalar_kernel
 def select_strategy(ld, p, hint, u):
     """Choose a strategy at p (with this hint) for u in [0, 1): (index, probability, u
@@ -271,6 +345,8 @@ def select_strategy(ld, p, hint, u):
         return select_in(ld.pmf, ld.cdf, u, True)
     k = ld.n_strategies
     guided = hint_known(hint)
+    if k <= CACHED_STRATEGIES:
+        return _select_cached(ld, p, hint, u, guided)
     totals = selection_totals(ld, p, hint, guided)
     c = 0.0
     last, last_prob, last_top = -1, 0.0, 0.0
