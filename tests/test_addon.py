@@ -66,7 +66,12 @@ def test_register_unregister_twice():
     for _ in range(2):
         addon.register()
         assert drt_engine.DRTRenderEngine.is_registered
-        assert bpy.context.scene.drt.max_bounces == 12
+        # a new scene shows the defaults (the context scene may carry another test's settings)
+        fresh = bpy.data.scenes.new("drt_register_twice")
+        try:
+            assert fresh.drt.max_bounces == 12
+        finally:
+            bpy.data.scenes.remove(fresh)
         assert "DRT" in bpy.types.DATA_PT_camera_dof.COMPAT_ENGINES
         addon.unregister()
         assert not hasattr(bpy.types.Scene, "drt")
