@@ -60,6 +60,7 @@ from .subsurface import SSS_DEAD, SSS_EXIT, SSS_EXIT_FLAT, SSS_NONE, SSS_WALK, s
 from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_5d
 from .sampling.warps import cosine_hemisphere, uniform_hemisphere
+from .terminator import shadow_origin
 from .trace import offset_point
 from .volumes.phase import hg_sample
 from .volumes.stack import stack_copy, stack_cross
@@ -127,6 +128,8 @@ Surfaces = namedtuple("Surfaces", [
     "material",       # (T,) int32 per global triangle
     "normals",        # (T, 3, 3) float32 per-corner shading normals ((0, 3, 3): none in the scene)
     "has_normals",    # (T,) bool
+    "terminator",     # (T,) float32 shadow terminator geometry offset ((0,): none; drt.terminator)
+    "corners",        # (T, 3, 3) float32 world vertex positions, with ``terminator`` ((0, 3, 3): none)
 ])
 
 HitArrays = namedtuple("HitArrays", [
@@ -639,10 +642,13 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 # geometric and shading normals must agree on reflection vs transmission
                 same_geo = dot(wi, ng) * dot(wo, ng) > 0.0
                 same_sh = wi_l[2] * wo_l[2] > 0.0
-                if same_geo == same_sh and any_positive(f):
+                # (a shadow ray lifted toward the smooth surface may reach a light below the
+                # facet's plane: drt.terminator)
+                o_shadow, lifted = shadow_origin(surf, hits, i, prim, p, ng, ns_unmapped, wo, wi)
+                if (same_geo == same_sh or (lifted and same_sh)) and any_positive(f):
                     w = nee_weight(direct, l_delta, lpdf, bpdf)
                     c = clamp(settings, scale(mul(mul(thr, f), le), w / lpdf), bounce > 0)
-                    store(shadow.o, n_shadow, offset_point(p, ng, wi))
+                    store(shadow.o, n_shadow, o_shadow)
                     store(shadow.d, n_shadow, wi)
                     shadow.tmax[n_shadow] = dist * (1.0 - SHADOW_EPSILON) if math.isfinite(dist) else np.inf
                     shadow.tau[n_shadow] = paths.tau[i]
@@ -650,7 +656,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                     shadow.slot[n_shadow] = slot
                     if vd.enabled:  # the shadow ray starts in the media on wi's side
                         stack_copy(paths.vstack, i, shadow.vstack, n_shadow)
-                        if not same_geo:
+                        if not same_geo and not (lifted and same_sh):
                             stack_cross(vd, shadow.vstack, n_shadow, prim, mat, wi, ng)
                     n_shadow += 1
 
