@@ -144,8 +144,10 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
             deform_keys[key] = k
         object_index[key] = len(objects)
         objects.append({"name": _instance_name(inst, key),
-                        "mesh": k, "matrix_world": matrix, "motion": None,
-                        "shadow_terminator": shadow_terminator(obj)})
+                        "mesh": k, "matrix_world": matrix, "motion": None})
+        term = shadow_terminator(obj)
+        if f"mesh{k}.normals" in arrays and any(term.values()):  # smooth shading only (drt.terminator)
+            objects[-1]["shadow_terminator"] = term
         infos.append(object_info(inst))
 
     cam_obj = scene.camera.evaluated_get(depsgraph)
