@@ -124,10 +124,11 @@ def test_offset_brightens_smooth_sphere_and_leaves_flat_unchanged():
     on, _ = drt_render(16)
     sphere_scene(0.0)
     off, header = drt_render(16)
-    assert header["objects"][0]["shadow_terminator"]["geometry_offset"] == 0.0
+    assert "shadow_terminator" not in header["objects"][0]  # offset 0: nothing exported
     assert on.mean() > off.mean() * 1.03, (on.mean(), off.mean())
     sphere_scene(0.1, smooth=False)
-    flat_on, _ = drt_render(8)
+    flat_on, header = drt_render(8)
+    assert "shadow_terminator" not in header["objects"][0]  # flat mesh: nothing exported
     sphere_scene(0.0, smooth=False)
     flat_off, _ = drt_render(8)
     assert np.array_equal(flat_on, flat_off)
@@ -167,3 +168,26 @@ def test_suzanne_matches_cycles(tmp_path, monkeypatch):
     cyc_gain = means[0.1][1] / means[0.0][1]
     assert cyc_gain > 1.03, cyc_gain  # the scene exercises the offset
     assert abs(drt_gain / cyc_gain - 1.0) < 0.005, (drt_gain, cyc_gain)
+
+
+def test_glossy_smooth_normal_correction_matches_cycles(tmp_path):
+    """Cycles bends a glossy closure's *smooth* normal (not only a mapped one) so that the
+    mirror direction stays above the facet (maybe_ensure_valid_specular_reflection: any N ≠ Ng).
+    A 16×8 smooth Glossy sphere (roughness 0.05) in a white world, 40×40, 128 spp each: the
+    disk's mean within 0.25 % of Cycles (measured +0.02 %; without the correction −0.58 %)."""
+    from compare_cycles import render as bpy_render
+
+    scene = C.reset()
+    mat = C.glossy("G", (0.8, 0.8, 0.8), 0.05)
+    C.uv_sphere("Ball", 1.0, (0, 0, 0), mat, segments=16, rings=8)
+    C.set_world(scene.world, (1.0, 1.0, 1.0), 1.0)
+    C.camera((0.0, -5.5, 0.0), (0.0, 0.0, 0.0), lens=50.0)
+    scene.render.resolution_x = scene.render.resolution_y = RES
+    C.reference_settings(scene)
+    ensure_registered()
+    drt, _ = drt_render(128)
+    cyc = bpy_render(scene, "CYCLES", 128, str(tmp_path / "cycles.exr"))
+    y, x = np.mgrid[0:RES, 0:RES]
+    disk = (x - 19.5) ** 2 + (y - 19.5) ** 2 < 11.5 ** 2
+    ratio = drt[disk].mean() / cyc[disk].mean()
+    assert abs(ratio - 1.0) < 0.0025, ratio

@@ -590,6 +590,15 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                         nm = valid_specular_normal(scale(ng, side), wo, nm)
                     ns = scale(nm, side)
                     mapped = True
+        if (not mapped and not exiting and not md.has_diffuse[mat] and surf.normals.shape[0]
+                and surf.has_normals[prim]):
+            # Cycles corrects a glossy closure's smooth normal too, not only a mapped one
+            # (maybe_ensure_valid_specular_reflection: any N ≠ Ng, with Bump Map Correction on)
+            side = 1.0 if dot(wo, ng) >= 0.0 else -1.0
+            nv = valid_specular_normal(scale(ng, side), wo, scale(ns, side))
+            if dot(nv, ns) * side < 1.0 - 1e-12:
+                ns = scale(nv, side)
+                mapped = True
         if camera and not exiting and md.transmission_or_delta[mat]:
             # a holdout lobe (always delta) cuts a camera-visible hit out of the alpha, as
             # Cycles's integrate_surface_holdout; a full holdout ends the path
