@@ -146,7 +146,8 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
         objects.append({"name": _instance_name(inst, key),
                         "mesh": k, "matrix_world": matrix, "motion": None})
         term = shadow_terminator(obj)
-        if f"mesh{k}.normals" in arrays and any(term.values()):  # smooth shading only (drt.terminator)
+        # the geometry offset acts on smooth shading only, the shading offset on any (drt.terminator)
+        if term["shading_offset"] > 0.0 or (f"mesh{k}.normals" in arrays and term["geometry_offset"] > 0.0):
             objects[-1]["shadow_terminator"] = term
         infos.append(object_info(inst))
 

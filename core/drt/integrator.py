@@ -35,7 +35,7 @@ from .path_stages import (D_BOUNCE0, D_LENS, D_PIXEL, D_TIME, DIMS_PER_BOUNCE,  
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
 from .scene import RenderSettings
-from .terminator import terminator_arrays
+from .terminator import shading_multipliers, terminator_arrays
 from .trace import Tracer
 from .volumes.media import STACK_SIZE, MediumData, build_medium_data
 from .volumes.stack import camera_stack
@@ -151,7 +151,7 @@ class Integrator:
             material=np.ascontiguousarray(geom.material, dtype=np.int32),
             normals=np.ascontiguousarray(normals, dtype=np.float32),
             has_normals=np.ascontiguousarray(geom.has_normals, dtype=bool),
-            terminator=term_cut, corners=term_corners)
+            terminator=term_cut, corners=term_corners, shading_mult=shading_multipliers(geom))
         # participating media (drt.volumes): a disabled MediumData costs the kernels one flag test
         if media is None:
             media = build_medium_data([], None)

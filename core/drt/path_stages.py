@@ -60,7 +60,7 @@ from .subsurface import SSS_DEAD, SSS_EXIT, SSS_EXIT_FLAT, SSS_NONE, SSS_WALK, s
 from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_5d
 from .sampling.warps import cosine_hemisphere, uniform_hemisphere
-from .terminator import shadow_origin
+from .terminator import shading_factor, shadow_origin
 from .trace import offset_point
 from .volumes.phase import hg_sample
 from .volumes.stack import stack_copy, stack_cross
@@ -130,6 +130,7 @@ Surfaces = namedtuple("Surfaces", [
     "has_normals",    # (T,) bool
     "terminator",     # (T,) float32 shadow terminator geometry offset ((0,): none; drt.terminator)
     "corners",        # (T, 3, 3) float32 world vertex positions, with ``terminator`` ((0, 3, 3): none)
+    "shading_mult",   # (T,) float32 shadow terminator shading-offset multiplier ((0,): none)
 ])
 
 HitArrays = namedtuple("HitArrays", [
@@ -648,6 +649,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             if l_valid and lpdf > 0.0:
                 wi_l = to_local(wi, t_ax, b_ax, ns)
                 f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local)
+                f = scale(f, shading_factor(surf, prim, wi_l[2] if wo_l[2] >= 0.0 else -wi_l[2]))
                 # geometric and shading normals must agree on reflection vs transmission
                 same_geo = dot(wi, ng) * dot(wo, ng) > 0.0
                 same_sh = wi_l[2] * wo_l[2] > 0.0
@@ -690,6 +692,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         wi = to_world(wi_l, t_ax, b_ax, ns)
         refl_geo = dot(wi, ng) * dot(wo, ng) > 0.0
         refl_sh = wi_l[2] * wo_l[2] > 0.0
+        if refl_sh:  # shadow terminator shading offset (reflections only, as Cycles)
+            weight = scale(weight, shading_factor(surf, prim, abs(wi_l[2])))
         alive = b_valid and refl_geo == refl_sh and any_positive(weight)
         if alive and b_delta and kind == LOBE_TRANSMISSION and straight_lobe(md, mat, u_lobe):
             # --- an IOR-1 lobe (alpha, Transparent BSDF): the ray passes straight on, a

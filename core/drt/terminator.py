@@ -20,6 +20,8 @@ not apply (instances), which differs only under non-uniform scale. Moving object
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .kernels import inline_kernel
@@ -27,6 +29,32 @@ from .kernels.vec3 import add, dot, neg, normalize, scale, sub
 from .trace import offset_point
 
 NO_TERMINATOR = (np.zeros(0, np.float32), np.zeros((0, 3, 3), np.float32))
+
+
+def shading_multipliers(geom) -> np.ndarray:
+    """(T,) float32 Cycles's shading-offset frequency multiplier 1 / (1 − s/2) per global
+    triangle (``kernel/closure/bsdf.h``, ``shift_cos_in``), or (0,) when no object sets one."""
+    s = getattr(geom, "terminator_shading", None)
+    if s is None or not np.any(s > 0.0):
+        return np.zeros(0, np.float32)
+    return (1.0 / (1.0 - 0.5 * np.asarray(s, np.float64))).astype(np.float32)
+
+
+@inline_kernel
+def shading_factor(surf, prim, cos_in):
+    """Cycles's shading offset (Appleseed's terminator softening): the BSDF value at a light
+    direction cos_in = cos(angle to the closure normal) ≥ 0 is scaled by cos(kθ) / cos θ,
+    k = the triangle's multiplier (> 1), so the lit side fades out before the terminator.
+    1 when the scene has no shading offset or cos_in < 0 (transmission)."""
+    if surf.shading_mult.shape[0] == 0 or cos_in < 0.0:
+        return 1.0
+    k = float(surf.shading_mult[prim])
+    if k <= 1.0:
+        return 1.0
+    c = min(cos_in, 1.0)
+    if c <= 0.0:
+        return 0.0
+    return max(math.cos(math.acos(c) * k), 0.0) / c
 
 
 def terminator_arrays(geom) -> tuple[np.ndarray, np.ndarray]:
