@@ -210,3 +210,22 @@ def test_shading_offset_matches_cycles(tmp_path, monkeypatch):
     drt_gain, cyc_gain = means[0][0] / means[1][0], means[0][1] / means[1][1]
     assert cyc_gain < 0.97, cyc_gain  # the scene exercises the offset
     assert abs(drt_gain / cyc_gain - 1.0) < 0.005, (drt_gain, cyc_gain)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("shape, sun", [("SUZANNE", (60.0, -70.0)), ("SUZANNE", (40.0, -60.0)),
+                                        ("SUZANNE", (65.0, -60.0)), ("TORUS", (45.0, -100.0)),
+                                        ("TORUS", (60.0, 70.0))])
+def test_offset_gain_sweep_matches_cycles(shape, sun, tmp_path, monkeypatch):
+    """Converged (256 spp) sweep of sun directions: the geometry offset's gain (0.1 over 0)
+    equals Cycles's within 0.5 % (measured at 64 spp within 0.2 %, gains 1.005–1.09). Back-lit
+    suns are left out: there DRT differs from Cycles at any offset (docs/lights.md)."""
+    monkeypatch.setattr(sys.modules[__name__], "SUN", sun)
+    means = []
+    for offset in (0.1, 0.0):
+        scene = sphere_scene(offset, shape=shape)
+        drt, _ = drt_render(256)
+        cyc = cycles_render(scene, 256, tmp_path / f"cycles{offset}.exr", monkeypatch)
+        means.append((drt.mean(), cyc.mean()))
+    drt_gain, cyc_gain = means[0][0] / means[1][0], means[0][1] / means[1][1]
+    assert abs(drt_gain / cyc_gain - 1.0) < 0.005, (drt_gain, cyc_gain)
