@@ -14,7 +14,7 @@ from .libraries import missing_link_warnings
 from .materials import MaterialExporter
 from .mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays, evaluated_positions
 from .object_info import object_info
-from .scene_parts import (ExportError, camera_dict, light_dict, matrix_list, render_settings,
+from .scene_parts import (ExportError, camera_dict, shadow_terminator, light_dict, matrix_list, render_settings,
                           world_dict)
 
 __all__ = ["ExportError", "ExportResult", "export_depsgraph"]
@@ -145,6 +145,10 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
         object_index[key] = len(objects)
         objects.append({"name": _instance_name(inst, key),
                         "mesh": k, "matrix_world": matrix, "motion": None})
+        term = shadow_terminator(obj)
+        # the geometry offset acts on smooth shading only, the shading offset on any (drt.terminator)
+        if term["shading_offset"] > 0.0 or (f"mesh{k}.normals" in arrays and term["geometry_offset"] > 0.0):
+            objects[-1]["shadow_terminator"] = term
         infos.append(object_info(inst))
 
     cam_obj = scene.camera.evaluated_get(depsgraph)

@@ -20,6 +20,15 @@ def matrix_list(m) -> list:
     return [[float(x) for x in row] for row in m]
 
 
+def shadow_terminator(obj) -> dict:
+    """The object's Cycles shadow terminator offsets (Object properties in Blender ≥ 3.0;
+    geometry offset default 0.1, shading offset default 0), clamped to the format's [0, 1]."""
+    def get(name):
+        return min(max(float(getattr(obj, name, 0.0)), 0.0), 1.0)
+    return {"geometry_offset": get("shadow_terminator_geometry_offset"),
+            "shading_offset": get("shadow_terminator_shading_offset")}
+
+
 def render_resolution(render) -> tuple[int, int]:
     """Final pixel count after the resolution percentage, as Blender computes it."""
     pct = render.resolution_percentage

@@ -58,6 +58,12 @@ class SceneGeometry:
     #: per-corner attributes material programs read, (T_all, 3, 3) float32 by name ("generated",
     #: "object_coords"); only those some mesh has (zeros on the other meshes' triangles)
     corner_attrs: dict = field(default_factory=dict)
+    #: (T_all,) float32 shadow terminator geometry offset of each global triangle's object
+    #: (static smooth-shaded meshes only; drt.terminator); None when no triangle has one
+    terminator: np.ndarray | None = None
+    #: (T_all,) float32 shadow terminator shading offset (Blender's value in [0, 1]) of each
+    #: triangle's object, any shading; None when no object sets one
+    terminator_shading: np.ndarray | None = None
     triangle_count: int = 0
     scene_radius: float = 1.0  # radius of the bounding sphere of all geometry (scene units)
     #: (T_all,) int32 index into scene.objects of each global triangle (volume stack keys)
@@ -143,6 +149,8 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     mats_moving, nrm_moving, hasn_moving, uv_moving = [], [], [], []
     order_static, order_moving = [], []  # meshes in global triangle order (for corner_attrs)
     obj_static, obj_moving = [], []  # object index per triangle block (Object Info)
+    term_static = []  # shadow terminator geometry offset per static triangle block
+    shade_static, shade_moving = [], []  # shadow terminator shading offset per triangle block
     v_offset = 0
     t_offset = 0
     ranges = []
@@ -170,6 +178,7 @@ def build_geometry(scene: Scene) -> SceneGeometry:
             mats_moving.append(m), nrm_moving.append(n), hasn_moving.append(h), uv_moving.append(u)
             order_moving.append((mesh, None))
             obj_moving.append(np.full(len(mesh.triangles), oi, np.int32))
+            shade_moving.append(np.full(len(mesh.triangles), obj.terminator_shading, np.float32))
             for mat in (m_open, m_close):
                 for pos in (mesh.positions, mesh.positions_close if mesh.positions_close is not None else mesh.positions):
                     w = transform_rows(pos, np.asarray(mat)[:3, :3]) + np.asarray(mat)[:3, 3] - shift
@@ -188,6 +197,9 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         mats_static.append(a), nrm_static.append(b), hasn_static.append(c), uv_static.append(d)
         order_static.append((mesh, m))
         obj_static.append(np.full(len(mesh.triangles), oi, np.int32))
+        shade_static.append(np.full(len(mesh.triangles), obj.terminator_shading, np.float32))
+        term_static.append(np.full(len(mesh.triangles), obj.terminator_geometry if mesh.normals is not None else 0.0,
+                                   np.float32))
 
     geom = SceneGeometry(
         origin_shift=shift,
@@ -209,6 +221,10 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     geom.normals = cat(nrm_static + nrm_moving, np.zeros((0, 3, 3), np.float32)) if any_normals else None
     geom.uvs = cat(uv_static + uv_moving, np.zeros((0, 3, 2), np.float32)) if any_uvs else None
     geom.triangle_count = offset
+    if any(t.any() for t in shade_static + shade_moving):
+        geom.terminator_shading = np.concatenate(shade_static + shade_moving)
+    if any(t.any() for t in term_static):  # moving meshes: no offset (drt.terminator)
+        geom.terminator = np.concatenate(term_static + [np.zeros(offset - geom.static_count, np.float32)])
     if any(o.info is not None for o in scene.objects):
         geom.object_of = cat(obj_static + obj_moving, np.zeros(0, np.int32))
         geom.object_info = np.array([np.concatenate([np.asarray(o.matrix, np.float64)[:3, 3],

@@ -35,6 +35,7 @@ from .path_stages import (D_BOUNCE0, D_LENS, D_PIXEL, D_TIME, DIMS_PER_BOUNCE,  
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
 from .scene import RenderSettings
+from .terminator import shading_multipliers, terminator_arrays
 from .trace import Tracer
 from .volumes.media import STACK_SIZE, MediumData, build_medium_data
 from .volumes.stack import camera_stack
@@ -145,10 +146,12 @@ class Integrator:
         self.n_registers = max(int(max((m["program"]["registers"] for m in src[0] if m.get("program")),
                                        default=0)) if src is not None else 0, int(world_registers))
         normals = geom.normals if geom.normals is not None else np.zeros((0, 3, 3), np.float32)
+        term_cut, term_corners = terminator_arrays(geom)  # shadow terminator offset (drt.terminator)
         self.surfaces = stages.Surfaces(
             material=np.ascontiguousarray(geom.material, dtype=np.int32),
             normals=np.ascontiguousarray(normals, dtype=np.float32),
-            has_normals=np.ascontiguousarray(geom.has_normals, dtype=bool))
+            has_normals=np.ascontiguousarray(geom.has_normals, dtype=bool),
+            terminator=term_cut, corners=term_corners, shading_mult=shading_multipliers(geom))
         # participating media (drt.volumes): a disabled MediumData costs the kernels one flag test
         if media is None:
             media = build_medium_data([], None)

@@ -60,6 +60,7 @@ from .subsurface import SSS_DEAD, SSS_EXIT, SSS_EXIT_FLAT, SSS_NONE, SSS_WALK, s
 from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_5d
 from .sampling.warps import cosine_hemisphere, uniform_hemisphere
+from .terminator import shading_factor, shadow_origin
 from .trace import offset_point
 from .volumes.phase import hg_sample
 from .volumes.stack import stack_copy, stack_cross
@@ -127,6 +128,9 @@ Surfaces = namedtuple("Surfaces", [
     "material",       # (T,) int32 per global triangle
     "normals",        # (T, 3, 3) float32 per-corner shading normals ((0, 3, 3): none in the scene)
     "has_normals",    # (T,) bool
+    "terminator",     # (T,) float32 shadow terminator geometry offset ((0,): none; drt.terminator)
+    "corners",        # (T, 3, 3) float32 world vertex positions, with ``terminator`` ((0, 3, 3): none)
+    "shading_mult",   # (T,) float32 shadow terminator shading-offset multiplier ((0,): none)
 ])
 
 HitArrays = namedtuple("HitArrays", [
@@ -587,6 +591,15 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                         nm = valid_specular_normal(scale(ng, side), wo, nm)
                     ns = scale(nm, side)
                     mapped = True
+        if (not mapped and not exiting and not md.has_diffuse[mat] and surf.normals.shape[0]
+                and surf.has_normals[prim]):
+            # Cycles corrects a glossy closure's smooth normal too, not only a mapped one
+            # (maybe_ensure_valid_specular_reflection: any N ≠ Ng, with Bump Map Correction on)
+            side = 1.0 if dot(wo, ng) >= 0.0 else -1.0
+            nv = valid_specular_normal(scale(ng, side), wo, scale(ns, side))
+            if dot(nv, ns) * side < 1.0 - 1e-12:
+                ns = scale(nv, side)
+                mapped = True
         if camera and not exiting and md.transmission_or_delta[mat]:
             # a holdout lobe (always delta) cuts a camera-visible hit out of the alpha, as
             # Cycles's integrate_surface_holdout; a full holdout ends the path
@@ -636,13 +649,17 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             if l_valid and lpdf > 0.0:
                 wi_l = to_local(wi, t_ax, b_ax, ns)
                 f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local)
+                f = scale(f, shading_factor(surf, prim, wi_l[2] if wo_l[2] >= 0.0 else -wi_l[2]))
                 # geometric and shading normals must agree on reflection vs transmission
                 same_geo = dot(wi, ng) * dot(wo, ng) > 0.0
                 same_sh = wi_l[2] * wo_l[2] > 0.0
-                if same_geo == same_sh and any_positive(f):
+                # (a shadow ray lifted toward the smooth surface may reach a light below the
+                # facet's plane: drt.terminator)
+                o_shadow, lifted = shadow_origin(surf, hits, i, prim, p, ng, ns_unmapped, wo, wi)
+                if (same_geo == same_sh or (lifted and same_sh)) and any_positive(f):
                     w = nee_weight(direct, l_delta, lpdf, bpdf)
                     c = clamp(settings, scale(mul(mul(thr, f), le), w / lpdf), bounce > 0)
-                    store(shadow.o, n_shadow, offset_point(p, ng, wi))
+                    store(shadow.o, n_shadow, o_shadow)
                     store(shadow.d, n_shadow, wi)
                     shadow.tmax[n_shadow] = dist * (1.0 - SHADOW_EPSILON) if math.isfinite(dist) else np.inf
                     shadow.tau[n_shadow] = paths.tau[i]
@@ -650,7 +667,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                     shadow.slot[n_shadow] = slot
                     if vd.enabled:  # the shadow ray starts in the media on wi's side
                         stack_copy(paths.vstack, i, shadow.vstack, n_shadow)
-                        if not same_geo:
+                        if not same_geo and not (lifted and same_sh):
                             stack_cross(vd, shadow.vstack, n_shadow, prim, mat, wi, ng)
                     n_shadow += 1
 
@@ -675,6 +692,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         wi = to_world(wi_l, t_ax, b_ax, ns)
         refl_geo = dot(wi, ng) * dot(wo, ng) > 0.0
         refl_sh = wi_l[2] * wo_l[2] > 0.0
+        if refl_sh:  # shadow terminator shading offset (reflections only, as Cycles)
+            weight = scale(weight, shading_factor(surf, prim, abs(wi_l[2])))
         alive = b_valid and refl_geo == refl_sh and any_positive(weight)
         if alive and b_delta and kind == LOBE_TRANSMISSION and straight_lobe(md, mat, u_lobe):
             # --- an IOR-1 lobe (alpha, Transparent BSDF): the ray passes straight on, a

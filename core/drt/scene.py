@@ -250,6 +250,12 @@ class ObjectSpec:
     #: Object Info values (only when a material program reads them): (6,) float64 — colour
     #: rgb, alpha, pass index, random in [0, 1] (the location is the matrix's translation)
     info: np.ndarray | None = None
+    #: Cycles's shadow terminator offsets (Object properties; drt.terminator): ``geometry``
+    #: moves NEE shadow-ray origins of smooth-shaded triangles toward the smooth surface
+    #: (Blender's default 0.1; absent from the file: 0, no offset), ``shading`` softens the
+    #: BSDF's cosine toward the terminator (0: off). Both in [0, 1].
+    terminator_geometry: float = 0.0
+    terminator_shading: float = 0.0
 
 
 @dataclass
@@ -637,8 +643,14 @@ def _objects(h: dict, n_meshes: int) -> list[ObjectSpec]:
                                    [_number(inf, "alpha", f"{p}.info", default=1.0),
                                     _number(inf, "pass_index", f"{p}.info", default=0.0),
                                     _number(inf, "random", f"{p}.info", default=0.0, lo=0.0)]])
+        term = _get(o, "shadow_terminator", p, {}) if o.get("shadow_terminator") is not None else {}
+        if not isinstance(term, dict):
+            raise SceneError(f"{p}.shadow_terminator", "must be an object with geometry_offset / shading_offset")
+        tp = f"{p}.shadow_terminator"
         out.append(ObjectSpec(str(o.get("name", f"object{i}")), mesh, _matrix(o, "matrix_world", p),
-                              _motion(o, "motion", p), info))
+                              _motion(o, "motion", p), info,
+                              _number(term, "geometry_offset", tp, default=0.0, lo=0.0, hi=1.0),
+                              _number(term, "shading_offset", tp, default=0.0, lo=0.0, hi=1.0)))
     return out
 
 
