@@ -202,7 +202,10 @@ def test_coat_sheen_spheres_match_cycles(tmp_path):
              _principled((0.8, 0.3, 0.1, 1), sheen=1.0, sheen_r=0.4, sheen_tint=(0.3, 0.6, 1, 1)),
              _principled((0.9, 0.6, 0.3, 1), rough=0.4, metal=0.5, coat=0.8, coat_r=0.2, sheen=0.7),
              _sheen_node((0.8, 0.8, 0.8, 1), 0.5),
-             _principled((0.8, 0.3, 0.1, 1), coat=1.0, coat_r=0.2, sheen=1.0, textured="layers")]
+             _principled((0.8, 0.3, 0.1, 1), coat=1.0, coat_r=0.2, sheen=1.0, textured="layers"),
+             # a coat of weight 1, untinted, alone over a metal: a single plain layer (has_layers
+             # 1) over a METALLIC lobe, which must still be attenuated
+             _principled((0.1, 0.25, 0.7, 1), rough=0.4, metal=1.0, coat=1.0, coat_r=0.05)]
     res = _compare(cases, 3, tmp_path, 0.01)
     mats = {m["name"]: m for m in res.header["materials"]}
     lobes = mats["case2"]["lobes"]

@@ -156,7 +156,8 @@ _ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
 #:   scaled per hit by the product over the chain above it of 1 − k·albedo_layer(wo) (× the
 #:   coat tint's absorption, see lobe_coat); has_layers (M,) int64: 0 no lobe has a layer,
 #:   1 only single untinted k = 1 DIELECTRIC_SPECULAR layers (the plain Principled: the old
-#:   scalar fast path), 2 anything else (coat, sheen, chains: the RGB chain walk);
+#:   scalar fast path for the generic lobes under it; specular, metallic and glass lobes
+#:   under a layer always take the RGB walk), 2 anything else (coat, sheen, chains);
 #:   lobe_coat (M, L, 4) f64: a layer lobe's (k, tint r, g, b): k its weight relative to what
 #:   lies under it (1 for the Principled specular layer, Coat Weight for a coat, Sheen Weight ×
 #:   max(Sheen Tint) for a sheen), tint the coat tint whose absorption mix(1, tint^(1/cos θt), k)
@@ -230,7 +231,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
         if t == BSDF_DIELECTRIC_SPECULAR:
             fc, p = dielectric_spec_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s],
                                          lobe_f0(md, m, s), md.lobe_fresnel[m, s, 3] > 0.0)
-            if md.has_layers[m] > 1 and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
+            if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
                 uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, memo_top, memo_w)
                 fc = (fc[0] * uw[0], fc[1] * uw[1], fc[2] * uw[2])
             f0 += md.lobe_color[m, s, 0] * fc[0]
@@ -242,7 +243,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
             k = md.lobe_fresnel[m, s, 4]
             fc, p = metallic_eval(wo, wi, md.lobe_alpha[m, s], metal_f0(md, m, s), lobe_f0(md, m, s),
                                   md.lobe_fresnel[m, s, 3] > 0.0)
-            if md.has_layers[m] > 1 and md.lobe_layer[m, s] >= 0:
+            if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
                 uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, memo_top, memo_w)
                 fc = (fc[0] * uw[0], fc[1] * uw[1], fc[2] * uw[2])
             f0 += k * fc[0]
