@@ -14,7 +14,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
 SCENES = ["cornell_box", "dof", "motion_blur", "glossy_glass", "all_lights", "showcase", "textured", "procedural",
-          "volume_fog", "volume_liquid", "volume_world", "volume_noise", "hdri", "sss_head", "cutout", "large_mesh"]
+          "volume_fog", "volume_liquid", "volume_world", "volume_noise", "hdri", "sss_head", "cutout", "coat_sheen",
+          "large_mesh"]
 
 
 def main():

@@ -25,7 +25,7 @@ from test_addon import ensure_registered, open_scene  # noqa: E402
 pytestmark = pytest.mark.blender
 
 SCENE_NAMES = ["cornell_box", "dof", "motion_blur", "glossy_glass", "all_lights", "showcase", "textured", "procedural",
-               "sss_head", "volume_noise"]
+               "sss_head", "volume_noise", "coat_sheen"]
 
 
 def read_npz(path):

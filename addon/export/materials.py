@@ -35,12 +35,25 @@ Mapping (see docs/addon.md, "Materials"):
   where eta is the IOR after Specular IOR Level (F0 × 2s, back to an IOR; no specular lobe when
   eta = 1) and multiscatter = distribution "Multiscatter GGX". The core scales the layered
   lobes per hit by 1 − the specular layer's albedo E(wo) (docs/materials.md, "Principled
-  dielectric layering"). Coat and sheen are ignored with a warning.
+  dielectric layering").
+  Sheen and coat lie on top of all of the above (Cycles's order, top first; docs/materials.md
+  "Principled coat and sheen"), with sheen weight w_sh, tint t_sh, coat weight w_c, tint t_c:
+    a·w_sh·t_sh  · SHEEN(sheen roughness; layer_weight w_sh·max(t_sh))
+    a·w_c        · DIELECTRIC_SPECULAR(white, coat roughness, coat IOR, multiscatter;
+                                       layer → sheen, layer_weight w_c, coat_tint t_c)
+  and metal, glass and the specular layer carry "layer" → the coat (or the sheen): the core
+  scales them per hit by each layer's 1 − k·albedo(wo) and the coat tint's absorption. Weights
+  and tints may be textured (k and the tint then come from registers); the coat IOR is
+  constant-only; a Coat Normal that differs from Normal warns (Normal's shading normal used);
+  the Principled's emission lies under its coat/sheen ("emission_layer": camera and BSDF rays
+  see it attenuated per view angle, as Cycles 5.0; light samples do not).
   Subsurface weight w_s splits the DIFFUSE lobe (Cycles's "Diffuse/Subsurface component"):
     DIFFUSE(base·(1−w_s)) + SUBSURFACE(clamp(base)·w_s, radius × scale, method,
     ior: IOR (Random Walk) or Subsurface IOR (Skin), roughness, anisotropy, weight = the scalar
     factor of the colour; both layered under the specular lobe) — docs/subsurface.md. Radius, scale, IORs and anisotropy are
     constant-only.
+- Sheen BSDF → SHEEN(color, roughness) (Microfiber) or VELVET(color, sigma = roughness)
+  (Ashikhmin; the legacy Velvet node too).
 - Subsurface Scattering node → SUBSURFACE(color, radius × scale, falloff, IOR, roughness:
   sqrt(Roughness) (Cycles uses the node's roughness as the GGX alpha), anisotropy).
 - Anything else (Toon, Hair, Principled Hair, Specular BSDF (EEVEE), Ray Portal, ...): one
@@ -52,9 +65,9 @@ material's *program*; the arithmetic above is written on ``Value``s, so a textur
 roughness, metallic, mix factor or emission gives lobes whose colour / roughness come from
 program registers (``color_reg`` / ``roughness_reg`` / ``emission_reg``), and constant inputs
 fold to today's constant lobes. Node groups, reroutes and muted nodes are followed at the
-shader level too. Alpha and transmission may be textured (alpha cut-outs); IOR, specular and
-coat stay constant-only (a linked one
-warns and uses its socket's value).
+shader level too. Alpha and transmission may be textured (alpha cut-outs), and the coat and
+sheen roughness; IOR, specular and the coat / sheen weights and tints stay constant-only (a
+linked one warns and uses its socket's value).
 """
 
 import numpy as np
@@ -87,6 +100,18 @@ def _from_socket(link_sock):
     """The socket a link comes from, skipping reroutes, muted links and nodes, node groups;
     None if unlinked."""
     return resolve(link_sock, ())[0]
+
+
+def _normal_key(node, name, ctx):
+    """Identity of what drives a normal input (None: unlinked), to compare two of them."""
+    sock = node.inputs.get(name)
+    src, sctx = resolve(sock, ctx) if sock is not None else (None, ())
+    return None if src is None else (src.node.as_pointer(), src.identifier, tuple(n.as_pointer() for n in sctx))
+
+
+def _above_cutoff(x) -> bool:
+    """A layer weight that may exceed Cycles's CLOSURE_WEIGHT_CUTOFF (1e-5) somewhere."""
+    return isinstance(x, Value) and maybe_positive(x) or not isinstance(x, Value) and x > 1e-5
 
 
 def _representative(v: Value, floor: float) -> list:
@@ -158,6 +183,8 @@ class MaterialExporter:
         emission = np.zeros(3)
         self._b = ProgramBuilder(self.images, self.attributes)
         self._normal = None  # (source key, Value) of the first BSDF Normal input that is linked
+        self._emitters = 0  # shaders that may emit (Emission, Principled with emission)
+        self._emission_layer = None  # the lowest coat / sheen lobe over a Principled's emission
         self._b.material_pass_index = int(getattr(material, "pass_index", 0))
         if tree is None:
             lobes = [{"type": "DIFFUSE", "color": list(map(float, material.diffuse_color[:3]))}]
@@ -187,21 +214,33 @@ class MaterialExporter:
                 index_of[id(lb)] = len(result["lobes"])
                 result["lobes"].append(entry)
         for lb, entry in zip([lb for lb in lobes if id(lb) in index_of], result["lobes"]):
-            if "layer" in lb and id(lb["layer"]) in index_of:  # else the layer above was black
-                entry["layer"] = index_of[id(lb["layer"])]
+            top = lb.get("layer")
+            while top is not None and id(top) not in index_of:  # a black layer: the one above it
+                top = top.get("layer")
+            if top is not None:
+                entry["layer"] = index_of[id(top)]
         emission = constant(emission)
         if isinstance(emission, Value):
             result["emission_reg"] = self._b.reg_of(emission)
             result["emission"] = _representative(emission, 0.0)
         else:
             result["emission"] = [float(x) for x in np.broadcast_to(emission, 3)]
+        if self._emission_layer is not None:
+            top = self._emission_layer
+            while top is not None and id(top) not in index_of:  # a black layer: the one above it
+                top = top.get("layer")
+            if self._emitters > 1:
+                problems.append("emission of several shaders, one under a coat / sheen: not attenuated by it")
+            elif top is not None and np.any(np.asarray(result["emission"]) > 0):
+                result["emission_layer"] = index_of[id(top)]
         if self._normal is not None and result["lobes"]:
             result["normal_reg"] = self._b.reg_of(self._normal[1])
         if getattr(getattr(material, "cycles", None), "emission_sampling", "AUTO") == "NONE":
             result["light"] = False  # Cycles: emission found by BSDF rays only, never sampled
         if "emission_reg" in result or "normal_reg" in result or "density_reg" in result.get("volume", {}) \
                 or "color_reg" in result.get("volume", {}) or any(
-                "color_reg" in lb or "roughness_reg" in lb for lb in result["lobes"]):
+                "color_reg" in lb or "roughness_reg" in lb or "layer_weight_reg" in lb or "coat_tint_reg" in lb
+                for lb in result["lobes"]):
             result["program"] = self._b.to_dict()
         problems += self._b.problems
         if problems:
@@ -255,6 +294,16 @@ class MaterialExporter:
         for key in ("radius", "method", "anisotropy", "tint", "multiscatter", "multiscatter_tint"):  # SSS, specular
             if key in lb:
                 out[key] = lb[key]
+        for key in ("layer_weight", "coat_tint"):  # coat and sheen layers: constants or registers
+            if key in lb:
+                v = constant(lb[key])
+                if isinstance(v, Value):
+                    rep = _representative(v, 0.0)
+                    out[key] = max(rep) if key == "layer_weight" else rep
+                    out[key + "_reg"] = self._b.reg_of(v)
+                else:
+                    v = np.maximum(np.broadcast_to(np.asarray(v, np.float64), 3), 0.0)
+                    out[key] = float(v.max()) if key == "layer_weight" else [float(x) for x in v]
         for key in ("weight", "reflection_weight"):  # METALLIC, SUBSURFACE / Principled glass
             if key not in lb:
                 continue
@@ -379,12 +428,21 @@ class MaterialExporter:
                      "ior": max(self._const_value(node, "IOR", problems, 1.45, ctx), 1e-5)}], np.zeros(3)
         if kind == "ShaderNodeHoldout":
             return [{"type": "HOLDOUT", "color": w * np.ones(3)}], np.zeros(3)
+        if kind in ("ShaderNodeBsdfSheen", "ShaderNodeBsdfVelvet"):  # drt.materials.sheen
+            # Microfiber: the LTC sheen; Ashikhmin (and the legacy Velvet node): velvet, whose
+            # sigma is the Roughness (Sigma) input
+            velvet = kind == "ShaderNodeBsdfVelvet" or getattr(node, "distribution", "MICROFIBER") == "ASHIKHMIN"
+            r = self._value(node, ("Roughness", "Sigma"), problems, 0.5, ctx)
+            return [{"type": "VELVET" if velvet else "SHEEN", "color": w * self._color(node, "Color", problems, ctx=ctx),
+                     "roughness": r if isinstance(r, Value) else min(max(r, 0.0), 1.0)}], np.zeros(3)
         if kind == "ShaderNodeBsdfTransparent":
             return [{"type": "GLASS", "color": w * self._color(node, "Color", problems, ctx=ctx),
                      "roughness": 0.0, "ior": 1.0}], np.zeros(3)
         if kind == "ShaderNodeEmission":
             col = self._color(node, "Color", problems, (1, 1, 1), ctx)
-            return [], w * col * self._value(node, "Strength", problems, 1.0, ctx)
+            em = w * col * self._value(node, "Strength", problems, 1.0, ctx)
+            self._emitters += 1 if maybe_positive(em) else 0
+            return [], em
         if kind == "ShaderNodeMixShader":
             fac = clamp01(self._value(node, ("Fac", "Factor"), problems, 0.5, ctx))
             lobes, em = [], np.zeros(3)
@@ -500,10 +558,8 @@ class MaterialExporter:
         em_col = self._color(node, "emission_color", problems, (0, 0, 0), ctx)
         em_strength = self._value(node, "Emission Strength", problems, 1.0, ctx) \
             if node.inputs.get("Emission Strength") is not None else 1.0
-        for key in ("coat", "sheen"):
-            if self._const_value(node, key, problems, 0.0, ctx) > 0.0:
-                problems.append(f"'{node.name}' {key} ignored")
-        for key in ("Coat Normal", "Tangent"):
+        layers = self._coat_and_sheen(node, w * alpha, problems, ctx)
+        for key in ("Tangent",):
             sock = node.inputs.get(key)
             if sock is not None and resolve(sock, ctx)[0] is not None:
                 problems.append(f"'{node.name}' linked {key} ignored")
@@ -516,7 +572,10 @@ class MaterialExporter:
             f0s = min(max(f0 * 2.0 * spec, 0.0), 0.99)
             eta = (1.0 + np.sqrt(f0s)) / (1.0 - np.sqrt(f0s))
         multiscatter = getattr(node, "distribution", "MULTI_GGX") == "MULTI_GGX"
-        lobes = []
+        lobes = list(layers)
+        # everything below the sheen / coat lies under the lowest of them ("layer": scaled per
+        # hit by 1 − its albedo(wo), and a coat tint's absorption; docs/materials.md)
+        below = {"layer": layers[-1]} if layers else {}
         wa = w * alpha
         if maybe_positive(metallic):
             k = wa * metallic
@@ -525,21 +584,22 @@ class MaterialExporter:
             clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
             lobes.append({"type": "METALLIC", "color": k * clamped, "weight": k, "roughness": rough,
                           "tint": [float(min(x, 1.0)) for x in np.broadcast_to(tint, 3)],
-                          "multiscatter": multiscatter})
+                          "multiscatter": multiscatter, **below})
         dielectric = 1.0 - metallic
         if maybe_positive(trans) and maybe_positive(dielectric):
-            lobes.append(self._principled_glass(node, wa * dielectric * trans, base, tint, rough, ior, problems))
+            lobes.append({**self._principled_glass(node, wa * dielectric * trans, base, tint, rough, ior, problems),
+                          **below})
         opaque = wa * dielectric * (1 - trans)
         if maybe_positive(opaque):
             # The specular layer (GGX × dielectric Fresnel) over the diffuse/subsurface base,
             # which the core scales per hit by 1 − the layer's albedo E(wo) ("layer": the index
             # of the specular lobe in this list; docs/materials.md)
-            layer = {}
+            layer = below
             if eta != 1.0:
                 top = {"type": "DIELECTRIC_SPECULAR", "color": opaque * np.ones(3),
                        "roughness": rough, "ior": float(eta),
                        "tint": [float(x) for x in np.broadcast_to(tint, 3)],
-                       "multiscatter": multiscatter}
+                       "multiscatter": multiscatter, **below}
                 layer = {"layer": top}  # the lobe dict itself: indices shift when lists merge
                 lobes.append(top)
             if sss < 1.0:
@@ -560,4 +620,57 @@ class MaterialExporter:
                               **layer})
         if maybe_positive(1 - alpha):  # transparency: straight through (a textured alpha: cut-outs)
             lobes.append({"type": "GLASS", "color": w * (1 - alpha), "roughness": 0.0, "ior": 1.0})
-        return lobes, wa * em_col * em_strength
+        emission = wa * em_col * em_strength
+        if maybe_positive(emission):
+            self._emitters += 1
+            if layers:  # attenuated per view angle by the coat / sheen (core: emission_layer)
+                self._emission_layer = layers[-1]
+        return lobes, emission
+
+    def _coat_and_sheen(self, node, wa, problems, ctx):
+        """The Principled BSDF's top layers, top first (Cycles 5.0's order: sheen over coat over
+        the rest), as lobe dicts whose "layer" chains them: [SHEEN?, DIELECTRIC_SPECULAR coat?].
+
+        Sheen: SHEEN(wa·Sheen Weight·Sheen Tint, Sheen Roughness), layer_weight = weight ×
+        max(tint) (Cycles's closure_layering_weight of its albedo). Coat: a dielectric GGX layer
+        with the real Fresnel of Coat IOR and Multiscatter GGX energy compensation (Cycles's
+        bsdf_microfacet_setup_fresnel_dielectric always preserves energy): DIELECTRIC_SPECULAR
+        (wa·Coat Weight, Coat Roughness, Coat IOR, white tint), layer_weight = Coat Weight,
+        coat_tint = Coat Tint (absorption of the layers below). Weights, tints and roughnesses may
+        be textured (registers; k is the largest component of the weight register); the coat
+        IOR is constant-only. A Coat Normal driven differently from Normal (e.g. a normal map on the
+        base only) warns: both layers use the material's shading normal (Normal's); the same
+        source on both is exact."""
+        layers = []
+        sheen_w = self._value(node, "sheen", problems, 0.0, ctx)
+        coat_w = self._value(node, "coat", problems, 0.0, ctx)
+        sheen_w = sheen_w if isinstance(sheen_w, Value) else max(sheen_w, 0.0)
+        coat_w = coat_w if isinstance(coat_w, Value) else max(coat_w, 0.0)
+        if _above_cutoff(sheen_w):  # Cycles's CLOSURE_WEIGHT_CUTOFF
+            sheen_tint = self._color(node, "Sheen Tint", problems, (1, 1, 1), ctx)
+            sheen_tint = sheen_tint if isinstance(sheen_tint, Value) else np.maximum(sheen_tint, 0.0)
+            r = self._value(node, "Sheen Roughness", problems, 0.5, ctx)
+            r = r if isinstance(r, Value) else min(max(r, 0.0), 1.0)
+            k = sheen_w * sheen_tint  # the layer weight: its largest component (core)
+            if maybe_positive(k):
+                layers.append({"type": "SHEEN", "color": wa * k, "roughness": r, "layer_weight": k})
+        if _above_cutoff(coat_w):
+            coat_ior = max(self._const_value(node, "Coat IOR", problems, 1.5, ctx), 1.0)
+            coat_tint = self._color(node, "Coat Tint", problems, (1, 1, 1), ctx)
+            coat_tint = coat_tint if isinstance(coat_tint, Value) else np.maximum(coat_tint, 0.0)
+            r = self._value(node, "Coat Roughness", problems, 0.03, ctx)
+            r = r if isinstance(r, Value) else min(max(r, 0.0), 1.0)
+            if coat_ior == 1.0 and (isinstance(coat_tint, Value) or not np.all(coat_tint == 1.0)):
+                problems.append(f"'{node.name}' Coat IOR 1: the coat tint is ignored")
+            if coat_ior > 1.0:
+                layers.append({"type": "DIELECTRIC_SPECULAR", "color": wa * coat_w * np.ones(3),
+                               "roughness": r, "ior": float(coat_ior), "tint": [1.0, 1.0, 1.0],
+                               "multiscatter": True, "layer_weight": coat_w, "coat_tint": coat_tint,
+                               **({"layer": layers[-1]} if layers else {})})
+        if layers and _above_cutoff(coat_w) \
+                and _normal_key(node, "Coat Normal", ctx) != _normal_key(node, "Normal", ctx):
+            # Cycles's coat uses Coat Normal (unlinked: the unmapped normal) and the sheen a mix
+            # of it with Normal; DRT has one shading normal per material (Normal's)
+            problems.append(f"'{node.name}' Coat Normal differs from Normal: the coat and sheen use "
+                            f"the material's shading normal")
+        return layers

@@ -55,7 +55,7 @@ from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N
 from .materials.programs import eval_material
 from .materials.transparency import straight_lobe
 from .materials.holdout import holdout_weight
-from .materials.table import LOBE_SUBSURFACE, LOBE_TRANSLUCENT, pick_lobe
+from .materials.table import LOBE_SUBSURFACE, LOBE_TRANSLUCENT, layered_emission, pick_lobe
 from .subsurface import SSS_DEAD, SSS_EXIT, SSS_EXIT_FLAT, SSS_NONE, SSS_WALK, sss_coefficients
 from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_5d
@@ -611,6 +611,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                     continue
         if md.has_emission[mat] and not exiting:
             le = load(md.emission, mat)
+            if md.emission_layer[mat] >= 0:  # a Principled's emission under its coat / sheen
+                le = layered_emission(md, mat, le, (0.0, 0.0, dot(wo, ns)))
             lpdf = emissive_pdf(ld, prim, prev_p, p, ng, prev_hint)
             w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
             acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))

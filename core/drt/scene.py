@@ -23,7 +23,7 @@ SUPPORTED_VERSIONS = (1, 2)  # 2: adds SUBSURFACE lobes (docs/scene-format.md)
 LIGHT_TYPES = ("POINT", "SPOT", "SUN", "AREA")
 AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
 LOBE_TYPES = ("DIFFUSE", "GLOSSY", "GLASS", "SUBSURFACE", "DIELECTRIC_SPECULAR", "METALLIC", "TRANSLUCENT",
-              "REFRACTION", "HOLDOUT")
+              "REFRACTION", "HOLDOUT", "SHEEN", "VELVET")
 SSS_METHODS = ("RANDOM_WALK", "RANDOM_WALK_SKIN", "BURLEY")  # = drt.materials.subsurface_lobe
 FILTER_TYPES = ("BLACKMAN_HARRIS", "GAUSSIAN", "BOX")
 SAMPLER_KINDS = ("SOBOL", "STRATIFIED", "RANDOM")
@@ -399,7 +399,8 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
             lp = f"{p}.lobes[{j}]"
             t = _enum(lobe, "type", lp, LOBE_TYPES)
             entry = {"type": t, "color": _vector(lobe, "color", lp, 3, lo=0.0).tolist()}
-            if t in ("GLOSSY", "GLASS", "DIELECTRIC_SPECULAR", "METALLIC", "REFRACTION"):
+            if t in ("GLOSSY", "GLASS", "DIELECTRIC_SPECULAR", "METALLIC", "REFRACTION", "SHEEN",
+                     "VELVET"):
                 entry["roughness"] = _number(lobe, "roughness", lp, 0.0 if t in ("GLASS", "REFRACTION") else 0.5,
                                              lo=0, hi=1)
             if t == "DIELECTRIC_SPECULAR":  # the Principled BSDF's specular layer (issue 11)
@@ -410,8 +411,12 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
                 entry["tint"] = _vector(lobe, "tint", lp, 3, default=[1, 1, 1], lo=0.0).tolist()
                 entry["multiscatter"] = _bool(lobe, "multiscatter", lp, True) if "multiscatter" in lobe else True
                 entry["weight"] = _number(lobe, "weight", lp, 1.0, lo=0, lo_open=True)
-            if "layer" in lobe:  # the index of the DIELECTRIC_SPECULAR lobe this one lies under
+            if "layer" in lobe:  # the index of the layer lobe (specular, coat, sheen) this one lies under
                 entry["layer"] = _number(lobe, "layer", lp, integer=True, lo=0, hi=len(lobes) - 1)
+            if "layer_weight" in lobe:  # a coat / sheen layer's weight relative to what lies under it
+                entry["layer_weight"] = _number(lobe, "layer_weight", lp, 1.0, lo=0)
+            if "coat_tint" in lobe:  # a coat's tint: absorption of the lobes under it
+                entry["coat_tint"] = _vector(lobe, "coat_tint", lp, 3, default=[1, 1, 1], lo=0.0).tolist()
             if t in ("GLASS", "REFRACTION"):
                 entry["ior"] = _number(lobe, "ior", lp, 1.45, lo=0, lo_open=True, hi=100)
             if t == "GLASS" and "reflection_weight" in lobe:  # a Principled transmission (issue 11)
@@ -427,7 +432,7 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
                 entry["roughness"] = _number(lobe, "roughness", lp, 1.0, lo=0, hi=1)
                 entry["anisotropy"] = _number(lobe, "anisotropy", lp, 0.0, lo=-1, hi=1)
                 entry["weight"] = _number(lobe, "weight", lp, 1.0, lo=0, lo_open=True)
-            for key in ("color_reg", "roughness_reg", "weight_reg"):
+            for key in ("color_reg", "roughness_reg", "weight_reg", "layer_weight_reg", "coat_tint_reg"):
                 if key in lobe:
                     entry[key] = _number(lobe, key, lp, integer=True, lo=0)
             clean.append(entry)
@@ -436,6 +441,8 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
             "lobes": clean,
             "emission": _vector(m, "emission", p, 3, default=[0, 0, 0], lo=0.0).tolist(),
         }
+        if "emission_layer" in m:  # the coat / sheen lobe over a Principled's emission (issue 11)
+            mat["emission_layer"] = _number(m, "emission_layer", p, integer=True, lo=0, hi=max(len(lobes) - 1, 0))
         volume = _medium(m, p)
         if volume is not None:
             mat["volume"] = volume

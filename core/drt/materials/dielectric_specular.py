@@ -129,6 +129,13 @@ def _compensation(f0, s, e_avg, missing):
 @kernel
 def layer_weight(alpha, eta, f0t, multiscatter, cos_o):
     """Scale of the lobes under the layer for this wo: 1 − max_c albedo_c (clamped)."""
+    return min(max(1.0 - layer_albedo_max(alpha, eta, f0t, multiscatter, cos_o), 0.0), 1.0)
+
+
+@kernel
+def layer_albedo_max(alpha, eta, f0t, multiscatter, cos_o):
+    """max_c of the layer's albedo estimate for this wo (per unit weight): what the lobes under
+    it lose (Cycles's bsdf_microfacet_estimate_albedo × the multiscatter darkening)."""
     rough = math.sqrt(alpha)
     z = math.sqrt(abs((eta - 1.0) / (eta + 1.0)))
     s = table_3d(GEN_SCHLICK_IOR_S, rough, min(abs(cos_o), 1.0), z)
@@ -144,7 +151,7 @@ def layer_weight(alpha, eta, f0t, multiscatter, cos_o):
         a0 *= e + _fms(f0t[0], s_avg, e_avg) * (1.0 - e)
         a1 *= e + _fms(f0t[1], s_avg, e_avg) * (1.0 - e)
         a2 *= e + _fms(f0t[2], s_avg, e_avg) * (1.0 - e)
-    return min(max(1.0 - max(a0, a1, a2), 0.0), 1.0)
+    return max(a0, a1, a2)
 
 
 @kernel

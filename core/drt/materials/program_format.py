@@ -124,6 +124,8 @@ ProgramData = namedtuple("ProgramData", [
                         # row 3 [ortho, plane_w, plane_h, 0], row 4 [shift_x, shift_y, 0, 0]
     "lobe_weight_reg",  # (M, L) int64 register of a METALLIC lobe's weight / a GLASS lobe's
                         # reflection_weight (lobe_fresnel[..., 4]), −1: constant
+    "lobe_layer_reg",   # (M, L, 2) int64 a coat / sheen layer's [k register (k = its largest
+                        # component), coat tint register], −1: constant (MaterialData.lobe_coat)
 ])
 
 
@@ -222,6 +224,7 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
     color_reg = np.full((m_count, n_slots), -1, np.int64)
     rough_reg = np.full((m_count, n_slots), -1, np.int64)
     weight_reg = np.full((m_count, n_slots), -1, np.int64)
+    layer_reg = np.full((m_count, n_slots, 2), -1, np.int64)
     emission_reg = np.full(m_count, -1, np.int64)
     normal_reg = np.full(m_count, -1, np.int64)
     reads_point = np.zeros(m_count, bool)
@@ -248,6 +251,8 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
             color_reg[i, slot] = _reg(lobe.get("color_reg"), n, f"{where} lobe {j} color_reg")
             rough_reg[i, slot] = _reg(lobe.get("roughness_reg"), n, f"{where} lobe {j} roughness_reg")
             weight_reg[i, slot] = _reg(lobe.get("weight_reg"), n, f"{where} lobe {j} weight_reg")
+            layer_reg[i, slot, 0] = _reg(lobe.get("layer_weight_reg"), n, f"{where} lobe {j} layer_weight_reg")
+            layer_reg[i, slot, 1] = _reg(lobe.get("coat_tint_reg"), n, f"{where} lobe {j} coat_tint_reg")
             slot += 1
         emission_reg[i] = _reg(mat.get("emission_reg"), n, f"{where} emission_reg")
         normal_reg[i] = _reg(mat.get("normal_reg"), n, f"{where} normal_reg")
@@ -295,7 +300,7 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         object_of=arr(object_of, np.int32, (0,)), object_info=arr(object_info, np.float64, (0, 9)),
         positions=arr(positions, np.float32, (0, 3)), triangles=arr(triangles, np.int32, (0, 3)),
         footprint=arr(footprint, np.float64, (0, 3)), camera=arr(camera, np.float64, (0, 4)),
-        lobe_weight_reg=weight_reg)
+        lobe_weight_reg=weight_reg, lobe_layer_reg=layer_reg)
 
 
 def world_program_index(pd: ProgramData) -> int:
@@ -319,4 +324,5 @@ def empty_program_data() -> ProgramData:
                        object_of=np.zeros(0, np.int32), object_info=np.zeros((0, 9)),
                        positions=np.zeros((0, 3), np.float32), triangles=np.zeros((0, 3), np.int32),
                        footprint=np.zeros((0, 3)), camera=np.zeros((0, 4)),
-                       lobe_weight_reg=np.zeros((0, 0), np.int64))
+                       lobe_weight_reg=np.zeros((0, 0), np.int64),
+                       lobe_layer_reg=np.zeros((0, 0, 2), np.int64))

@@ -1168,10 +1168,18 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
             alpha = rough * rough
             md.lobe_alpha[m, l] = alpha
             t = md.lobe_type[m, l]
-            # (as MaterialTable: Lambert (1) and translucent (7) never, glass (3) and refraction
-            # (8) also at IOR ≈ 1, a holdout (11) always)
-            md.lobe_delta[m, l] = t == 11 or (t != 1 and t != 7 and (alpha * alpha <= ALPHA_SQ_SINGULAR or (
+            # (as MaterialTable: Lambert (1), translucent (7), sheen (9) and velvet (10) never,
+            # glass (3) and refraction (8) also at IOR ≈ 1, a holdout (11) always)
+            md.lobe_delta[m, l] = t == 11 or (t != 1 and t != 7 and t != 9 and t != 10 and (alpha * alpha <= ALPHA_SQ_SINGULAR or (
                 (t == 3 or t == 8) and abs(md.lobe_ior[m, l] - 1.0) < IOR_ONE_EPS)))
+        kr = pd.lobe_layer_reg[m, l, 0]
+        if kr >= 0:  # a textured coat / sheen weight: k = the register's largest component
+            md.lobe_coat[m, l, 0] = max(regs[kr, 0], regs[kr, 1], regs[kr, 2], 0.0)
+        tr = pd.lobe_layer_reg[m, l, 1]
+        if tr >= 0:  # a textured coat tint
+            md.lobe_coat[m, l, 1] = max(regs[tr, 0], 0.0)
+            md.lobe_coat[m, l, 2] = max(regs[tr, 1], 0.0)
+            md.lobe_coat[m, l, 3] = max(regs[tr, 2], 0.0)
         total += (md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0] + md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]
                   + md.lobe_color[m, l, 2] * md.lobe_avg[m, l, 2]) * (1.0 / 3.0)
     cdf = 0.0

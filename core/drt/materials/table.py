@@ -9,7 +9,8 @@ the remaining lobes are packed into the first slots):
 
     lobe_type   (M, L) int8     BSDF_NONE / BSDF_DIFFUSE / BSDF_GLOSSY / BSDF_GLASS / ... (the
                                 BSDF_* constants below; TRANSLUCENT, REFRACTION and HOLDOUT:
-                                docs/materials.md, "More shader nodes")
+                                docs/materials.md, "More shader nodes"; SHEEN, VELVET:
+                                "Principled coat and sheen")
     lobe_color  (M, L, 3)       linear RGB weight of the lobe
     lobe_alpha  (M, L)          GGX alpha = roughness² (0 for diffuse)
     lobe_ior    (M, L)          index of refraction of GLASS lobes (1 otherwise)
@@ -52,9 +53,12 @@ from ..kernels.vec3 import load, store
 from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample, refraction_eval, refraction_sample
 from .diffuse import INV_PI, diffuse_eval, diffuse_sample, translucent_eval, translucent_sample
 from .dielectric_specular import (average_albedo, dielectric_spec_delta_weight, dielectric_spec_eval,
-                                  layer_weight, metallic_average_albedo, metallic_delta_weight,
+                                  layer_albedo_max, layer_weight, metallic_average_albedo,
+                                  metallic_delta_weight,
                                   metallic_eval)
 from .glass_ms import glass_energy_factor
+from .sheen import (average_albedo as sheen_average_albedo, sheen_albedo, sheen_eval, sheen_sample,
+                    velvet_average_albedo, velvet_eval, velvet_sample)
 from .subsurface_lobe import BSSRDF_MIN_RADIUS, SSS_METHODS, effective_radius, sss_entry_sample
 from .ggx import (
     ALPHA_SQ_SINGULAR,
@@ -75,15 +79,19 @@ BSDF_DIELECTRIC_SPECULAR = 5  # GGX × dielectric Fresnel, the Principled specul
 BSDF_METALLIC = 6  # GGX × F82-tint conductor Fresnel, the Principled metallic lobe
 BSDF_TRANSLUCENT = 7  # Lambert transmission (Cycles's Translucent BSDF)
 BSDF_REFRACTION = 8  # GGX refraction only, no Fresnel factor (Cycles's Refraction BSDF)
-# 9, 10: reserved (sheen)
+BSDF_SHEEN = 9  # Cycles's microfiber sheen (LTC), drt.materials.sheen
+BSDF_VELVET = 10  # Ashikhmin velvet (Sheen BSDF "Ashikhmin", legacy Velvet), drt.materials.sheen
 BSDF_HOLDOUT = 11  # Cycles's Holdout closure: never sampled or evaluated; its colour (a grey
 #                    weight) cuts camera-visible hits out of the film's alpha (drt.path_stages)
 BSDF_TYPES = {"DIFFUSE": BSDF_DIFFUSE, "GLOSSY": BSDF_GLOSSY, "GLASS": BSDF_GLASS,
               "SUBSURFACE": BSDF_SUBSURFACE, "DIELECTRIC_SPECULAR": BSDF_DIELECTRIC_SPECULAR,
               "METALLIC": BSDF_METALLIC, "TRANSLUCENT": BSDF_TRANSLUCENT,
-              "REFRACTION": BSDF_REFRACTION, "HOLDOUT": BSDF_HOLDOUT}
+              "REFRACTION": BSDF_REFRACTION, "HOLDOUT": BSDF_HOLDOUT,
+              "SHEEN": BSDF_SHEEN, "VELVET": BSDF_VELVET}
 #: lobe types that transmit (wi on the other side from wo)
 TRANSMITTING = (BSDF_GLASS, BSDF_TRANSLUCENT, BSDF_REFRACTION)
+#: lobe types that may be a layer over others (a lobe's "layer")
+LAYER_TYPES = ("DIELECTRIC_SPECULAR", "SHEEN")
 #: name of the white Lambert material appended to tables with SSS: shades SSS exit points
 SSS_EXIT_MATERIAL = "__drt_sss_exit__"
 #: columns of lobe_sss (M, L, 8)
@@ -142,8 +150,20 @@ _ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
 #:   is k × the base colour, Fresnel F0 = min(colour / k, 1)); GLASS lobes' (multiscatter Fss
 #:   r, g, b (0: none, drt.materials.glass_ms), reflection_weight set 0/1, reflection weight k)
 #:   (drt.materials.dielectric_specular); lobe_layer (M, L) int64: slot of the
-#:   DIELECTRIC_SPECULAR lobe this lobe lies under (its colour is scaled per hit by that
-#:   layer's 1 − albedo(wo)), −1: none; has_layers (M,) bool: some lobe has lobe_layer ≥ 0;
+#:   (drt.materials.dielectric_specular); lobe_layer (M, L) int64: slot of the layer lobe
+#:   (DIELECTRIC_SPECULAR or SHEEN) this lobe lies directly under, −1: none. Layers chain (a
+#:   layer lobe has its own lobe_layer: diffuse → specular → coat → sheen); a lobe's colour is
+#:   scaled per hit by the product over the chain above it of 1 − k·albedo_layer(wo) (× the
+#:   coat tint's absorption, see lobe_coat); has_layers (M,) int64: 0 no lobe has a layer,
+#:   1 only single untinted k = 1 DIELECTRIC_SPECULAR layers (the plain Principled: the old
+#:   scalar fast path for the generic lobes under it; specular, metallic and glass lobes
+#:   under a layer always take the RGB walk), 2 anything else (coat, sheen, chains);
+#:   lobe_coat (M, L, 4) f64: a layer lobe's (k, tint r, g, b): k its weight relative to what
+#:   lies under it (1 for the Principled specular layer, Coat Weight for a coat, Sheen Weight ×
+#:   max(Sheen Tint) for a sheen), tint the coat tint whose absorption mix(1, tint^(1/cos θt), k)
+#:   the lobes below get (white: none); (1, 1, 1, 1) for other lobes; emission_layer (M,) int64:
+#:   slot of the lowest coat / sheen layer over the material's emission (a Principled's), whose
+#:   chain attenuates emission seen by camera and BSDF rays (``layered_emission``), −1: none;
 #:   lobe_avg (M, L, 3) f64: per unit colour, the lobe's cosine-averaged share (the specular
 #:   layer's average albedo, 1 − its max for the lobes under it, 1 otherwise): lobe selection
 #:   and the albedo pass weigh colours by it (also per hit, in ``programs.eval_material``).
@@ -151,7 +171,7 @@ MaterialData = namedtuple("MaterialData", [
     "lobe_type", "lobe_color", "lobe_alpha", "lobe_ior", "lobe_delta", "lobe_select", "lobe_cdf",
     "lobe_count", "emission", "has_emission", "albedo", "delta_only", "pure_diffuse",
     "transmission_or_delta", "has_diffuse", "summary", "lobe_sss", "sss_exit",
-    "lobe_fresnel", "lobe_layer", "has_layers", "lobe_avg"])
+    "lobe_fresnel", "lobe_layer", "has_layers", "lobe_avg", "lobe_coat", "emission_layer"])
 
 
 #: ``ns_local`` of a surface without a bump/normal map: the shading frame's own z
@@ -202,6 +222,8 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
     f1 = 0.0
     f2 = 0.0
     pdf = 0.0
+    memo_top = -1  # the last layer chain weight computed (memo_under_weight)
+    memo_w = (1.0, 1.0, 1.0)
     for s in range(md.lobe_type.shape[1]):
         t = md.lobe_type[m, s]
         if t == BSDF_NONE or md.lobe_delta[m, s]:
@@ -209,6 +231,9 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
         if t == BSDF_DIELECTRIC_SPECULAR:
             fc, p = dielectric_spec_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s],
                                          lobe_f0(md, m, s), md.lobe_fresnel[m, s, 3] > 0.0)
+            if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
+                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, memo_top, memo_w)
+                fc = (fc[0] * uw[0], fc[1] * uw[1], fc[2] * uw[2])
             f0 += md.lobe_color[m, s, 0] * fc[0]
             f1 += md.lobe_color[m, s, 1] * fc[1]
             f2 += md.lobe_color[m, s, 2] * fc[2]
@@ -218,6 +243,9 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
             k = md.lobe_fresnel[m, s, 4]
             fc, p = metallic_eval(wo, wi, md.lobe_alpha[m, s], metal_f0(md, m, s), lobe_f0(md, m, s),
                                   md.lobe_fresnel[m, s, 3] > 0.0)
+            if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
+                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, memo_top, memo_w)
+                fc = (fc[0] * uw[0], fc[1] * uw[1], fc[2] * uw[2])
             f0 += k * fc[0]
             f1 += k * fc[1]
             f2 += k * fc[2]
@@ -239,8 +267,9 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
             if fss[0] + fss[1] + fss[2] > 0.0:  # Multiscatter GGX glass (drt.materials.glass_ms)
                 k = glass_energy_factor(md.lobe_alpha[m, s], md.lobe_ior[m, s], wo[2], fss)
                 c0, c1, c2 = c0 * k[0], c1 * k[1], c2 * k[2]
-            if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
-                v *= under_weight(md, m, s, wo)
+            if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
+                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, memo_top, memo_w)
+                c0, c1, c2 = c0 * uw[0], c1 * uw[1], c2 * uw[2]
             f0 += c0 * v
             f1 += c1 * v
             f2 += c2 * v
@@ -250,13 +279,27 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
             v, p = translucent_eval(wo, wi)
         elif t == BSDF_REFRACTION:
             v, p = refraction_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
+        elif t == BSDF_SHEEN:
+            v, p = sheen_eval(wo, wi, md.lobe_alpha[m, s])
+        elif t == BSDF_VELVET:
+            v, p = velvet_eval(wo, wi, md.lobe_alpha[m, s])
         else:
             continue
         if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
-            v *= under_weight(md, m, s, wo)
-        f0 += md.lobe_color[m, s, 0] * v
-        f1 += md.lobe_color[m, s, 1] * v
-        f2 += md.lobe_color[m, s, 2] * v
+            if md.has_layers[m] == 1:  # one plain specular layer: a scalar factor
+                v *= single_layer_weight(md, m, md.lobe_layer[m, s], wo)
+                f0 += md.lobe_color[m, s, 0] * v
+                f1 += md.lobe_color[m, s, 1] * v
+                f2 += md.lobe_color[m, s, 2] * v
+            else:
+                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, memo_top, memo_w)
+                f0 += md.lobe_color[m, s, 0] * (v * uw[0])
+                f1 += md.lobe_color[m, s, 1] * (v * uw[1])
+                f2 += md.lobe_color[m, s, 2] * (v * uw[2])
+        else:
+            f0 += md.lobe_color[m, s, 0] * v
+            f1 += md.lobe_color[m, s, 1] * v
+            f2 += md.lobe_color[m, s, 2] * v
         pdf += md.lobe_select[m, s] * p
     return (f0, f1, f2), pdf
 
@@ -279,13 +322,89 @@ def metal_f0(md, m, s):
 
 @inline_kernel
 def under_weight(md, m, s, wo):
-    """Scale of slot s, which lies under the DIELECTRIC_SPECULAR slot md.lobe_layer[m, s], for
-    this wo: that layer's 1 − albedo(wo) (Cycles's closure_layering_weight)."""
-    top = md.lobe_layer[m, s]
+    """Scale (3-tuple) of slot s for this wo: the product over the layers above it (the chain
+    md.lobe_layer[m, s], its lobe_layer, ...) of Cycles's closure_layering_weight
+    1 − k·max_c albedo_c(wo), and for a tinted coat its absorption mix(1, tint^(1/cos θt), k)
+    with θt the view direction refracted into the coat (Cycles's principled_bsdf_emission)."""
+    return chain_weight(md, m, md.lobe_layer[m, s], wo)
+
+
+@inline_kernel
+def layered_emission(md, m, le, wo):
+    """Emission le (3-tuple) of material m seen from wo (local frame, or any vector whose z is
+    cos θo): attenuated by the coat / sheen layers over it (Cycles 5.0 does so for camera and
+    BSDF rays; its light samples see the unattenuated emission — Cycles fixed that after 5.1)."""
+    top = md.emission_layer[m]
     if top < 0:
-        return 1.0
+        return le
+    w = chain_weight(md, m, top, wo)
+    return (le[0] * w[0], le[1] * w[1], le[2] * w[2])
+
+
+@inline_kernel
+def single_layer_weight(md, m, top, wo):
+    """The factor 1 − albedo(wo) of a DIELECTRIC_SPECULAR layer with k = 1, no tint and nothing
+    above it (``has_layers`` 1): what ``chain_weight`` gives, as one scalar."""
     return layer_weight(md.lobe_alpha[m, top], md.lobe_ior[m, top], lobe_f0(md, m, top),
                         md.lobe_fresnel[m, top, 3] > 0.0, wo[2])
+
+
+@inline_kernel
+def chain_weight(md, m, top, wo):
+    """Product of the layer weights of the chain starting at slot ``top`` (−1: (1, 1, 1))."""
+    w0 = 1.0
+    w1 = 1.0
+    w2 = 1.0
+    while top >= 0:
+        f = layer_factor(md, m, top, wo)
+        w0 *= f[0]
+        w1 *= f[1]
+        w2 *= f[2]
+        top = md.lobe_layer[m, top]
+    return w0, w1, w2
+
+
+@inline_kernel
+def memo_under_weight(md, m, s, wo, memo_top, memo_w):
+    """``under_weight`` of slot s reusing the chain weight of the last layer asked for
+    (memo_top, memo_w; −1 and (1, 1, 1) at first): lobes come top layer first, so each layer's
+    chain is the one above it, already known, times its own factor. Returns (weight, memo_top,
+    memo_w) for the next call."""
+    top = md.lobe_layer[m, s]
+    if top == memo_top:
+        return memo_w, memo_top, memo_w
+    up = md.lobe_layer[m, top]
+    if up < 0:  # a single layer (the plain Principled's specular layer): its factor
+        w = layer_factor(md, m, top, wo)
+        return w, top, w
+    if up == memo_top:
+        f = layer_factor(md, m, top, wo)
+        w = (memo_w[0] * f[0], memo_w[1] * f[1], memo_w[2] * f[2])
+    else:
+        w = chain_weight(md, m, top, wo)
+    return w, top, w
+
+
+@inline_kernel
+def layer_factor(md, m, top, wo):
+    """One layer's factor (3-tuple): 1 − k·albedo(wo), × the coat tint's absorption."""
+    k = md.lobe_coat[m, top, 0]
+    if md.lobe_type[m, top] == BSDF_SHEEN:
+        a = sheen_albedo(md.lobe_alpha[m, top], wo[2])
+    else:
+        a = layer_albedo_max(md.lobe_alpha[m, top], md.lobe_ior[m, top], lobe_f0(md, m, top),
+                             md.lobe_fresnel[m, top, 3] > 0.0, wo[2])
+    lw = min(max(1.0 - k * a, 0.0), 1.0)
+    t0 = md.lobe_coat[m, top, 1]
+    t1 = md.lobe_coat[m, top, 2]
+    t2 = md.lobe_coat[m, top, 3]
+    if t0 != 1.0 or t1 != 1.0 or t2 != 1.0:
+        inv = 1.0 / md.lobe_ior[m, top]
+        c = min(abs(wo[2]), 1.0)
+        depth = 1.0 / math.sqrt(max(1.0 - inv * inv * (1.0 - c * c), 1e-12))
+        return (lw * (1.0 + k * (t0 ** depth - 1.0)), lw * (1.0 + k * (t1 ** depth - 1.0)),
+                lw * (1.0 + k * (t2 ** depth - 1.0)))
+    return lw, lw, lw
 
 
 @inline_kernel
@@ -336,6 +455,12 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
     elif t == BSDF_GLOSSY or t == BSDF_DIELECTRIC_SPECULAR or t == BSDF_METALLIC:
         wi = glossy_sample(wo, alpha, u0, u1)
         kind = LOBE_GLOSSY
+    elif t == BSDF_SHEEN:  # Cycles labels sheen diffuse (bounce counting)
+        wi = sheen_sample(wo, md.lobe_alpha[m, slot], u0, u1)
+        kind = LOBE_DIFFUSE
+    elif t == BSDF_VELVET:
+        wi = velvet_sample(wo, u0, u1)
+        kind = LOBE_DIFFUSE
     elif t == BSDF_GLASS:
         wi, refracted = glass_sample(wo, alpha, ior, u_rest, u0, u1)
         kind = LOBE_TRANSMISSION if refracted else LOBE_GLOSSY
@@ -356,9 +481,9 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
                                   md.lobe_sss[m, slot, SSS_IOR], wo, u_rest, u0, u1)
         if not ok or p_sel <= 0.0:
             return wi, zero, 0.0, LOBE_NONE, False, False
-        k = under_weight(md, m, slot, wo) / p_sel if md.has_layers[m] else 1.0 / p_sel
-        weight = (md.lobe_color[m, slot, 0] * k, md.lobe_color[m, slot, 1] * k,
-                  md.lobe_color[m, slot, 2] * k)
+        uw = under_weight(md, m, slot, wo) if md.has_layers[m] else (1.0, 1.0, 1.0)
+        weight = (md.lobe_color[m, slot, 0] * (uw[0] / p_sel), md.lobe_color[m, slot, 1] * (uw[1] / p_sel),
+                  md.lobe_color[m, slot, 2] * (uw[2] / p_sel))
         return wi, weight, 1.0, LOBE_SUBSURFACE, False, True
     else:
         return zero, zero, 0.0, LOBE_NONE, False, False
@@ -385,6 +510,9 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
             fc = metallic_delta_weight(wo[2], metal_f0(md, m, slot), lobe_f0(md, m, slot))
             k = md.lobe_fresnel[m, slot, 4] / p_sel
             weight = (k * fc[0], k * fc[1], k * fc[2])
+        if md.has_layers[m] and md.lobe_layer[m, slot] >= 0:  # a smooth lobe under a coat / sheen
+            uw = under_weight(md, m, slot, wo)
+            weight = (weight[0] * uw[0], weight[1] * uw[1], weight[2] * uw[2])
         return wi, weight, pdf, kind, True, True
 
     if md.pure_diffuse[m] and ns_local[2] >= 1.0:
@@ -489,6 +617,51 @@ def _dielectric_specular_lobe(lobe: dict, where: str) -> np.ndarray:
     return np.concatenate([np.clip(f0 * tint, 0.0, 1.0), [1.0 if ms else 0.0, eta]])
 
 
+def _layer_of(lobes, j: int, where: str) -> int:
+    """The file index of the layer lobe j lies under (−1: none), validated: "layer" must name a
+    DIELECTRIC_SPECULAR or SHEEN lobe of the same material, and the chain of layers must not
+    loop."""
+    if "layer" not in lobes[j]:
+        return -1
+    under = lobes[j]["layer"]
+    seen, cur = {j}, under
+    while True:
+        if isinstance(cur, bool) or not isinstance(cur, int) or not 0 <= cur < len(lobes) \
+                or not isinstance(lobes[cur], dict) or lobes[cur].get("type") not in LAYER_TYPES:
+            raise _fail(where, f"layer must be the index of a DIELECTRIC_SPECULAR or SHEEN lobe, got {cur!r}")
+        if cur in seen:
+            raise _fail(where, f"layer chain loops back to lobe {cur}")
+        seen.add(cur)
+        if "layer" not in lobes[cur]:
+            return under
+        cur = lobes[cur]["layer"]
+
+
+def _layer_slot(lobes, under: int, slot_of: dict) -> int:
+    """Table slot of the file lobe ``under`` or, if it was dropped, of the nearest kept layer
+    above it (−1: none)."""
+    while under >= 0 and under not in slot_of:
+        under = lobes[under].get("layer", -1)
+    return slot_of.get(under, -1) if under >= 0 else -1
+
+
+def _layer_params(lobe: dict, kind: str, where: str) -> np.ndarray:
+    """A lobe's ``lobe_coat`` row (k, tint r, g, b): ``layer_weight`` k (≥ 0, default 1) and,
+    for a DIELECTRIC_SPECULAR coat, ``coat_tint`` (RGB ≥ 0, default white); only layer lobes
+    (DIELECTRIC_SPECULAR, SHEEN) take them."""
+    row = np.ones(4)
+    for key in ("layer_weight", "coat_tint"):
+        if key in lobe and kind not in (LAYER_TYPES if key == "layer_weight" else ("DIELECTRIC_SPECULAR",)):
+            raise _fail(where, f"{key} is only allowed on {' / '.join(LAYER_TYPES)} lobes, not {kind}")
+    if "layer_weight" in lobe:
+        row[0] = _number(lobe["layer_weight"], where, "layer_weight")
+        if row[0] < 0.0:
+            raise _fail(where, f"layer_weight must be >= 0, got {row[0]!r}")
+    if "coat_tint" in lobe:
+        row[1:] = _rgb(lobe["coat_tint"], where, "coat_tint")
+    return row
+
+
 def _metallic_lobe(lobe: dict, where: str) -> np.ndarray:
     """A METALLIC lobe's (F82 tint r, g, b, multiscatter, weight k): ``tint`` (RGB, clamped to
     [0, 1], default white), ``multiscatter`` (default true), ``weight`` (> 0: the lobe's colour
@@ -509,7 +682,7 @@ class MaterialTable:
     """All materials of a scene; see the module docstring for the arrays."""
 
     def __init__(self, names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission, lobe_sss=None,
-                 lobe_fresnel=None, lobe_layer=None):
+                 lobe_fresnel=None, lobe_layer=None, lobe_coat=None, emission_layer=None):
         self.names = list(names)
         self.lobe_type = np.asarray(lobe_type, dtype=np.int8)
         self.lobe_color = np.asarray(lobe_color, dtype=np.float64)
@@ -519,7 +692,8 @@ class MaterialTable:
         m, n_slots = self.lobe_type.shape
         used = self.lobe_type != BSDF_NONE
         self.lobe_count = used.sum(axis=1)
-        lambert = (self.lobe_type == BSDF_DIFFUSE) | (self.lobe_type == BSDF_TRANSLUCENT)
+        lambert = (self.lobe_type == BSDF_DIFFUSE) | (self.lobe_type == BSDF_TRANSLUCENT) \
+            | (self.lobe_type == BSDF_SHEEN) | (self.lobe_type == BSDF_VELVET)
         # a holdout "lobe" is marked delta: never evaluated, and no reason for NEE
         self.lobe_delta = used & ~lambert & (
             (self.lobe_alpha ** 2 <= ALPHA_SQ_SINGULAR)
@@ -532,6 +706,9 @@ class MaterialTable:
             else np.asarray(lobe_fresnel, np.float64)
         self.lobe_layer = np.full((m, n_slots), -1, np.int64) if lobe_layer is None \
             else np.asarray(lobe_layer, np.int64)
+        self.lobe_coat = np.ones((m, n_slots, 4)) if lobe_coat is None else np.asarray(lobe_coat, np.float64)
+        self.emission_layer = np.full(m, -1, np.int64) if emission_layer is None \
+            else np.asarray(emission_layer, np.int64)
         # the specular layer's cosine-averaged albedo per unit colour, and the share its lower
         # layers keep on average: lobe selection and the albedo pass use these averages (the
         # per-hit values depend on wo; any selection probability keeps the estimator unbiased)
@@ -544,8 +721,19 @@ class MaterialTable:
             f0 = np.clip(self.lobe_color[i, j] / k, 0.0, 1.0)
             eff[i, j] = np.divide(metallic_average_albedo(f0, self.lobe_fresnel[i, j, :3]), f0,
                                   out=np.ones(3), where=f0 > 0)
+        for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_SHEEN))):
+            eff[i, j] = sheen_average_albedo(self.lobe_alpha[i, j])
+        for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_VELVET))):
+            eff[i, j] = velvet_average_albedo(self.lobe_alpha[i, j])
+        own = eff.copy()  # a layer's own average albedo (before the layers above scale it)
         for i, j in zip(*np.nonzero(used & (self.lobe_layer >= 0))):
-            eff[i, j] = max(1.0 - eff[i, self.lobe_layer[i, j]].max(), 0.0)
+            top, keep = self.lobe_layer[i, j], np.ones(3)
+            while top >= 0:  # the chain of layers above: what each lets through, on average
+                k = self.lobe_coat[i, top, 0]
+                keep = keep * max(1.0 - k * own[i, top].max(), 0.0) * (1.0 + k * (self.lobe_coat[i, top, 1:] - 1.0))
+                top = self.lobe_layer[i, top]
+            eff[i, j] = own[i, j] * keep if self.lobe_type[i, j] in (BSDF_DIELECTRIC_SPECULAR, BSDF_METALLIC,
+                                                                       BSDF_SHEEN) else keep
         # a holdout is no BSDF: never selected, no albedo
         eff[used & (self.lobe_type == BSDF_HOLDOUT)] = 0.0
         self.lobe_effective = self.lobe_color * eff if n_slots else self.lobe_color
@@ -592,10 +780,24 @@ class MaterialTable:
                                else -1], np.int64),
             lobe_fresnel=c(self.lobe_fresnel.reshape(m, n_slots, 5), np.float64),
             lobe_layer=c(np.where(used, self.lobe_layer, -1).reshape(m, n_slots), np.int64),
-            has_layers=c(np.any(used & (self.lobe_layer >= 0), axis=1), np.bool_),
+            has_layers=c(self._layer_level(used), np.int64),
             lobe_avg=c(eff.reshape(m, n_slots, 3), np.float64),
+            lobe_coat=c(self.lobe_coat.reshape(m, n_slots, 4), np.float64),
+            emission_layer=c(self.emission_layer, np.int64),
         )
         self.has_subsurface = bool(sss.any())
+
+    def _layer_level(self, used):
+        """``MaterialData.has_layers`` per material: 0 none, 1 single plain specular layers
+        only, 2 coat / sheen / chains / tints."""
+        layered = used & (self.lobe_layer >= 0)
+        level = np.where(np.any(layered, axis=1), 1, 0)
+        for i, j in zip(*np.nonzero(layered)):
+            top = self.lobe_layer[i, j]
+            if self.lobe_type[i, top] != BSDF_DIELECTRIC_SPECULAR or self.lobe_layer[i, top] >= 0 \
+                    or np.any(self.lobe_coat[i, top] != 1.0):
+                level[i] = 2
+        return level
 
     def _summarise_lobes(self, used):
         """Per material, what light selection needs to guess where the BSDF is large (see
@@ -603,7 +805,8 @@ class MaterialTable:
         weight-averaged alpha of the glossy ones."""
         weight = np.where(used & ~self.lobe_delta, self.lobe_effective.mean(axis=2), 0.0) \
             if self.lobe_type.shape[1] else np.zeros(self.lobe_type.shape)
-        kd = np.where(self.lobe_type == BSDF_DIFFUSE, weight, 0.0).sum(axis=1)
+        kd = np.where((self.lobe_type == BSDF_DIFFUSE) | (self.lobe_type == BSDF_SHEEN)
+                      | (self.lobe_type == BSDF_VELVET), weight, 0.0).sum(axis=1)
         wg = np.where((self.lobe_type == BSDF_GLOSSY) | (self.lobe_type == BSDF_DIELECTRIC_SPECULAR)
                       | (self.lobe_type == BSDF_METALLIC), weight, 0.0)
         kg = wg.sum(axis=1)
@@ -625,7 +828,7 @@ class MaterialTable:
         ``data.has_emission`` True: hits still collect it)."""
         if not isinstance(materials, (list, tuple)):
             raise ValueError(f"materials must be a list, got {type(materials).__name__}")
-        names, parsed, emissions = [], [], []
+        names, parsed, emissions, em_layers = [], [], [], []
         for i, mat in enumerate(materials):
             if not isinstance(mat, dict):
                 raise ValueError(f"material {i}: must be an object, got {type(mat).__name__}")
@@ -637,6 +840,12 @@ class MaterialTable:
             if not isinstance(lobes, (list, tuple)):
                 raise _fail(where, f"lobes must be a list, got {type(lobes).__name__}")
             emissions.append(_rgb(mat.get("emission", [0.0, 0.0, 0.0]), where, "emission"))
+            em_layer = mat.get("emission_layer", -1)
+            if "emission_layer" in mat and (isinstance(em_layer, bool) or not isinstance(em_layer, int)
+                                            or not 0 <= em_layer < len(lobes) or not isinstance(lobes[em_layer], dict)
+                                            or lobes[em_layer].get("type") not in LAYER_TYPES):
+                raise _fail(where, f"emission_layer must be the index of a DIELECTRIC_SPECULAR or SHEEN lobe, "
+                                   f"got {em_layer!r}")
             rows, extra, slot_of = [], [], {}
             for j, lobe in enumerate(lobes):
                 lw = f"{where} lobe {j}"
@@ -650,7 +859,7 @@ class MaterialTable:
                 color = _rgb(lobe["color"], lw, "color")
                 alpha, ior = 0.0, 1.0
                 fr = np.zeros(5)
-                if kind in ("GLOSSY", "GLASS", "DIELECTRIC_SPECULAR", "METALLIC", "REFRACTION"):
+                if kind in ("GLOSSY", "GLASS", "DIELECTRIC_SPECULAR", "METALLIC", "REFRACTION", "SHEEN", "VELVET"):
                     if "roughness" not in lobe:
                         raise _fail(lw, "roughness is missing")
                     r = _number(lobe["roughness"], lw, "roughness")
@@ -663,13 +872,8 @@ class MaterialTable:
                     fr[4] = 0.0
                 if kind == "METALLIC":
                     fr = _metallic_lobe(lobe, lw)
-                under = -1
-                if "layer" in lobe:
-                    under = lobe["layer"]
-                    if isinstance(under, bool) or not isinstance(under, int) or not 0 <= under < len(lobes) \
-                            or not isinstance(lobes[under], dict) \
-                            or lobes[under].get("type") != "DIELECTRIC_SPECULAR":
-                        raise _fail(lw, f"layer must be the index of a DIELECTRIC_SPECULAR lobe, got {under!r}")
+                under = _layer_of(lobes, j, lw)
+                coat = _layer_params(lobe, kind, lw)
                 if kind == "GLASS" and "reflection_weight" in lobe:
                     # a Principled transmission: reflection × this weight, refraction × colour
                     k = _number(lobe["reflection_weight"], lw, "reflection_weight")
@@ -689,24 +893,27 @@ class MaterialTable:
                 if kind == "SUBSURFACE":
                     sss, color, split = _subsurface_lobe(lobe, color, lw)
                     if split is not None and split.mean() >= CLOSURE_WEIGHT_CUTOFF:
-                        extra.append((BSDF_DIFFUSE, split, 0.0, 1.0, np.zeros(8), fr, under))
+                        extra.append((BSDF_DIFFUSE, split, 0.0, 1.0, np.zeros(8), fr, under, np.ones(4)))
                     if not np.any(sss[SSS_RADIUS:SSS_RADIUS + 3] > 0):
                         continue  # every channel became Lambert
                 if color.mean() >= CLOSURE_WEIGHT_CUTOFF:
                     slot_of[j] = len(rows)
-                    rows.append((BSDF_TYPES[kind], color, alpha, ior, sss, fr, under))
+                    rows.append((BSDF_TYPES[kind], color, alpha, ior, sss, fr, under, coat))
             # Lambert lobes split off SSS channels go last: program registers address the
             # slots of the file's own lobes
             rows += extra
-            # "layer" names a lobe of the file; the table needs its slot (−1 if it was dropped)
-            rows = [r[:6] + (slot_of.get(r[6], -1) if r[6] >= 0 else -1,) for r in rows]
+            # "layer" names a lobe of the file; the table needs its slot (a dropped, black layer
+            # passes its lobes on to the layer above it; −1 if none is left)
+            rows = [r[:6] + (_layer_slot(lobes, r[6], slot_of),) + r[7:] for r in rows]
+            em_layers.append(_layer_slot(lobes, em_layer, slot_of))
             names.append(name)
             parsed.append(rows)
         if any(r[0] == BSDF_SUBSURFACE for rows in parsed for r in rows):
             # SSS exit points are shaded by a white Lambert (Cycles's subsurface_shader_data_setup)
             names.append(SSS_EXIT_MATERIAL)
-            parsed.append([(BSDF_DIFFUSE, np.ones(3), 0.0, 1.0, np.zeros(8), np.zeros(5), -1)])
+            parsed.append([(BSDF_DIFFUSE, np.ones(3), 0.0, 1.0, np.zeros(8), np.zeros(5), -1, np.ones(4))])
             emissions.append(np.zeros(3))
+            em_layers.append(-1)
         m = len(parsed)
         n_slots = max((len(r) for r in parsed), default=0)
         lobe_type = np.zeros((m, n_slots), np.int8)
@@ -716,13 +923,15 @@ class MaterialTable:
         lobe_sss = np.zeros((m, n_slots, 8))
         lobe_fresnel = np.zeros((m, n_slots, 5))
         lobe_layer = np.full((m, n_slots), -1, np.int64)
+        lobe_coat = np.ones((m, n_slots, 4))
         for i, rows in enumerate(parsed):
-            for j, (t, c, a, eta, ss, fr, under) in enumerate(rows):
+            for j, (t, c, a, eta, ss, fr, under, coat) in enumerate(rows):
                 lobe_type[i, j], lobe_color[i, j], lobe_alpha[i, j], lobe_ior[i, j] = t, c, a, eta
                 lobe_sss[i, j], lobe_fresnel[i, j], lobe_layer[i, j] = ss, fr, under
+                lobe_coat[i, j] = coat
         emission = np.array(emissions).reshape(m, 3)
         table = cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission, lobe_sss,
-                    lobe_fresnel, lobe_layer)
+                    lobe_fresnel, lobe_layer, lobe_coat, np.array(em_layers, np.int64).reshape(m))
         table.program_source = None
         table.images = list(images)  # a world program may read them without any material program
         for i, mat in enumerate(materials):
@@ -730,6 +939,10 @@ class MaterialTable:
                 # Emission Sampling None: not a light for NEE; hits still collect the emission
                 table.has_emission[i] = False
                 table.data.has_emission[i] = True
+        for i, mat in enumerate(materials):  # a per-hit k / tint: never the scalar fast path
+            if table.data.has_layers[i] and any(isinstance(lb, dict) and ("layer_weight_reg" in lb or "coat_tint_reg" in lb)
+                                                for lb in mat.get("lobes", [])):
+                table.data.has_layers[i] = 2
         if any(isinstance(mat, dict) and mat.get("program") for mat in materials):
             table.program_source = (list(materials), list(images), list(attributes))
             for i, mat in enumerate(materials):
