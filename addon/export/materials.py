@@ -65,9 +65,9 @@ material's *program*; the arithmetic above is written on ``Value``s, so a textur
 roughness, metallic, mix factor or emission gives lobes whose colour / roughness come from
 program registers (``color_reg`` / ``roughness_reg`` / ``emission_reg``), and constant inputs
 fold to today's constant lobes. Node groups, reroutes and muted nodes are followed at the
-shader level too. Alpha and transmission may be textured (alpha cut-outs), and the coat and
-sheen roughness; IOR, specular and the coat / sheen weights and tints stay constant-only (a
-linked one warns and uses its socket's value).
+shader level too. Alpha, metallic and transmission may be textured (alpha cut-outs), and the
+coat and sheen weights, tints and roughnesses; IOR, Coat IOR, Specular IOR Level and Specular
+Tint stay constant-only (a linked one warns and uses its socket's value).
 """
 
 import numpy as np
