@@ -170,27 +170,11 @@ def sobol_dim4(index):
     return sobol_poly(index, 3, 1, 0, 0x80000000, 0x40000000, 0x20000000)
 
 
-def _direction_numbers(s, a1, a2, v1, v2, v3):
-    """The 32 direction numbers of ``sobol_poly``'s dimension (s = 0: ``sobol_dim1``'s): the
-    Sobol value of index 2^k is v_k."""
-    out, p1, p2, p3 = [], 0, 0, 0
-    for k in range(1, 33):
-        if s == 0:
-            v = 0x80000000 if k == 1 else p1 ^ (p1 >> 1)
-        elif k == 1:
-            v = v1
-        elif k <= s:
-            v = v2 if k == 2 else v3
-        else:
-            q = p1 if s == 1 else (p2 if s == 2 else p3)
-            v = q ^ (q >> s)
-            if a1 and s >= 2:
-                v ^= p1
-            if a2 and s >= 3:
-                v ^= p2
-        out.append(v)
-        p1, p2, p3 = v, p1, p2
-    return out
+def _direction_numbers(dimension, *poly):
+    """The 32 direction numbers v_1 … v_32 of a Sobol dimension: its value at index 2^(k−1).
+    ``dimension``: ``sobol_dim1`` or ``sobol_poly`` (with ``poly`` = its (s, a1, a2, v1, v2, v3));
+    their plain-Python bodies run, so building the tables compiles nothing."""
+    return [int(dimension.py_func(1 << k, *poly)) for k in range(32)]
 
 
 def _byte_tables():
@@ -199,9 +183,10 @@ def _byte_tables():
     the index's bits, so four lookups give it exactly; the bit loop of ``sobol_dim1`` /
     ``sobol_poly`` over a scrambled 32-bit index mispredicts a branch per bit (measured: a SOBOL
     ``sample_2d`` 35 → 12 ns, ``sample_5d`` 95 → 22 ns)."""
-    dims = [_direction_numbers(0, 0, 0, 0, 0, 0), _direction_numbers(2, 1, 0, 0x80000000, 0xC0000000, 0),
-            _direction_numbers(3, 0, 1, 0x80000000, 0xC0000000, 0x20000000),
-            _direction_numbers(3, 1, 0, 0x80000000, 0x40000000, 0x20000000)]
+    dims = [_direction_numbers(sobol_dim1),
+            _direction_numbers(sobol_poly, 2, 1, 0, 0x80000000, 0xC0000000, 0),
+            _direction_numbers(sobol_poly, 3, 0, 1, 0x80000000, 0xC0000000, 0x20000000),
+            _direction_numbers(sobol_poly, 3, 1, 0, 0x80000000, 0x40000000, 0x20000000)]
     t = np.zeros((4, 4, 256), np.int64)
     for d, v in enumerate(dims):
         for b in range(4):
