@@ -416,3 +416,32 @@ def assert_within_ci(estimate_samples, expected, k: float = 4.0, atol: float = 1
         raise AssertionError(
             f"{label + ': ' if label else ''}MC mean {mean} differs from expected {exp} by {err}, "
             f"more than {k} standard errors ({se}) ")
+
+
+def material_chi_square(table, mat: int, wo: np.ndarray, n: int, rng, z_lo: float = 0.0,
+                        bins_z: int = 10, bins_phi: int = 20, refine: int = 48):
+    """Chi-square of a MaterialTable material's sampled directions against its own eval pdf.
+
+    ``wo`` (n, 3) local-frame outgoing directions (all equal); cells are uniform in cos θ over
+    [z_lo, 1] (0: the upper hemisphere; −1: the whole sphere, for transmission) × φ, expected
+    counts from ``eval``'s pdf averaged over ``refine``² points per cell (dω = dz dφ).
+    Returns (p-value, fraction of samples valid, expected mass in the grid, observed mass in
+    the cells too small to test)."""
+    s = table.sample(np.full(n, mat), wo, rng.random(n), rng.random((n, 2)))
+    wi = s.wi[s.valid]
+    span = 1.0 - z_lo
+    iz = np.clip(((wi[:, 2] - z_lo) / span * bins_z).astype(int), 0, bins_z - 1)
+    ip = ((np.arctan2(wi[:, 1], wi[:, 0]) + np.pi) / (2 * np.pi) * bins_phi).astype(int) % bins_phi
+    obs = np.bincount(iz * bins_phi + ip, minlength=bins_z * bins_phi)
+    zz = z_lo + (np.arange(bins_z * refine) + 0.5) / (bins_z * refine) * span
+    pp = (np.arange(bins_phi * refine) + 0.5) / (bins_phi * refine) * 2 * np.pi - np.pi
+    Z, P = np.meshgrid(zz, pp, indexing="ij")
+    r = np.sqrt(1 - Z * Z)
+    dirs = np.stack([r * np.cos(P), r * np.sin(P), Z], -1).reshape(-1, 3)
+    _, pdf = table.eval(np.full(len(dirs), mat), np.tile(wo[0], (len(dirs), 1)), dirs)
+    cell = pdf.reshape(bins_z, refine, bins_phi, refine).mean(axis=(1, 3)) * (span / bins_z) \
+        * (2 * np.pi / bins_phi)
+    exp = cell.ravel() * n
+    keep = exp > 20
+    stat = ((obs[keep] - exp[keep]) ** 2 / exp[keep]).sum()
+    return chi2_sf(stat, keep.sum() - 1), s.valid.mean(), exp.sum() / n, obs[~keep].sum() / n

@@ -9,7 +9,7 @@ import pytest
 
 from drt.materials.table import MaterialTable
 
-from stats_util import chi2_sf
+from stats_util import material_chi_square
 
 
 def _table(rough=0.5, ior=1.5, tint=(1, 1, 1), ms=True, base=(1, 1, 1)):
@@ -97,29 +97,9 @@ def test_sampling_chi_square():
     θ×φ grid, expected counts from eval's pdf)."""
     t = _table(0.4, base=(0.5, 0.3, 0.2))
     n = 200_000
-    rng = np.random.default_rng(11)
-    wo = _wo(0.5, n)
-    s = t.sample(np.zeros(n, int), wo, rng.random(n), rng.random((n, 2)))
-    wi = s.wi[s.valid]
-    nt, nphi = 10, 20
-    cz = np.clip(wi[:, 2], 0, 1 - 1e-12)
-    it = np.minimum((cz * nt).astype(int), nt - 1)
-    ip = ((np.arctan2(wi[:, 1], wi[:, 0]) + np.pi) / (2 * np.pi) * nphi).astype(int) % nphi
-    obs = np.bincount(it * nphi + ip, minlength=nt * nphi)
-    # expected: integrate pdf over each cell (uniform in cos θ and φ → dω = dz dφ)
-    m = 64
-    zz = (np.arange(nt * m) + 0.5) / (nt * m)
-    pp = (np.arange(nphi * m) + 0.5) / (nphi * m) * 2 * np.pi - np.pi
-    Z, P = np.meshgrid(zz, pp, indexing="ij")
-    r = np.sqrt(1 - Z * Z)
-    dirs = np.stack([r * np.cos(P), r * np.sin(P), Z], -1).reshape(-1, 3)
-    _, pdf = t.eval(np.zeros(len(dirs), int), np.tile(wo[0], (len(dirs), 1)), dirs)
-    cell = pdf.reshape(nt, m, nphi, m).mean(axis=(1, 3)) * (1.0 / nt) * (2 * np.pi / nphi)
-    exp = cell.ravel() * n
-    keep = exp > 20
-    stat = ((obs[keep] - exp[keep]) ** 2 / exp[keep]).sum()
-    assert chi2_sf(stat, keep.sum() - 1) > 1e-3, (stat, keep.sum())
-    assert abs(obs.sum() / n - exp.sum() / n) < 0.01
+    p, valid, mass, _ = material_chi_square(t, 0, _wo(0.5, n), n, np.random.default_rng(11), refine=64)
+    assert p > 1e-3, p
+    assert abs(valid - mass) < 0.01
 
 
 @pytest.mark.parametrize("ms", [True, False])

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from drt.materials.table import (BSDF_HOLDOUT, LOBE_TRANSLUCENT, LOBE_TRANSMISSION, MaterialTable)
-from stats_util import chi2_sf
+from stats_util import material_chi_square
 
 
 def _wo(mu, n):
@@ -29,27 +29,10 @@ def _table(*lobe_lists):
 
 def _chi_square(t, m, mu, n=200_000, seed=11):
     """Chi-square p-value of material m's sampled directions against its eval pdf over a
-    (cos θ ∈ [−1, 1]) × φ grid; returns (p, fraction of samples valid, expected total mass)."""
-    rng = np.random.default_rng(seed)
-    wo = _wo(mu, n)
-    s = t.sample(np.full(n, m), wo, rng.random(n), rng.random((n, 2)))
-    wi = s.wi[s.valid]
-    nt, nphi = 20, 16
-    it = np.clip(((wi[:, 2] + 1) * 0.5 * nt).astype(int), 0, nt - 1)
-    ip = ((np.arctan2(wi[:, 1], wi[:, 0]) + np.pi) / (2 * np.pi) * nphi).astype(int) % nphi
-    obs = np.bincount(it * nphi + ip, minlength=nt * nphi)
-    k = 48
-    zz = (np.arange(nt * k) + 0.5) / (nt * k) * 2 - 1
-    pp = (np.arange(nphi * k) + 0.5) / (nphi * k) * 2 * np.pi - np.pi
-    Z, P = np.meshgrid(zz, pp, indexing="ij")
-    r = np.sqrt(1 - Z * Z)
-    dirs = np.stack([r * np.cos(P), r * np.sin(P), Z], -1).reshape(-1, 3)
-    _, pdf = t.eval(np.full(len(dirs), m), np.tile(wo[0], (len(dirs), 1)), dirs)
-    cell = pdf.reshape(nt, k, nphi, k).mean(axis=(1, 3)) * (2.0 / nt) * (2 * np.pi / nphi)
-    exp = cell.ravel() * n
-    keep = exp > 20
-    stat = ((obs[keep] - exp[keep]) ** 2 / exp[keep]).sum()
-    return chi2_sf(stat, keep.sum() - 1), s.valid.mean(), exp.sum() / n, obs[~keep].sum() / n
+    (cos θ ∈ [−1, 1]) × φ grid; returns (p, fraction of samples valid, expected total mass,
+    observed mass in untested cells)."""
+    return material_chi_square(t, m, _wo(mu, n), n, np.random.default_rng(seed), z_lo=-1.0,
+                               bins_z=20, bins_phi=16)
 
 
 # ------------------------------------------------------------------------------ lobe level
