@@ -94,12 +94,17 @@ def _array_budget() -> int:
     return MAX_ARRAY_BYTES if avail is None else min(MAX_ARRAY_BYTES, int(0.8 * avail))
 
 
+#: bytes inflated per call: big enough that zlib runs long without the GIL, small enough that
+#: zipfile's bytes objects stay cheap to copy (one copy per chunk into the array)
+_READ_CHUNK = 4 << 20
+
+
 def _read_member(z: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:
     """One ``.npy`` member, after checking that the shape its header declares matches the size
     the archive declares (a lying header cannot make us allocate more than the archive holds).
 
-    The data are read with one call into the array (numpy's reader inflates 256 KiB at a time,
-    with the GIL held between chunks): zlib then inflates the whole member without the GIL, so
+    The data are read into the array in 4 MiB calls (numpy's reader inflates 256 KiB at a time,
+    with the GIL held between chunks): zlib inflates each chunk without the GIL, so
     ``read_scene_arrays`` inflates big members on several threads at once."""
     name = info.filename[:-4]
     with z.open(info) as f:
@@ -119,8 +124,11 @@ def _read_member(z: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:
                 name, f"declares shape {shape} of {dtype} ({count * dtype.itemsize} bytes) but holds {data_bytes} bytes"
             )
         out = np.empty(count, dtype=dtype)
-        if data_bytes and f.readinto(memoryview(out.view(np.uint8))) != data_bytes:
-            raise SceneError(name, "ends before its declared size")
+        view = memoryview(out.view(np.uint8))
+        for start in range(0, data_bytes, _READ_CHUNK):
+            part = view[start:start + _READ_CHUNK]
+            if f.readinto(part) != len(part):
+                raise SceneError(name, "ends before its declared size")
         f.read(1)  # reach the end of the member: zipfile checks its CRC there
     if fortran:
         return out.reshape(shape[::-1]).transpose()
