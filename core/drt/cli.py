@@ -263,7 +263,7 @@ def _check_output(path: str, ext: str = ".exr"):
 
 class _Loading(threading.Thread):
     """``_load(args)`` on a thread: an exported scene is read and checked while the main thread
-    imports the renderer (numba and the kernel modules, ~0.35 s). zlib inflates the arrays
+    imports the renderer (the compiler and the kernel modules, ~0.35 s). zlib inflates the arrays
     without the GIL, so on two cores a big scene's read (0.7 s for 1M triangles) mostly hides
     behind the imports. ``result()`` returns the scene or raises what ``_load`` raised."""
 
