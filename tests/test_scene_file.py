@@ -140,3 +140,69 @@ def test_more_bad_fields_are_named(mutate, field):
         scene_from_dict(h, a)
     assert e.value.field == field, str(e.value)
     assert str(e.value).startswith(f"scene field '{field}': ")
+
+
+def _mesh_scene(noise_floats: bool):
+    """A Cornell box plus one big mesh (~3 MB of per-corner floats): smooth values (deflate
+    saves most of them) or noise (deflate saves little)."""
+    h, a = cornell_box()
+    rng = np.random.default_rng(2)
+    n = 90_000
+    tris = np.arange(3 * n).reshape(n, 3)
+    pos = rng.random((3 * n, 3)) if noise_floats else np.repeat(np.linspace(0, 1, n), 9).reshape(3 * n, 3)
+    k = len(h["meshes"])
+    h["meshes"].append({"name": "big", "deforming": False})
+    h["objects"].append({"name": "big", "mesh": k, "matrix_world": np.eye(4).tolist(), "motion": None})
+    a[f"mesh{k}.positions"] = pos.astype(np.float32)
+    a[f"mesh{k}.triangles"] = tris.astype(np.int32)
+    a[f"mesh{k}.material_index"] = np.zeros(n, np.int32)
+    normals = rng.normal(size=(n, 3, 3)) if noise_floats else np.tile([0.0, 0.0, 1.0], (n, 3, 1))
+    a[f"mesh{k}.normals"] = normals.astype(np.float32)
+    return h, a, k
+
+
+@pytest.mark.parametrize("noise", [False, True])
+def test_big_members_that_deflate_poorly_are_stored(tmp_path, noise):
+    """Big members whose deflate saving is under STORE_BELOW_SAVING are stored (read as a copy,
+    no inflating); smooth ones and small ones stay deflated; both read back exactly, also by
+    np.load (the file is still a plain .npz)."""
+    import zipfile
+
+    from drt import scene_file
+
+    h, a, k = _mesh_scene(noise)
+    path = tmp_path / "big.npz"
+    save_scene(path, h, a)
+    methods = {i.filename[:-4]: i.compress_type for i in zipfile.ZipFile(path).infolist()}
+    big = zipfile.ZIP_STORED if noise else zipfile.ZIP_DEFLATED
+    assert methods[f"mesh{k}.normals"] == big and methods[f"mesh{k}.positions"] == big
+    assert methods["mesh0.positions"] == zipfile.ZIP_DEFLATED  # small: always deflated
+    assert methods[f"mesh{k}.material_index"] == zipfile.ZIP_DEFLATED  # big but all zeros
+    saving = scene_file._deflate_saving(memoryview(a[f"mesh{k}.normals"].reshape(-1).view(np.uint8)))
+    assert (saving < scene_file.STORE_BELOW_SAVING) == noise
+    _, arrays = read_scene_arrays(path)
+    with np.load(path) as z:
+        for name, v in a.items():
+            assert np.array_equal(arrays[name], v) and arrays[name].dtype == v.dtype, name
+            assert np.array_equal(z[name], v), name
+    save_scene(tmp_path / "plain.npz", h, a, compress=False)
+    assert {i.compress_type for i in zipfile.ZipFile(tmp_path / "plain.npz").infolist()} == {zipfile.ZIP_STORED}
+
+
+def test_threaded_read_equals_serial_read(tmp_path, monkeypatch):
+    """Members of at least PARALLEL_MIN_BYTES inflate on worker threads: same arrays, same
+    order of the dict, also for a Fortran-ordered member."""
+    from drt import scene_file
+
+    h, a, k = _mesh_scene(False)
+    a[f"mesh{k}.normals"] = np.asfortranarray(a[f"mesh{k}.normals"])
+    path = tmp_path / "big.npz"
+    np.savez_compressed(path, header=scene_file.encode_header(h), **a)  # keeps Fortran order
+    monkeypatch.setattr(scene_file.os, "cpu_count", lambda: 4)
+    _, threaded = read_scene_arrays(path)
+    monkeypatch.setattr(scene_file, "PARALLEL_MIN_BYTES", 1 << 40)
+    _, serial = read_scene_arrays(path)
+    assert list(threaded) == list(serial)
+    for name, v in a.items():
+        assert np.array_equal(threaded[name], v) and np.array_equal(serial[name], v), name
+    assert sum(v.nbytes >= (1 << 20) for v in a.values()) >= 2  # the threaded path ran

@@ -422,9 +422,7 @@ class LiveScene:
         return mo
 
     def _geometry(self) -> tuple[SceneGeometry, Tracer]:
-        from embreex import rtcore_scene as rtcs
-        from embreex.mesh_construction import TriangleMesh
-
+        from .embree_mesh import triangle_scene
         from .trace import _unit_face_normals
 
         static_changed = False
@@ -432,8 +430,7 @@ class LiveScene:
             pos, tri, tables, attrs = self._flatten_static()
             scene = ng = None
             if len(tri):
-                scene = rtcs.EmbreeScene()
-                TriangleMesh(scene, pos, tri)
+                scene = triangle_scene(pos, tri)
                 ng = _unit_face_normals(pos, tri)
             self._static = (pos, tri, tables, scene, ng, attrs)
             self._static_dirty = False

@@ -27,9 +27,8 @@ from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
-from embreex import rtcore_scene as rtcs
-from embreex.mesh_construction import TriangleMesh
 
+from .embree_mesh import triangle_scene
 from .geometry import SceneGeometry
 from .kernels import kernel
 from .kernels.vec3 import cross, dot, load, store, sub
@@ -573,8 +572,7 @@ class _MovingObject:
         self.scene = None
         self.deforming = None
         if mm.positions_close is None:
-            self.scene = rtcs.EmbreeScene()
-            TriangleMesh(self.scene, mm.positions.astype(np.float32), mm.triangles.astype(np.int32))
+            self.scene = triangle_scene(mm.positions, mm.triangles)
             self.positions_close = self.positions
         else:
             self.deforming = deforming_data(mm)
@@ -617,8 +615,7 @@ class Tracer:
         self.geom = geom
         self.static = None
         if geom.static_count:
-            self.static = rtcs.EmbreeScene()
-            TriangleMesh(self.static, geom.static_positions, geom.static_triangles)
+            self.static = triangle_scene(geom.static_positions, geom.static_triangles)
         self.moving = [_MovingObject(mm) for mm in geom.moving]
         self._static_ng = _unit_face_normals(geom.static_positions, geom.static_triangles) \
             if geom.static_count else None
