@@ -85,3 +85,67 @@ def test_white_noise_is_uniform_and_perlin_in_range():
         assert np.all(np.abs(n) <= 1.05) and abs(n.mean()) < 0.05 and n.std() > 0.1
         # the lattice: perlin is 0 at integer points
         assert P.perlin(dim, 3.0, -2.0, 5.0, 7.0) == 0.0
+
+
+def _perlin_numpy(dim, p):
+    """Cycles's perlin_{2,3,4}d in float64 over points p (N, dim), corner by corner with
+    numpy's wrapping uint32 lookup3 and Cycles's grad2/3/4 branches (np.where)."""
+    f = np.floor(p)
+    r = p - f
+    cell = f.astype(np.int64)
+    fade = r * r * r * (r * (r * 6.0 - 15.0) + 10.0)
+    vals = []
+    for k in range(1 << dim):
+        bits = [(k >> i) & 1 for i in range(dim)]
+        h = _lookup3_numpy([((cell[:, i] + bits[i]) & 0xFFFFFFFF).astype(np.uint32) for i in range(dim)])
+        g = [r[:, i] - bits[i] for i in range(dim)]
+        if dim == 2:
+            h = h & 7
+            u, v = np.where(h < 4, g[0], g[1]), 2.0 * np.where(h < 4, g[1], g[0])
+            terms = [(u, 1), (v, 2)]
+        elif dim == 3:
+            h = h & 15
+            u = np.where(h < 8, g[0], g[1])
+            v = np.where(h < 4, g[1], np.where((h == 12) | (h == 14), g[0], g[2]))
+            terms = [(u, 1), (v, 2)]
+        else:
+            h = h & 31
+            terms = [(np.where(h < 24, g[0], g[1]), 1), (np.where(h < 16, g[1], g[2]), 2),
+                     (np.where(h < 8, g[2], g[3]), 4)]
+        total = np.where(h & terms[0][1], -terms[0][0], terms[0][0])
+        for t, bit in terms[1:]:
+            total = total + np.where(h & bit, -t, t)
+        vals.append(total)
+    for i in range(dim):  # mix along x, then y, ...: pairs of corners differing in bit i
+        t = fade[:, i]
+        vals = [(1.0 - t) * vals[2 * j] + t * vals[2 * j + 1] for j in range(len(vals) // 2)]
+    return vals[0]
+
+
+def test_perlin_corners_in_simd_equal_scalar_lookup3():
+    """perlin's vectorised corners (drt.materials.lattice_simd) give exactly the lookup3 hashes
+    and gradients: every 2–4D value equal to a per-corner numpy evaluation, bit for bit, over
+    negative, small and large (wrapping-range) coordinates."""
+    rng = np.random.default_rng(11)
+    pts = np.concatenate([rng.uniform(-20, 20, (400, 4)), rng.uniform(-1e5, 1e5, (200, 4)),
+                          np.floor(rng.uniform(-5, 5, (20, 4)))])
+    for dim in (2, 3, 4):
+        got = np.array([P.perlin(dim, *p) for p in pts])
+        q = np.column_stack([pts[:, 3]] if dim == 1 else [pts[:, i] for i in range(dim)])
+        np.testing.assert_array_equal(got, _perlin_numpy(dim, q), err_msg=f"{dim}D")
+
+
+def test_voronoi_octaves_in_simd_equal_the_scalar_scan():
+    """The vectorised Euclidean F1/F2 octaves (all 3^dim cells as lanes) give exactly what the
+    generic scalar octave (``voronoi_octave``, pruned F1 scan) gives: distance, colour and
+    position, ties included (randomness 0 puts every feature point on a lattice corner)."""
+    rng = np.random.default_rng(12)
+    pts = np.concatenate([rng.uniform(-30, 30, (150, 3)), rng.uniform(-1e4, 1e4, (30, 3)),
+                          np.floor(rng.uniform(-5, 5, (10, 3))) + 0.5]).astype(np.float32).astype(np.float64)
+    for randomness in (1.0, 0.37, 0.0):
+        for feature in (P.VORONOI_F1, P.VORONOI_F2):
+            for x, y, z in pts:
+                want3 = P.voronoi_octave(3, feature, P.METRIC_EUCLIDEAN, 1.0, randomness, 0.0, x, y, z, 0.0)
+                assert P._octave_euclidean3(feature, randomness, x, y, z) == want3
+                want2 = P.voronoi_octave(2, feature, P.METRIC_EUCLIDEAN, 1.0, randomness, 0.0, x, y, 0.0, 0.0)
+                assert P._octave_euclidean2(feature, randomness, x, y) == want2

@@ -577,7 +577,10 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             # smooth normal says; the Lambert's only use of wo is that side
             mat = md.sss_exit[0]
             wo = ns if dot(wo, ng) >= 0.0 else neg(ns)
-        elif pd.prog_of.shape[0] and pd.prog_of[mat] >= 0:  # a textured material: this hit's parameters
+        elif (pd.prog_of.shape[0] and pd.prog_of[mat] >= 0
+              and not (paths.terminate[i] and pd.emission_reg[mat] < 0 and not md.has_emission[mat])):
+            # a textured material: this hit's parameters (a path ending here reads only the
+            # emission, so a material without textured or constant emission skips its program)
             if pd.reads_point[mat]:
                 fill_point(point, pd, surf, hits, i, prim, p, ng, ns, wo, paths.prev_flags[i], paths.counts[i],
                            t_geom, camera)

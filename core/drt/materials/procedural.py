@@ -30,6 +30,8 @@ from numba import types
 from numba.extending import intrinsic
 
 from ..kernels import inline_kernel, kernel
+from .lattice_simd import (cell_distances2, cell_distances2_sq, cell_distances3, cell_distances3_sq,
+                           corner_gradients2, corner_gradients3, corner_gradients4)
 from .program_format import RAMP_TABLE_SIZE
 
 M32 = 0xFFFFFFFF
@@ -302,7 +304,9 @@ def _lerp(a, b, t):
 @kernel
 def perlin(dim, x, y, z, w):
     """Cycles's perlin_{1,2,3,4}d (unscaled): gradients at the 2^dim lattice corners around the
-    point, blended with the quintic fade (bi/tri/quad_mix)."""
+    point, blended with the quintic fade (bi/tri/quad_mix). The corners' hashes and gradients
+    of 2–4D come from ``lattice_simd`` (all corners at once, as vector lanes; the same values as
+    ``hash_uint*`` and ``_grad``)."""
     if dim == 1:
         fw = math.floor(w)
         W = int(fw)
@@ -314,45 +318,26 @@ def perlin(dim, x, y, z, w):
     rx, ry = x - fx, y - fy
     u, v = _fade(rx), _fade(ry)
     if dim == 2:
-        return _lerp(_lerp(_grad(2, hash_uint2(X, Y), rx, ry, 0.0, 0.0),
-                           _grad(2, hash_uint2(X + 1, Y), rx - 1.0, ry, 0.0, 0.0), u),
-                     _lerp(_grad(2, hash_uint2(X, Y + 1), rx, ry - 1.0, 0.0, 0.0),
-                           _grad(2, hash_uint2(X + 1, Y + 1), rx - 1.0, ry - 1.0, 0.0, 0.0), u), v)
+        g = corner_gradients2(X, Y, rx, ry)
+        return _lerp(_lerp(g[0], g[1], u), _lerp(g[2], g[3], u), v)
     fz = math.floor(z)
     Z = int(fz)
     rz = z - fz
     t = _fade(rz)
     if dim == 3:
-        return _lerp(
-            _lerp(_lerp(_grad(3, hash_uint3(X, Y, Z), rx, ry, rz, 0.0),
-                        _grad(3, hash_uint3(X + 1, Y, Z), rx - 1.0, ry, rz, 0.0), u),
-                  _lerp(_grad(3, hash_uint3(X, Y + 1, Z), rx, ry - 1.0, rz, 0.0),
-                        _grad(3, hash_uint3(X + 1, Y + 1, Z), rx - 1.0, ry - 1.0, rz, 0.0), u), v),
-            _lerp(_lerp(_grad(3, hash_uint3(X, Y, Z + 1), rx, ry, rz - 1.0, 0.0),
-                        _grad(3, hash_uint3(X + 1, Y, Z + 1), rx - 1.0, ry, rz - 1.0, 0.0), u),
-                  _lerp(_grad(3, hash_uint3(X, Y + 1, Z + 1), rx, ry - 1.0, rz - 1.0, 0.0),
-                        _grad(3, hash_uint3(X + 1, Y + 1, Z + 1), rx - 1.0, ry - 1.0, rz - 1.0, 0.0), u), v),
-            t)
+        g = corner_gradients3(X, Y, Z, rx, ry, rz)
+        return _lerp(_lerp(_lerp(g[0], g[1], u), _lerp(g[2], g[3], u), v),
+                     _lerp(_lerp(g[4], g[5], u), _lerp(g[6], g[7], u), v), t)
     fw = math.floor(w)
     W = int(fw)
     rw = w - fw
     s = _fade(rw)
-    total = 0.0
-    for cw in range(2):
-        gw = rw - cw
-        Wc = W + cw
-        a = _lerp(
-            _lerp(_lerp(_grad(4, hash_uint4(X, Y, Z, Wc), rx, ry, rz, gw),
-                        _grad(4, hash_uint4(X + 1, Y, Z, Wc), rx - 1.0, ry, rz, gw), u),
-                  _lerp(_grad(4, hash_uint4(X, Y + 1, Z, Wc), rx, ry - 1.0, rz, gw),
-                        _grad(4, hash_uint4(X + 1, Y + 1, Z, Wc), rx - 1.0, ry - 1.0, rz, gw), u), v),
-            _lerp(_lerp(_grad(4, hash_uint4(X, Y, Z + 1, Wc), rx, ry, rz - 1.0, gw),
-                        _grad(4, hash_uint4(X + 1, Y, Z + 1, Wc), rx - 1.0, ry, rz - 1.0, gw), u),
-                  _lerp(_grad(4, hash_uint4(X, Y + 1, Z + 1, Wc), rx, ry - 1.0, rz - 1.0, gw),
-                        _grad(4, hash_uint4(X + 1, Y + 1, Z + 1, Wc), rx - 1.0, ry - 1.0, rz - 1.0, gw), u), v),
-            t)
-        total += a * (s if cw else 1.0 - s)
-    return total
+    g = corner_gradients4(X, Y, Z, W, rx, ry, rz, rw)
+    a = _lerp(_lerp(_lerp(g[0], g[1], u), _lerp(g[2], g[3], u), v),
+              _lerp(_lerp(g[4], g[5], u), _lerp(g[6], g[7], u), v), t)
+    b = _lerp(_lerp(_lerp(g[8], g[9], u), _lerp(g[10], g[11], u), v),
+              _lerp(_lerp(g[12], g[13], u), _lerp(g[14], g[15], u), v), t)
+    return a * (1.0 - s) + b * s
 
 
 @inline_kernel
@@ -689,28 +674,66 @@ def _position(dim, x, y, z, w):
     return x, y, z, w
 
 
-# Specialised octaves for the common Euclidean cases: with dim, feature and metric constants in
-# its only call site, LLVM inlines ``voronoi_octave`` and folds the branches on them, unrolling
-# the 3^dim cell loop (measured: 3D F1 Euclidean 430 → 160 ns a point). Same code, same values.
+# The common Euclidean F1 / F2 cases in 2D and 3D: the 3^dim cells' hashes and distances as
+# vector lanes (``lattice_simd.cell_distances*``), then the same strict-'<' scan in Cycles's
+# order over them (no pruning needed: all distances are there), the same final steps as
+# ``voronoi_octave``. Same values (tests/test_procedural_kernels.py compares the two).
+
+@inline_kernel
+def _nearest_two(d):
+    """(F1 distance, its cell, F2 distance, its cell) of a tuple of cell distances, scanned in
+    order with strict '<' (Cycles's tie rule)."""
+    d1 = d2 = FLT_MAX
+    k1 = k2 = len(d) // 2  # (the centre cell when nothing is nearer, as the scalar scan)
+    for k in range(len(d)):
+        if d[k] < d1:
+            d2, k2 = d1, k1
+            d1, k1 = d[k], k
+        elif d[k] < d2:
+            d2, k2 = d[k], k
+    return d1, k1, d2, k2
+
 
 @kernel
-def _octave_2_f1(randomness, x, y):
-    return voronoi_octave(2, VORONOI_F1, METRIC_EUCLIDEAN, 1.0, randomness, 0.0, x, y, 0.0, 0.0)
+def _octave_result(dim, feature, randomness, cx, cy, cz, fx, fy, fz, lx, ly, lz, k, dist):
+    """voronoi_octave's outputs for the chosen cell k (x fastest) of the 3^dim around (cx, cy, cz);
+    an F1 distance is recomputed unsquared from the point, as the scalar octave does."""
+    ox, oy, oz = k % 3 - 1, (k // 3) % 3 - 1, (k // 9) - 1 if dim == 3 else 0
+    p = _cell_point(dim, cx + ox, cy + oy, cz + oz, 0, randomness)
+    px, py, pz = ox + p[0], oy + p[1], oz + p[2]
+    if feature == VORONOI_F1:
+        dist = _vdist(dim, METRIC_EUCLIDEAN, 1.0, px - lx, py - ly, pz - lz, 0.0, False)
+    col = _cell_color(dim, cx + ox, cy + oy, cz + oz, 0)
+    pos = _position(dim, px + fx, py + fy, pz + fz, 0.0)
+    return dist, col[0], col[1], col[2], pos[0], pos[1], pos[2], pos[3]
 
 
 @kernel
-def _octave_2_f2(randomness, x, y):
-    return voronoi_octave(2, VORONOI_F2, METRIC_EUCLIDEAN, 1.0, randomness, 0.0, x, y, 0.0, 0.0)
+def _octave_euclidean2(feature, randomness, x, y):
+    fx, fy = math.floor(x), math.floor(y)
+    cx, cy = int(fx), int(fy)
+    lx, ly = x - fx, y - fy
+    if feature == VORONOI_F1:
+        d = cell_distances2_sq(cx, cy, lx, ly, randomness)
+    else:
+        d = cell_distances2(cx, cy, lx, ly, randomness)
+    d1, k1, d2, k2 = _nearest_two(d)
+    return _octave_result(2, feature, randomness, cx, cy, 0, fx, fy, 0.0, lx, ly, 0.0,
+                          k1 if feature == VORONOI_F1 else k2, d1 if feature == VORONOI_F1 else d2)
 
 
 @kernel
-def _octave_3_f1(randomness, x, y, z):
-    return voronoi_octave(3, VORONOI_F1, METRIC_EUCLIDEAN, 1.0, randomness, 0.0, x, y, z, 0.0)
-
-
-@kernel
-def _octave_3_f2(randomness, x, y, z):
-    return voronoi_octave(3, VORONOI_F2, METRIC_EUCLIDEAN, 1.0, randomness, 0.0, x, y, z, 0.0)
+def _octave_euclidean3(feature, randomness, x, y, z):
+    fx, fy, fz = math.floor(x), math.floor(y), math.floor(z)
+    cx, cy, cz = int(fx), int(fy), int(fz)
+    lx, ly, lz = x - fx, y - fy, z - fz
+    if feature == VORONOI_F1:
+        d = cell_distances3_sq(cx, cy, cz, lx, ly, lz, randomness)
+    else:
+        d = cell_distances3(cx, cy, cz, lx, ly, lz, randomness)
+    d1, k1, d2, k2 = _nearest_two(d)
+    return _octave_result(3, feature, randomness, cx, cy, cz, fx, fy, fz, lx, ly, lz,
+                          k1 if feature == VORONOI_F1 else k2, d1 if feature == VORONOI_F1 else d2)
 
 
 @inline_kernel
@@ -718,12 +741,8 @@ def _octave(dim, feature, metric, exponent, randomness, smoothness, x, y, z, w):
     """``voronoi_octave``, through a specialised copy where there is one."""
     if metric == METRIC_EUCLIDEAN and (dim == 2 or dim == 3) and (feature == VORONOI_F1 or feature == VORONOI_F2):
         if dim == 3:
-            if feature == VORONOI_F1:
-                return _octave_3_f1(randomness, x, y, z)
-            return _octave_3_f2(randomness, x, y, z)
-        if feature == VORONOI_F1:
-            return _octave_2_f1(randomness, x, y)
-        return _octave_2_f2(randomness, x, y)
+            return _octave_euclidean3(feature, randomness, x, y, z)
+        return _octave_euclidean2(feature, randomness, x, y)
     return voronoi_octave(dim, feature, metric, exponent, randomness, smoothness, x, y, z, w)
 
 
