@@ -10,7 +10,8 @@ ellipses (the sizes are diameters). The back side emits nothing but still stops 
 θ the angle from the emission normal; Cycles normalizes it so that the power is preserved.
 
 Sampling: rectangles with s = π by solid angle (Ureña, Fajardo, King 2013, "An area-preserving
-parametrization for spherical rectangles"), falling back to area sampling when the subtended
+parametrization for spherical rectangles"; its solid angle by one atan2 and its angle k
+algebraically, see `_spherical_rect`), falling back to area sampling when the subtended
 solid angle is below 1e-7 sr (where the spherical-rectangle formulas lose precision); everything
 else (disks, ellipses, spread < π) uniformly by area. `pdf` applies exactly the same rule.
 """
