@@ -169,7 +169,9 @@ def _rect_solid_angle(ld, i, x0, y0, z0, x1, y1):
     d2 = r00 * r11 * r01 + d_00_11 * r01 + d_00_01 * r11 + d_11_01 * r00
     half = math.atan2(big_n * (d1 + d2), d1 * d2 - big_n * big_n)
     if half < 0.0:
-        half += np.pi  # round-off at S = 2π (a point on the light's plane, inside it)
+        # S/2 ∈ (0, π): a negative result is round-off of the imaginary part (or −0.0) at
+        # S/2 ≈ π (a point just off the light's plane, inside its outline): −π + ε → π + ε
+        half += 2.0 * np.pi
     return 2.0 * half, r00, r01
 
 
