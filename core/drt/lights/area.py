@@ -171,7 +171,7 @@ def _rect_solid_angle(ld, i, x0, y0, z0, x1, y1):
     if half < 0.0:
         # S/2 ∈ (0, π): a negative result is round-off of the imaginary part (or −0.0) at
         # S/2 ≈ π (a point just off the light's plane, inside its outline): −π + ε → π + ε
-        half += 2.0 * np.pi
+        half += _TWO_PI
     return 2.0 * half, r00, r01
 
 
