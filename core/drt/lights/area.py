@@ -10,7 +10,8 @@ ellipses (the sizes are diameters). The back side emits nothing but still stops 
 θ the angle from the emission normal; Cycles normalizes it so that the power is preserved.
 
 Sampling: rectangles with s = π by solid angle (Ureña, Fajardo, King 2013, "An area-preserving
-parametrization for spherical rectangles"), falling back to area sampling when the subtended
+parametrization for spherical rectangles"; its solid angle by one atan2 and its angle k
+algebraically, see `_spherical_rect`), falling back to area sampling when the subtended
 solid angle is below 1e-7 sr (where the spherical-rectangle formulas lose precision); everything
 else (disks, ellipses, spread < π) uniformly by area. `pdf` applies exactly the same rule.
 """
@@ -129,52 +130,87 @@ def _clip(x, lo, hi):
 
 
 @scalar_kernel
-def _cross_n(ax, ay, bx, by, z0):
-    """normalized cross((ax, ay, z0), (bx, by, z0))"""
-    cx = ay * z0 - z0 * by
-    cy = z0 * bx - ax * z0
-    cz = ax * by - ay * bx
-    inv = 1.0 / max(math.sqrt(cx * cx + cy * cy + cz * cz), 1e-300)
-    return (cx * inv, cy * inv, cz * inv)
+def _rect_local(ld, i, o):
+    """The rectangle in its frame seen from o: (x0, y0, z0, x1, y1, zsign), o at the origin,
+    the rectangle in the plane z = z0 ≤ 0 spanning [x0, x1] × [y0, y1]; zsign maps that local z
+    back to the light's ez (Ureña et al.'s frame: local z points away from the rectangle)."""
+    dv = sub(load_col3(ld.lf, i, L_CORNER), o)
+    x0 = dot(dv, load_col3(ld.lf, i, L_EX))
+    y0 = dot(dv, load_col3(ld.lf, i, L_EY))
+    z0 = dot(dv, load_col3(ld.lf, i, L_EZ))
+    zsign = -1.0 if z0 > 0.0 else 1.0
+    z0 = -abs(z0)
+    return x0, y0, z0, x0 + ld.lf[i, L_LEN_X], y0 + ld.lf[i, L_LEN_Y], zsign
 
 
 @scalar_kernel
-def _angle(a, b):
-    return math.acos(_clip(-(a[0] * b[0] + a[1] * b[1] + a[2] * b[2]), -1.0, 1.0))
+def _rect_solid_angle(ld, i, x0, y0, z0, x1, y1):
+    """(S, R00, R01): the solid angle (sr) of the rectangle [x0, x1] × [y0, y1] at z = z0 seen
+    from the origin, and the distances to its corners (x0, y0) and (x0, y1).
+
+    Van Oosterom & Strackee (1983) for its two triangles (v00, v10, v11) and (v00, v11, v01):
+    tan(Ω/2) = N / D with N = |det(a, b, c)| = |z0|·lx·ly for both and
+    D = |a||b||c| + (a·b)|c| + (a·c)|b| + (b·c)|a|; the half angles add as the arguments of
+    D + iN, and S/2 < π (a convex polygon on one side of a plane), so one atan2 gives S exactly
+    — the same value as Ureña et al.'s g0 + g1 + g2 + g3 − 2π (four acos) without its
+    cancellation for small S."""
+    z2 = z0 * z0
+    r00 = math.sqrt(x0 * x0 + y0 * y0 + z2)
+    r10 = math.sqrt(x1 * x1 + y0 * y0 + z2)
+    r11 = math.sqrt(x1 * x1 + y1 * y1 + z2)
+    r01 = math.sqrt(x0 * x0 + y1 * y1 + z2)
+    d_00_10 = x0 * x1 + y0 * y0 + z2
+    d_00_11 = x0 * x1 + y0 * y1 + z2
+    d_10_11 = x1 * x1 + y0 * y1 + z2
+    d_00_01 = x0 * x0 + y0 * y1 + z2
+    d_11_01 = x0 * x1 + y1 * y1 + z2
+    big_n = -z0 * ld.lf[i, L_LEN_X] * ld.lf[i, L_LEN_Y]
+    d1 = r00 * r10 * r11 + d_00_10 * r11 + d_00_11 * r10 + d_10_11 * r00
+    d2 = r00 * r11 * r01 + d_00_11 * r01 + d_00_01 * r11 + d_11_01 * r00
+    half = math.atan2(big_n * (d1 + d2), d1 * d2 - big_n * big_n)
+    if half < 0.0:
+        # S/2 ∈ (0, π): a negative result is round-off of the imaginary part (or −0.0) at
+        # S/2 ≈ π (a point just off the light's plane, inside its outline): −π + ε → π + ε
+        half += _TWO_PI
+    return 2.0 * half, r00, r01
 
 
 @scalar_kernel
 def _spherical_rect(ld, i, o):
     """The rectangle seen from o (Ureña, Fajardo, King 2013): (x0, y0, z0, x1, y1, zsign, b0, b1,
-    k, S) with S its solid angle."""
-    dv = sub(load_col3(ld.lf, i, L_CORNER), o)
-    x0 = dot(dv, load_col3(ld.lf, i, L_EX))
-    y0 = dot(dv, load_col3(ld.lf, i, L_EY))
-    z0 = dot(dv, load_col3(ld.lf, i, L_EZ))
-    zsign = -1.0 if z0 > 0.0 else 1.0     # local z points away from the rectangle
-    z0 = -abs(z0)
-    x1 = x0 + ld.lf[i, L_LEN_X]
-    y1 = y0 + ld.lf[i, L_LEN_Y]
-    n0 = _cross_n(x0, y0, x1, y0, z0)
-    n1 = _cross_n(x1, y0, x1, y1, z0)
-    n2 = _cross_n(x1, y1, x0, y1, z0)
-    n3 = _cross_n(x0, y1, x0, y0, z0)
-    g0, g1, g2, g3 = _angle(n0, n1), _angle(n1, n2), _angle(n2, n3), _angle(n3, n0)
-    k = _TWO_PI - g2 - g3
-    solid_angle = g0 + g1 - k
-    return (x0, y0, z0, x1, y1, zsign, n0[2], n2[2], k, solid_angle)
+    cos k, sin k, S) with S its solid angle and k = 2π − g2 − g3 (g the spherical rectangle's
+    inner angles), all algebraic but S (one atan2, `_rect_solid_angle`): with the normals
+    n0 = (0, z0, −y0)/r_y0, n2 = (0, −z0, y1)/r_y1, n3 = (z0, 0, −x0)/r_x0 of the paper,
+    b0 = n0.z, b1 = n2.z, cos g = −n·n', sin g = |n × n'| = |z0|·|corner|/(r·r')."""
+    x0, y0, z0, x1, y1, zsign = _rect_local(ld, i, o)
+    solid_angle, r00, r01 = _rect_solid_angle(ld, i, x0, y0, z0, x1, y1)
+    z2 = z0 * z0
+    ry0 = math.sqrt(y0 * y0 + z2)
+    ry1 = math.sqrt(y1 * y1 + z2)
+    rx0_2 = x0 * x0 + z2
+    # e^{i(g2 + g3)} with cos g2 = x0·y1/(r_y1 r_x0), sin g2 = |z0|·r01/(r_y1 r_x0),
+    # cos g3 = −x0·y0/(r_x0 r_y0), sin g3 = |z0|·r00/(r_x0 r_y0); k = 2π − (g2 + g3)
+    inv = 1.0 / (ry0 * ry1 * rx0_2)
+    az = -z0
+    cos_k = (-(x0 * x0) * y0 * y1 - z2 * r00 * r01) * inv
+    sin_k = -(az * x0 * (y1 * r00 - y0 * r01)) * inv
+    return (x0, y0, z0, x1, y1, zsign, -y0 / ry0, y1 / ry1, cos_k, sin_k, solid_angle)
 
 
 @scalar_kernel
-def _use_solid_angle(sr):
-    return sr[9] > MIN_SOLID_ANGLE and sr[2] < 0.0
+def _use_solid_angle(solid_angle, z0):
+    return solid_angle > MIN_SOLID_ANGLE and z0 < 0.0
 
 
 @scalar_kernel
 def _sample_spherical_rect(ld, i, o, u0, u1, sr):
-    x0, y0, z0, x1, y1, zsign, b0, b1, k, solid_angle = sr
-    au = u0 * solid_angle + k
-    fu = (math.cos(au) * b0 - b1) / math.sin(au)
+    x0, y0, z0, x1, y1, zsign, b0, b1, cos_k, sin_k, solid_angle = sr
+    # au = u0·S + k by the angle sum: one sincos instead of cos and sin of k + u0·S
+    c_u = math.cos(u0 * solid_angle)
+    s_u = math.sin(u0 * solid_angle)
+    cos_au = c_u * cos_k - s_u * sin_k
+    sin_au = s_u * cos_k + c_u * sin_k
+    fu = (cos_au * b0 - b1) / sin_au
     if fu > 0.0:
         sign = 1.0
     elif fu < 0.0:
@@ -228,8 +264,8 @@ def area_sample(ld, i, p, u0, u1):
     solid_angle = 0.0
     if (ld.li[i, I_SOLID_ANGLE] != 0):
         sr = _spherical_rect(ld, i, p)
-        use = _use_solid_angle(sr)
-        solid_angle = sr[9]
+        solid_angle = sr[10]
+        use = _use_solid_angle(solid_angle, sr[2])
         if use:
             q = _sample_spherical_rect(ld, i, p, u0, u1, sr)
         else:
@@ -280,6 +316,8 @@ def area_hit_radiance(ld, i, o, d):
 def area_pdf(ld, i, o, d, t):
     """Solid-angle pdf of `area_sample` from o producing d (the light hit at distance t)."""
     if (ld.li[i, I_SOLID_ANGLE] != 0):
-        sr = _spherical_rect(ld, i, o)
-        return _pdf_given(ld, i, d, t, _use_solid_angle(sr), sr[9])
+        # only S is needed: four square roots and one atan2
+        x0, y0, z0, x1, y1, _ = _rect_local(ld, i, o)
+        solid_angle = _rect_solid_angle(ld, i, x0, y0, z0, x1, y1)[0]
+        return _pdf_given(ld, i, d, t, _use_solid_angle(solid_angle, z0), solid_angle)
     return _pdf_given(ld, i, d, t, False, 0.0)
