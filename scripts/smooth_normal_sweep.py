@@ -105,14 +105,14 @@ def main(argv=None):
         for material in a.materials.split(","):
             for sun_name in a.suns.split(","):
                 key = f"{shape.lower()}_{material}_{sun_name}"
-                scene = build(shape, material, SUNS[sun_name])
-                drt, _ = T.drt_render(a.spp)
                 cpath = os.path.join(a.out, f"cyc_{key}_{a.res}_{a.spp}.npy")
                 if os.path.exists(cpath):
                     cyc = np.load(cpath)
                 else:
                     cyc = cycles(build(shape, material, SUNS[sun_name]), a.spp, os.path.join(a.out, "c.exr"))
                     np.save(cpath, cyc)
+                build(shape, material, SUNS[sun_name])
+                drt, _ = T.drt_render(a.spp)
                 np.save(os.path.join(a.out, f"{a.label}_{key}.npy"), drt)
                 png(os.path.join(a.out, f"{a.label}_{key}.png"), drt, cyc)
                 print(f"{key:36s} drt/cycles {drt.mean() / max(cyc.mean(), 1e-12):.4f}  "
