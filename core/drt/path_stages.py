@@ -23,9 +23,9 @@ Sample dimensions (each a 2-D point from ``sample_2d``):
 | 0 | pixel filter offset (dims 0–2 are one 5-D sample, see ``sample_5d``) |
 | 1 | lens position |
 | 2 | (shutter time, unused) |
-| 3 + 4b | (light selection, BSDF lobe selection) at bounce b |
-| 4 + 4b | light sample position |
-| 5 + 4b | BSDF direction |
+| 3 + 4b | (unused) at bounce b |
+| 4 + 4b | light sample position and light selection (one 3-D sample, ``sample_3d``) |
+| 5 + 4b | BSDF direction and lobe selection (one 3-D sample) |
 | 6 + 4b | (Russian roulette, unused) |
 
 Directions follow docs/architecture.md: ``wo`` points back along the path, ``wi`` toward the
@@ -58,7 +58,7 @@ from .materials.holdout import holdout_weight
 from .materials.table import LOBE_SUBSURFACE, LOBE_TRANSLUCENT, layered_emission, pick_lobe
 from .subsurface import SSS_DEAD, SSS_EXIT, SSS_EXIT_FLAT, SSS_NONE, SSS_WALK, sss_coefficients
 from .sampling.pixel_filter import filter_sample
-from .sampling.sequences import sample_2d, sample_5d
+from .sampling.sequences import sample_2d, sample_3d, sample_5d
 from .sampling.warps import cosine_hemisphere, uniform_hemisphere
 from .terminator import shading_factor, shadow_origin
 from .trace import offset_point
@@ -188,6 +188,17 @@ def clamp(settings, c, indirect):
         if peak > limit:
             return scale(c, limit / peak)
     return c
+
+
+@kernel
+def continuation_probability(thr):
+    """Russian roulette's survival probability for a path of throughput ``thr`` (3-tuple, the
+    BSDF weight of the new direction included): √(max channel), at most 1, as Cycles's
+    ``path_state_continuation_probability``. The square root terminates fewer dim paths than
+    max(thr) itself would; a path that survives with probability q carries 1/q, and on scenes
+    whose light arrives through dark bounces (caustics on a grey floor) 1/q is most of the
+    variance (docs/estimators.md, "Per-sample error on glossy_glass")."""
+    return min(math.sqrt(max(max(thr[0], max(thr[1], thr[2])), 0.0)), 1.0)
 
 
 @kernel
@@ -507,7 +518,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             alive = any_positive(thr)
             if bounce + 1 >= RR_START_BOUNCE:
                 u_rr = sample_2d(sd, pixel, idx, vbase + 4)[0]
-                q = min(max(max(thr[0], max(thr[1], thr[2])), 0.0), 1.0)
+                q = continuation_probability(thr)
                 if not u_rr < q:
                     alive = False
                 elif q > 0.0:
@@ -627,7 +638,6 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             out.depth[slot] = max(dot(sub(p, load(out.eye, slot)), load(out.forward, slot)), 0.0)
             store(out.normal, slot, ns)
             store(out.albedo, slot, load(md.albedo, mat))
-        u_light_select, u_lobe = sample_2d(sd, pixel, idx, base)
         t_ax, b_ax = build_frame(ns)
         wo_l = to_local(wo, t_ax, b_ax, ns)
         # Cycles's side rule for smooth normals: sd->N is the smooth normal on wo's *geometric*
@@ -646,7 +656,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # --- next-event estimation
         if direct != DIRECT_BSDF and ld.n_strategies > 0 and not md.delta_only[mat]:
             hint = material_hint(md, mat, n_wo, wo)
-            ul0, ul1 = sample_2d(sd, pixel, idx, base + 1)
+            # (light position, selection): one jointly stratified 3-D sample, as Cycles's
+            ul0, ul1, u_light_select = sample_3d(sd, pixel, idx, base + 1)
             wi, dist, le, lpdf, l_delta, l_valid, strategy, l_tri = light_sample_full(
                 ld, p, n_wo, hint, u_light_select, ul0, ul1)
             if l_valid and lpdf > 0.0 and strategy == ld.world_index and ld.world_prog >= 0:
@@ -686,7 +697,10 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                     n_shadow += 1
 
         # --- continue the path by sampling the BSDF
-        ub0, ub1 = sample_2d(sd, pixel, idx, base + 2)
+        # (direction, lobe choice): one jointly stratified 3-D sample, as Cycles's; with the
+        # lobe drawn from its own padded dimension a pixel's directions stratify within the
+        # union of lobes but not within each lobe (glass, mixes: docs/estimators.md)
+        ub0, ub1, u_lobe = sample_3d(sd, pixel, idx, base + 2)
         wi_l, weight, bpdf, kind, b_delta, b_valid = bsdf_sample_bump(md, mat, wo_l, u_lobe, ub0, ub1, ns_local)
         if settings.indirect != INDIRECT_BSDF and not md.transmission_or_delta[mat]:
             # the lecture's hemisphere estimators, on wo's side of the surface
@@ -737,7 +751,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                  or n_glossy > settings.glossy_bounces or n_transmission > settings.transmission_bounces)
         if vertex + 1 >= RR_START_BOUNCE and not exiting:  # one roulette per SSS event, as Cycles
             u_rr = sample_2d(sd, pixel, idx, base + 3)[0]
-            q = min(max(max(thr[0], max(thr[1], thr[2])), 0.0), 1.0)
+            q = continuation_probability(thr)
             if not u_rr < q:
                 alive = False
             elif q > 0.0:

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..kernels import kernel
 
-__all__ = ["Sampler", "SamplerData", "SAMPLER_KINDS", "sample_2d", "sample_5d", "sample_2d_batch",
+__all__ = ["Sampler", "SamplerData", "SAMPLER_KINDS", "sample_2d", "sample_3d", "sample_5d", "sample_2d_batch",
            "hash_u32", "reverse_bits", "sobol_2d", "nested_uniform_scramble", "permute_index"]
 
 SAMPLER_KINDS = ("SOBOL", "STRATIFIED", "RANDOM")
@@ -309,6 +309,41 @@ def sample_5d(sd, pixel, index, dim, with_fifth):
     return (float(x) * _INV_2_32, float(y) * _INV_2_32, float(z) * _INV_2_32, float(w) * _INV_2_32, u4)
 
 
+#: offset of the padded dimension that gives STRATIFIED and RANDOM the third value of a
+#: ``sample_3d`` (far above every dimension the integrator and the media use)
+PAD_3D = 1 << 28
+
+
+@kernel
+def sample_3d(sd, pixel, index, dim):
+    """A 3-D sample (u0, u1, u2) of (pixel, index) for dimension ``dim``; (u0, u1) equals
+    ``sample_2d(sd, pixel, index, dim)``. SOBOL: u2 is the third Sobol dimension of the same
+    shuffled index, Owen-scrambled on its own, so the three are jointly stratified (Cycles's
+    3-D ``path_state_rng_3D`` for a BSDF's lobe choice and direction, a light's selection and
+    position). STRATIFIED and RANDOM: u2 = ``sample_2d(dim + PAD_3D)[0]``, padded."""
+    if sd.kind != KIND_SOBOL:
+        u0, u1 = sample_2d(sd, pixel, index, dim)
+        return u0, u1, sample_2d(sd, pixel, index, dim + PAD_3D)[0]
+    pixel &= 0xFFFFFFFF
+    index &= 0xFFFFFFFF
+    dim &= 0xFFFFFFFF
+    h = hash32(hash32(sd.prefix ^ pixel) ^ dim)
+    shuffled = nested_uniform_scramble32(index, h)
+    x = nested_uniform_scramble32(reverse32(shuffled), hash32(h ^ 0x2545F491))
+    y = nested_uniform_scramble32(sobol_fast(1, shuffled), hash32(h ^ 0x9E3779B9))
+    z = nested_uniform_scramble32(sobol_fast(2, shuffled), hash32(h ^ 0x5BD1E995))
+    return float(x) * _INV_2_32, float(y) * _INV_2_32, float(z) * _INV_2_32
+
+
+@kernel
+def _sample_3d_rows(sd, pixel, index, dim, out):
+    for k in range(pixel.shape[0]):
+        a, b, c = sample_3d(sd, pixel[k], index[k], dim)
+        out[k, 0] = a
+        out[k, 1] = b
+        out[k, 2] = c
+
+
 @kernel
 def _sample_5d_rows(sd, pixel, index, dim, out):
     for k in range(pixel.shape[0]):
@@ -488,6 +523,15 @@ class Sampler:
         index = np.ascontiguousarray(np.broadcast_to(np.asarray(index, dtype=np.int64), pixel.shape))
         out = np.empty((len(pixel), 5))
         _sample_5d_rows(self.data, pixel, index, int(dim), out)
+        return out
+
+    def sample_3d(self, pixel, index, dim) -> np.ndarray:
+        """pixel, index: (n,) ints; dim: int. Returns (n, 3) float64 (see the ``sample_3d``
+        kernel: SOBOL's three values are jointly stratified)."""
+        pixel = np.ascontiguousarray(np.asarray(pixel, dtype=np.int64).reshape(-1))
+        index = np.ascontiguousarray(np.broadcast_to(np.asarray(index, dtype=np.int64), pixel.shape))
+        out = np.empty((len(pixel), 3))
+        _sample_3d_rows(self.data, pixel, index, int(dim), out)
         return out
 
     def __repr__(self) -> str:
