@@ -60,9 +60,10 @@ TINT1, TINT2 = (1.0, 0.4, 0.2, 1), (0.3, 0.8, 1.0, 1)
 SPHERE_CASES = [
     # IOR 1.1 … 2.6 on a dielectric (specular layer and the diffuse layer's albedo weight)
     ({"Base Color": BASE, "Roughness": 0.3, "IOR": 1.5}, {"IOR": lambda nt, uv: _checker(nt, uv, 1.1, 2.6)}),
-    # Specular IOR Level 0 … 1
+    # Specular IOR Level 0.6 … 1 (one-sided: a symmetric range around 0.5 nearly cancels in
+    # the tile mean)
     ({"Base Color": BASE, "Roughness": 0.25, "Specular IOR Level": 0.5},
-     {"Specular IOR Level": lambda nt, uv: _checker(nt, uv, 0.0, 1.0)}),
+     {"Specular IOR Level": lambda nt, uv: _checker(nt, uv, 0.6, 1.0)}),
     # Specular Tint on a dark dielectric (the specular layer dominates)
     ({"Base Color": (0.05, 0.05, 0.05, 1), "Roughness": 0.2, "IOR": 1.8},
      {"Specular Tint": lambda nt, uv: _checker_color(nt, uv, TINT1, TINT2)}),
@@ -89,8 +90,9 @@ def _tile_means(img, count, n):
 
 def _compare_with_twins(cases, tmp_path, shape, sun, tol, tag):
     """Each case textured and as its constant twin on one grid; DRT's textured tiles within
-    ``tol`` of Cycles's; Cycles's textured and twin tiles differ by > 3 % (the input matters:
-    DRT before this work rendered the twin)."""
+    ``tol`` of Cycles's; Cycles's textured and twin tiles differ by > 2.5 × tol in some channel
+    (the input matters: DRT before this work rendered the twin, within tol of Cycles's twin, so
+    it would miss the textured tile by more than tol)."""
     from node_parity import render_tiles
 
     builders = [_principled if not isinstance(c[0], str) else None for c in cases]
@@ -110,14 +112,14 @@ def _compare_with_twins(cases, tmp_path, shape, sun, tol, tag):
           np.round(100 * errs, 3), "\ntextured vs twin in Cycles (%):\n", np.round(100 * effect, 2))
     assert cm.min() > 1e-3, cm
     assert np.all(np.abs(errs).max(axis=1) < tol), np.round(100 * errs, 3)
-    assert np.all(np.abs(effect).max(axis=1) > 0.03), np.round(100 * effect, 2)
+    assert np.all(np.abs(effect).max(axis=1) > 2.5 * tol), np.round(100 * effect, 2)
     return res
 
 
 def test_textured_ior_level_tint_coat_ior_match_cycles(tmp_path):
     """Sphere tiles under a delta sun, no bounces: textured IOR, Specular IOR Level, Specular
     Tint (dielectric and metal F82), Coat IOR, and all three under a coat, each within 1 % of
-    Cycles per channel (tile means), each different from its constant twin by > 3 % in Cycles;
+    Cycles per channel (tile means), each different from its constant twin by > 2.5 % in Cycles;
     the exported lobes name the registers."""
     pytest.importorskip("bpy")
     res = _compare_with_twins(SPHERE_CASES, tmp_path, "sphere", (3.0, (0.6, 0.2, 0.3)), 0.01, "fresnel")
@@ -165,3 +167,54 @@ def test_per_hit_registers_set_eta_f0_and_tint():
     np.testing.assert_allclose(md.lobe_fresnel[0, 1, :3], [1.0, 0.5, 0.25])
     fresnel_from_registers(md, regs, 0, 2, 3, -1, -1)
     assert md.lobe_ior[0, 2] == 1.0
+
+
+def test_export_registers_and_thin_film_warning():
+    """Export only (bpy, no render): a constant Principled exports no Fresnel registers and no
+    warning; a checker-driven Coat IOR gives the coat lobe all three registers (level 0.5 and a
+    white tint as constant registers) and a selectable stand-in IOR; a Thin Film Thickness
+    above Cycles's 0.1 nm cutoff warns (it used to be dropped silently)."""
+    bpy = pytest.importorskip("bpy")
+    import os
+    import sys
+
+    here = os.path.dirname(os.path.abspath(__file__))
+    for p in (os.path.dirname(here), os.path.join(os.path.dirname(here), "blend_scenes")):
+        if p not in sys.path:
+            sys.path.insert(0, p)
+    import _common as C
+    from addon.export.blend import export_current
+    from test_addon import ensure_registered
+
+    ensure_registered()
+    C.reset()
+    C.camera((0, -5, 1), (0, 0, 0))
+    made = {}
+    for name in ("Plain", "CoatIOR", "Film"):
+        mat, nodes, out = C._new_material(name)
+        p = nodes.new("ShaderNodeBsdfPrincipled")
+        p.inputs["Coat Weight"].default_value = 1.0
+        if name == "CoatIOR":
+            ck = nodes.new("ShaderNodeTexChecker")
+            rng = nodes.new("ShaderNodeMapRange")
+            rng.inputs[3].default_value, rng.inputs[4].default_value = 1.0, 2.5
+            mat.node_tree.links.new(ck.outputs["Fac"], rng.inputs[0])
+            mat.node_tree.links.new(rng.outputs[0], p.inputs["Coat IOR"])
+            p.inputs["Coat IOR"].default_value = 1.0  # its stand-in is floored (selectable)
+        if name == "Film":
+            p.inputs["Thin Film Thickness"].default_value = 300.0
+        mat.node_tree.links.new(p.outputs[0], out.inputs["Surface"])
+        C.quad(name, (len(made), 0, 0), 1.0, mat)
+        made[name] = mat
+    res = export_current()
+    mats = {m["name"]: m for m in res.header["materials"]}
+    assert not any(k.endswith("_reg") for lb in mats["Plain"]["lobes"] for k in lb)
+    assert "program" not in mats["Plain"]
+    coat = mats["CoatIOR"]["lobes"][0]
+    assert coat["type"] == "DIELECTRIC_SPECULAR" and coat["ior"] == pytest.approx(1.01)
+    assert {"ior_reg", "ior_level_reg", "tint_reg"} <= set(coat)
+    consts = {int(r): v for r, *v in mats["CoatIOR"]["program"]["constants"]}
+    assert consts[coat["ior_level_reg"]] == [0.5] * 3 and consts[coat["tint_reg"]] == [1.0] * 3
+    assert not any("'Plain'" in w or "'CoatIOR'" in w for w in res.warnings), res.warnings
+    film = [w for w in res.warnings if "'Film'" in w]
+    assert len(film) == 1 and "thin film" in film[0]

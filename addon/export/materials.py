@@ -43,8 +43,8 @@ Mapping (see docs/addon.md, "Materials"):
                                        layer → sheen, layer_weight w_c, coat_tint t_c)
   and metal, glass and the specular layer carry "layer" → the coat (or the sheen): the core
   scales them per hit by each layer's 1 − k·albedo(wo) and the coat tint's absorption. Weights
-  and tints may be textured (k and the tint then come from registers); the coat IOR is
-  constant-only; a Coat Normal that differs from Normal warns (Normal's shading normal used);
+  and tints may be textured (k and the tint then come from registers), so may the coat IOR
+  ("ior_reg"); a Coat Normal that differs from Normal warns (Normal's shading normal used);
   the Principled's emission lies under its coat/sheen ("emission_layer": camera and BSDF rays
   see it attenuated per view angle, as Cycles 5.0; light samples do not).
   Subsurface weight w_s splits the DIFFUSE lobe (Cycles's "Diffuse/Subsurface component"):
@@ -66,8 +66,9 @@ roughness, metallic, mix factor or emission gives lobes whose colour / roughness
 program registers (``color_reg`` / ``roughness_reg`` / ``emission_reg``), and constant inputs
 fold to today's constant lobes. Node groups, reroutes and muted nodes are followed at the
 shader level too. Alpha, metallic and transmission may be textured (alpha cut-outs), and the
-coat and sheen weights, tints and roughnesses; IOR, Coat IOR, Specular IOR Level and Specular
-Tint stay constant-only (a linked one warns and uses its socket's value).
+coat and sheen weights, tints and roughnesses, and IOR, Coat IOR, Specular IOR Level and
+Specular Tint (the lobes' "ior_reg" / "ior_level_reg" / "tint_reg": eta, f0·tint and the F82
+tint per hit; docs/materials.md "Textured IOR and tint"). Thin Film warns (not rendered).
 """
 
 import numpy as np
@@ -683,8 +684,8 @@ class MaterialExporter:
         bsdf_microfacet_setup_fresnel_dielectric always preserves energy): DIELECTRIC_SPECULAR
         (wa·Coat Weight, Coat Roughness, Coat IOR, white tint), layer_weight = Coat Weight,
         coat_tint = Coat Tint (absorption of the layers below). Weights, tints and roughnesses may
-        be textured (registers; k is the largest component of the weight register); the coat
-        IOR is constant-only. A Coat Normal driven differently from Normal (e.g. a normal map on the
+        be textured (registers; k is the largest component of the weight register), and the coat
+        IOR (``ior_reg``, per hit). A Coat Normal driven differently from Normal (e.g. a normal map on the
         base only) warns: both layers use the material's shading normal (Normal's); the same
         source on both is exact."""
         layers = []
