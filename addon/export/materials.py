@@ -43,8 +43,8 @@ Mapping (see docs/addon.md, "Materials"):
                                        layer → sheen, layer_weight w_c, coat_tint t_c)
   and metal, glass and the specular layer carry "layer" → the coat (or the sheen): the core
   scales them per hit by each layer's 1 − k·albedo(wo) and the coat tint's absorption. Weights
-  and tints may be textured (k and the tint then come from registers); the coat IOR is
-  constant-only; a Coat Normal that differs from Normal warns (Normal's shading normal used);
+  and tints may be textured (k and the tint then come from registers), so may the coat IOR
+  ("ior_reg"); a Coat Normal that differs from Normal warns (Normal's shading normal used);
   the Principled's emission lies under its coat/sheen ("emission_layer": camera and BSDF rays
   see it attenuated per view angle, as Cycles 5.0; light samples do not).
   Subsurface weight w_s splits the DIFFUSE lobe (Cycles's "Diffuse/Subsurface component"):
@@ -66,8 +66,9 @@ roughness, metallic, mix factor or emission gives lobes whose colour / roughness
 program registers (``color_reg`` / ``roughness_reg`` / ``emission_reg``), and constant inputs
 fold to today's constant lobes. Node groups, reroutes and muted nodes are followed at the
 shader level too. Alpha, metallic and transmission may be textured (alpha cut-outs), and the
-coat and sheen weights, tints and roughnesses; IOR, Coat IOR, Specular IOR Level and Specular
-Tint stay constant-only (a linked one warns and uses its socket's value).
+coat and sheen weights, tints and roughnesses, and IOR, Coat IOR, Specular IOR Level and
+Specular Tint (the lobes' "ior_reg" / "ior_level_reg" / "tint_reg": eta, f0·tint and the F82
+tint per hit; docs/materials.md "Textured IOR and tint"). Thin Film warns (not rendered).
 """
 
 import numpy as np
@@ -89,6 +90,11 @@ _SHARP = {"SHARP"}
 #: smallest representative colour of a program-driven lobe: the table drops lobes below
 #: CLOSURE_WEIGHT_CUTOFF (1e-5), which would detach the lobe from its register
 MIN_PLACEHOLDER = 1e-4
+#: smallest stand-in IOR of a lobe whose IOR comes per hit from a register: an IOR of 1 would
+#: make the stand-in lobe unselectable (zero average albedo) or a straight transmission
+TEXTURED_IOR_FLOOR = 1.01
+#: lobe keys of the per-hit Fresnel registers (drt.materials.program_format.IOR_REG_KEYS)
+IOR_REG_KEYS = ("ior_reg", "ior_level_reg", "tint_reg")
 
 
 def _rgb(value) -> np.ndarray:
@@ -119,6 +125,11 @@ def _representative(v: Value, floor: float) -> list:
     component at least ``floor``."""
     fb = v.fallback if v.fallback is not None else np.full(3, 0.5)
     return [float(max(x, floor)) for x in np.broadcast_to(fb, 3)]
+
+
+def _stand_in(v, lo: float) -> float:
+    """A float input's constant (its representative if it is a Value), at least ``lo``."""
+    return max(_representative(v, lo)[0] if isinstance(v, Value) else float(v), lo)
 
 
 def _multiscatter_tint(color) -> list:
@@ -240,6 +251,7 @@ class MaterialExporter:
         if "emission_reg" in result or "normal_reg" in result or "density_reg" in result.get("volume", {}) \
                 or "color_reg" in result.get("volume", {}) or any(
                 "color_reg" in lb or "roughness_reg" in lb or "layer_weight_reg" in lb or "coat_tint_reg" in lb
+                or "ior_reg" in lb or "tint_reg" in lb
                 for lb in result["lobes"]):
             result["program"] = self._b.to_dict()
         problems += self._b.problems
@@ -304,6 +316,13 @@ class MaterialExporter:
                 else:
                     v = np.maximum(np.broadcast_to(np.asarray(v, np.float64), 3), 0.0)
                     out[key] = float(v.max()) if key == "layer_weight" else [float(x) for x in v]
+        if any(isinstance(lb.get(key), Value) for key in IOR_REG_KEYS):
+            # a textured IOR / level / tint (docs/materials.md "Textured IOR and tint"): a
+            # DIELECTRIC_SPECULAR lobe names all three registers (constants get one too)
+            for key in IOR_REG_KEYS:
+                if key in lb:
+                    v = lb[key]
+                    out[key] = self._b.reg_of(v if isinstance(v, Value) else Value(self._b, const=v))
         for key in ("weight", "reflection_weight"):  # METALLIC, SUBSURFACE / Principled glass
             if key not in lb:
                 continue
@@ -415,17 +434,23 @@ class MaterialExporter:
                      "roughness": self._roughness(node, problems, ctx)}], np.zeros(3)
         if kind == "ShaderNodeBsdfGlass":
             col = self._color(node, "Color", problems, ctx=ctx)
+            ior = self._value(node, "IOR", problems, 1.45, ctx)
             lobe = {"type": "GLASS", "color": w * col, "roughness": self._roughness(node, problems, ctx),
-                    "ior": max(self._const_value(node, "IOR", problems, 1.45, ctx), 1.0)}
+                    "ior": _stand_in(ior, TEXTURED_IOR_FLOOR if isinstance(ior, Value) else 1.0)}
+            if isinstance(ior, Value):  # per hit from a register
+                lobe["ior_reg"] = ior
             if getattr(node, "distribution", "") == "MULTI_GGX":  # Cycles's compensation, Fss = colour
                 lobe["multiscatter_tint"] = _multiscatter_tint(col)
             return [lobe], np.zeros(3)
         if kind == "ShaderNodeBsdfTranslucent":
             return [{"type": "TRANSLUCENT", "color": w * self._color(node, "Color", problems, ctx=ctx)}], np.zeros(3)
         if kind == "ShaderNodeBsdfRefraction":
-            return [{"type": "REFRACTION", "color": w * self._color(node, "Color", problems, ctx=ctx),
-                     "roughness": self._roughness(node, problems, ctx),
-                     "ior": max(self._const_value(node, "IOR", problems, 1.45, ctx), 1e-5)}], np.zeros(3)
+            ior = self._value(node, "IOR", problems, 1.45, ctx)
+            lobe = {"type": "REFRACTION", "color": w * self._color(node, "Color", problems, ctx=ctx),
+                    "roughness": self._roughness(node, problems, ctx), "ior": _stand_in(ior, 1e-5)}
+            if isinstance(ior, Value):  # per hit from a register (a stand-in of 1 is no delta: the
+                lobe.update(ior=max(lobe["ior"], TEXTURED_IOR_FLOOR), ior_reg=ior)  # straight case)
+            return [lobe], np.zeros(3)
         if kind == "ShaderNodeHoldout":
             return [{"type": "HOLDOUT", "color": w * np.ones(3)}], np.zeros(3)
         if kind in ("ShaderNodeBsdfSheen", "ShaderNodeBsdfVelvet"):  # drt.materials.sheen
@@ -545,13 +570,13 @@ class MaterialExporter:
         metallic = clamp01(self._value(node, "Metallic", problems, 0.0, ctx))
         rough = self._value(node, "Roughness", problems, 0.5, ctx)
         rough = rough if isinstance(rough, Value) else min(max(rough, 0.0), 1.0)
-        ior = max(self._const_value(node, "IOR", problems, 1.5, ctx), 1.0)
+        ior_in = self._value(node, "IOR", problems, 1.5, ctx)
         alpha = clamp01(self._value(node, "Alpha", problems, 1.0, ctx))
         trans = clamp01(self._value(node, "transmission", problems, 0.0, ctx))
-        spec = max(self._const_value(node, "specular", problems, 0.5, ctx), 0.0)
+        spec_in = self._value(node, "specular", problems, 0.5, ctx)
         tint_sock = compat.find_input(node, "specular_tint")
         if tint_sock is not None and tint_sock.type == "RGBA":
-            tint = self._const_color(node, "specular_tint", problems, (1, 1, 1), ctx)
+            tint = self._color(node, "specular_tint", problems, (1, 1, 1), ctx)
         else:  # 3.x: a float blending white toward the base color
             t = self._const_value(node, "specular_tint", problems, 0.0, ctx) if tint_sock is not None else 0.0
             tint = (1.0 - t) * np.ones(3) + t * base
@@ -559,18 +584,32 @@ class MaterialExporter:
         em_strength = self._value(node, "Emission Strength", problems, 1.0, ctx) \
             if node.inputs.get("Emission Strength") is not None else 1.0
         layers = self._coat_and_sheen(node, w * alpha, problems, ctx)
+        film = node.inputs.get("Thin Film Thickness")  # Blender 4.2+
+        if film is not None and (resolve(film, ctx)[0] is not None or film.default_value > 0.1):
+            # Cycles's iridescence (THINFILM_THICKNESS_CUTOFF 0.1 nm) needs its spectral
+            # sensitivity table; not done (docs/materials.md "Thin film")
+            problems.append(f"'{node.name}' thin film (iridescence) not supported, rendered without it")
         for key in ("Tangent",):
             sock = node.inputs.get(key)
             if sock is not None and resolve(sock, ctx)[0] is not None:
                 problems.append(f"'{node.name}' linked {key} ignored")
         sss = min(max(self._const_value(node, "subsurface", problems, 0.0, ctx), 0.0), 1.0)
 
+        # A textured IOR / Specular IOR Level / Specular Tint: the lobes take them per hit from
+        # registers ("ior_reg", "ior_level_reg", "tint_reg"; the core recomputes eta, f0 and
+        # the layer albedo per hit); the constants below are their stand-ins (selection, hints)
+        fresnel_textured = isinstance(ior_in, Value) or isinstance(spec_in, Value)
+        ior = _stand_in(ior_in, 1.0)
+        spec = max(_representative(spec_in, 0.0)[0], 0.0) if isinstance(spec_in, Value) else max(spec_in, 0.0)
+        tint_c = np.asarray(_representative(tint, 0.0)) if isinstance(tint, Value) else tint
         # Cycles's "Apply IOR adjustment": Specular IOR Level rescales F0, then back to an IOR
         f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
         eta = ior
         if spec != 0.5:
             f0s = min(max(f0 * 2.0 * spec, 0.0), 0.99)
             eta = (1.0 + np.sqrt(f0s)) / (1.0 - np.sqrt(f0s))
+        if fresnel_textured:  # a stand-in that keeps the specular lobe selectable
+            eta = max(eta, TEXTURED_IOR_FLOOR)
         multiscatter = getattr(node, "distribution", "MULTI_GGX") == "MULTI_GGX"
         lobes = list(layers)
         # everything below the sheen / coat lies under the lowest of them ("layer": scaled per
@@ -583,12 +622,15 @@ class MaterialExporter:
             # textured metallic / alpha gives the weight per hit from a register (weight_reg)
             clamped = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
             lobes.append({"type": "METALLIC", "color": k * clamped, "weight": k, "roughness": rough,
-                          "tint": [float(min(x, 1.0)) for x in np.broadcast_to(tint, 3)],
-                          "multiscatter": multiscatter, **below})
+                          "tint": [float(min(x, 1.0)) for x in np.broadcast_to(tint_c, 3)],
+                          "multiscatter": multiscatter, **below,
+                          **({"tint_reg": tint} if isinstance(tint, Value) else {})})
         dielectric = 1.0 - metallic
         if maybe_positive(trans) and maybe_positive(dielectric):
-            lobes.append({**self._principled_glass(node, wa * dielectric * trans, base, tint, rough, ior, problems),
-                          **below})
+            glass = self._principled_glass(node, wa * dielectric * trans, base, tint, rough, ior, problems)
+            if isinstance(ior_in, Value):
+                glass.update(ior=max(ior, TEXTURED_IOR_FLOOR), ior_reg=ior_in)
+            lobes.append({**glass, **below})
         opaque = wa * dielectric * (1 - trans)
         if maybe_positive(opaque):
             # The specular layer (GGX × dielectric Fresnel) over the diffuse/subsurface base,
@@ -598,8 +640,10 @@ class MaterialExporter:
             if eta != 1.0:
                 top = {"type": "DIELECTRIC_SPECULAR", "color": opaque * np.ones(3),
                        "roughness": rough, "ior": float(eta),
-                       "tint": [float(x) for x in np.broadcast_to(tint, 3)],
+                       "tint": [float(x) for x in np.broadcast_to(tint_c, 3)],
                        "multiscatter": multiscatter, **below}
+                if fresnel_textured or isinstance(tint, Value):
+                    top.update(ior_reg=ior_in, ior_level_reg=spec_in, tint_reg=tint)
                 layer = {"layer": top}  # the lobe dict itself: indices shift when lists merge
                 lobes.append(top)
             if sss < 1.0:
@@ -611,6 +655,9 @@ class MaterialExporter:
                 # Cycles's Random Walk enters through the specular layer's IOR (eta above)
                 ior_sss = self._const_value(node, "Subsurface IOR", problems, 1.4, ctx) \
                     if method == "RANDOM_WALK_SKIN" else eta
+                if fresnel_textured and method != "RANDOM_WALK_SKIN":
+                    problems.append(f"'{node.name}' textured IOR / Specular IOR Level: the subsurface "
+                                    f"entry uses its constant IOR {eta:.3g}")
                 r_entry = rough if not isinstance(rough, Value) else rough
                 lobes.append({"type": "SUBSURFACE", "color": k * clamped, "weight": k,
                               "radius": self._sss_radius(node, "Subsurface Radius", "Subsurface Scale",
@@ -637,8 +684,8 @@ class MaterialExporter:
         bsdf_microfacet_setup_fresnel_dielectric always preserves energy): DIELECTRIC_SPECULAR
         (wa·Coat Weight, Coat Roughness, Coat IOR, white tint), layer_weight = Coat Weight,
         coat_tint = Coat Tint (absorption of the layers below). Weights, tints and roughnesses may
-        be textured (registers; k is the largest component of the weight register); the coat
-        IOR is constant-only. A Coat Normal driven differently from Normal (e.g. a normal map on the
+        be textured (registers; k is the largest component of the weight register), and the coat
+        IOR (``ior_reg``, per hit). A Coat Normal driven differently from Normal (e.g. a normal map on the
         base only) warns: both layers use the material's shading normal (Normal's); the same
         source on both is exact."""
         layers = []
@@ -655,7 +702,10 @@ class MaterialExporter:
             if maybe_positive(k):
                 layers.append({"type": "SHEEN", "color": wa * k, "roughness": r, "layer_weight": k})
         if _above_cutoff(coat_w):
-            coat_ior = max(self._const_value(node, "Coat IOR", problems, 1.5, ctx), 1.0)
+            coat_ior_in = self._value(node, "Coat IOR", problems, 1.5, ctx)
+            coat_ior = _stand_in(coat_ior_in, 1.0)
+            if isinstance(coat_ior_in, Value):  # per hit from a register; a selectable stand-in
+                coat_ior = max(coat_ior, TEXTURED_IOR_FLOOR)
             coat_tint = self._color(node, "Coat Tint", problems, (1, 1, 1), ctx)
             coat_tint = coat_tint if isinstance(coat_tint, Value) else np.maximum(coat_tint, 0.0)
             r = self._value(node, "Coat Roughness", problems, 0.03, ctx)
@@ -666,7 +716,9 @@ class MaterialExporter:
                 layers.append({"type": "DIELECTRIC_SPECULAR", "color": wa * coat_w * np.ones(3),
                                "roughness": r, "ior": float(coat_ior), "tint": [1.0, 1.0, 1.0],
                                "multiscatter": True, "layer_weight": coat_w, "coat_tint": coat_tint,
-                               **({"layer": layers[-1]} if layers else {})})
+                               **({"layer": layers[-1]} if layers else {}),
+                               **({"ior_reg": coat_ior_in, "ior_level_reg": 0.5, "tint_reg": np.ones(3)}
+                                  if isinstance(coat_ior_in, Value) else {})})
         if layers and _above_cutoff(coat_w) \
                 and _normal_key(node, "Coat Normal", ctx) != _normal_key(node, "Normal", ctx):
             # Cycles's coat uses Coat Normal (unlinked: the unmapped normal) and the sheen a mix

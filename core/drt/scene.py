@@ -432,7 +432,8 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
                 entry["roughness"] = _number(lobe, "roughness", lp, 1.0, lo=0, hi=1)
                 entry["anisotropy"] = _number(lobe, "anisotropy", lp, 0.0, lo=-1, hi=1)
                 entry["weight"] = _number(lobe, "weight", lp, 1.0, lo=0, lo_open=True)
-            for key in ("color_reg", "roughness_reg", "weight_reg", "layer_weight_reg", "coat_tint_reg"):
+            for key in ("color_reg", "roughness_reg", "weight_reg", "layer_weight_reg", "coat_tint_reg",
+                        "ior_reg", "ior_level_reg", "tint_reg"):
                 if key in lobe:
                     entry[key] = _number(lobe, key, lp, integer=True, lo=0)
             clean.append(entry)

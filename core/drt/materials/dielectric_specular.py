@@ -88,6 +88,20 @@ def f0_from_ior(eta):
 
 
 @kernel
+def specular_eta_f0(ior, level):
+    """The Principled specular layer's (eta, F0) from IOR (≥ 1) and Specular IOR Level
+    (≥ 0): Cycles's "Apply IOR adjustment" — F0 of the IOR scaled by 2·level, clamped to
+    [0, 0.99], and back to an IOR; level 0.5 leaves both as they are. The exporter does the same
+    for constant inputs; ``programs.eval_material`` calls this per hit for textured ones."""
+    f0 = f0_from_ior(ior)
+    if level == 0.5:
+        return ior, f0
+    f0s = min(max(f0 * 2.0 * level, 0.0), 0.99)
+    r = math.sqrt(f0s)
+    return (1.0 + r) / (1.0 - r), f0s
+
+
+@kernel
 def fss_real(eta):
     """Cosine-weighted average of the real dielectric Fresnel (Kulla-Conty fit, Cycles's
     ``fresnel_dielectric_Fss``)."""

@@ -126,7 +126,15 @@ ProgramData = namedtuple("ProgramData", [
                         # reflection_weight (lobe_fresnel[..., 4]), −1: constant
     "lobe_layer_reg",   # (M, L, 2) int64 a coat / sheen layer's [k register (k = its largest
                         # component), coat tint register], −1: constant (MaterialData.lobe_coat)
+    "lobe_ior_reg",     # (M, L, 3) int64 a lobe's [IOR, Specular IOR Level, specular tint]
+                        # registers (DIELECTRIC_SPECULAR: all three or none; METALLIC: tint =
+                        # its F82 tint; GLASS / REFRACTION: IOR), −1: constant (lobe_ior,
+                        # lobe_fresnel[..., :3]; docs/materials.md "Textured IOR and tint")
 ])
+
+
+#: lobe keys of the registers in ``ProgramData.lobe_ior_reg``, in column order
+IOR_REG_KEYS = ("ior_reg", "ior_level_reg", "tint_reg")
 
 
 def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> dict:
@@ -225,6 +233,7 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
     rough_reg = np.full((m_count, n_slots), -1, np.int64)
     weight_reg = np.full((m_count, n_slots), -1, np.int64)
     layer_reg = np.full((m_count, n_slots, 2), -1, np.int64)
+    ior_reg = np.full((m_count, n_slots, 3), -1, np.int64)
     emission_reg = np.full(m_count, -1, np.int64)
     normal_reg = np.full(m_count, -1, np.int64)
     reads_point = np.zeros(m_count, bool)
@@ -253,6 +262,11 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
             weight_reg[i, slot] = _reg(lobe.get("weight_reg"), n, f"{where} lobe {j} weight_reg")
             layer_reg[i, slot, 0] = _reg(lobe.get("layer_weight_reg"), n, f"{where} lobe {j} layer_weight_reg")
             layer_reg[i, slot, 1] = _reg(lobe.get("coat_tint_reg"), n, f"{where} lobe {j} coat_tint_reg")
+            for c, key in enumerate(IOR_REG_KEYS):
+                ior_reg[i, slot, c] = _reg(lobe.get(key), n, f"{where} lobe {j} {key}")
+            if lobe["type"] == "DIELECTRIC_SPECULAR" and 0 < (ior_reg[i, slot] >= 0).sum() < 3:
+                raise ValueError(f"{where} lobe {j}: a DIELECTRIC_SPECULAR lobe needs all of "
+                                 f"{', '.join(IOR_REG_KEYS)} or none")
             slot += 1
         emission_reg[i] = _reg(mat.get("emission_reg"), n, f"{where} emission_reg")
         normal_reg[i] = _reg(mat.get("normal_reg"), n, f"{where} normal_reg")
@@ -300,7 +314,7 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         object_of=arr(object_of, np.int32, (0,)), object_info=arr(object_info, np.float64, (0, 9)),
         positions=arr(positions, np.float32, (0, 3)), triangles=arr(triangles, np.int32, (0, 3)),
         footprint=arr(footprint, np.float64, (0, 3)), camera=arr(camera, np.float64, (0, 4)),
-        lobe_weight_reg=weight_reg, lobe_layer_reg=layer_reg)
+        lobe_weight_reg=weight_reg, lobe_layer_reg=layer_reg, lobe_ior_reg=ior_reg)
 
 
 def world_program_index(pd: ProgramData) -> int:
@@ -325,4 +339,5 @@ def empty_program_data() -> ProgramData:
                        positions=np.zeros((0, 3), np.float32), triangles=np.zeros((0, 3), np.int32),
                        footprint=np.zeros((0, 3)), camera=np.zeros((0, 4)),
                        lobe_weight_reg=np.zeros((0, 0), np.int64),
-                       lobe_layer_reg=np.zeros((0, 0, 2), np.int64))
+                       lobe_layer_reg=np.zeros((0, 0, 2), np.int64),
+                       lobe_ior_reg=np.zeros((0, 0, 3), np.int64))

@@ -36,6 +36,7 @@ import numpy as np
 
 from ..kernels import inline_kernel, kernel
 from .dielectric import IOR_ONE_EPS
+from .dielectric_specular import specular_eta_f0
 from .ggx import ALPHA_SQ_SINGULAR
 from .procedural import procedural_op
 from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
@@ -1145,6 +1146,34 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
 
 
 @inline_kernel
+def fresnel_from_registers(md, regs, m, l, ir, lr, tr):
+    """Write slot l's per-hit Fresnel parameters from registers (Cycles's svm_node_closure
+    Principled code; docs/materials.md "Textured IOR and tint"). DIELECTRIC_SPECULAR (the
+    specular layer or a coat; ir, lr, tr all given): eta and F0 from IOR (≥ 1) and Specular IOR
+    Level (``specular_eta_f0``), f0·tint clamped to [0, 1] — the layer-albedo and energy tables
+    then read this hit's eta and f0·tint in bsdf_eval. METALLIC: the F82 tint min(max(tint, 0),
+    1). GLASS: IOR ≥ 1 (as the exporter clamps); REFRACTION: IOR ≥ 1e-5."""
+    t = md.lobe_type[m, l]
+    if t == 5:  # BSDF_DIELECTRIC_SPECULAR
+        eta, f0 = specular_eta_f0(max(regs[ir, 0], 1.0), max(regs[lr, 0], 0.0))
+        md.lobe_ior[m, l] = eta
+        md.lobe_fresnel[m, l, 0] = min(max(f0 * regs[tr, 0], 0.0), 1.0)
+        md.lobe_fresnel[m, l, 1] = min(max(f0 * regs[tr, 1], 0.0), 1.0)
+        md.lobe_fresnel[m, l, 2] = min(max(f0 * regs[tr, 2], 0.0), 1.0)
+    elif t == 6:  # BSDF_METALLIC: F82 tint
+        if tr >= 0:
+            md.lobe_fresnel[m, l, 0] = min(max(regs[tr, 0], 0.0), 1.0)
+            md.lobe_fresnel[m, l, 1] = min(max(regs[tr, 1], 0.0), 1.0)
+            md.lobe_fresnel[m, l, 2] = min(max(regs[tr, 2], 0.0), 1.0)
+    elif t == 3:  # BSDF_GLASS
+        if ir >= 0:
+            md.lobe_ior[m, l] = max(regs[ir, 0], 1.0)
+    elif t == 8:  # BSDF_REFRACTION
+        if ir >= 0:
+            md.lobe_ior[m, l] = max(regs[ir, 0], 1e-5)
+
+
+@inline_kernel
 def eval_material(pd, md, regs, m, prim, b1, b2, point):
     """Run material m's program at a hit and write its per-hit parameters into row m of ``md``
     (which must be this thread's private copy): lobe colours and alphas, the lobe selection
@@ -1162,11 +1191,16 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
         wr = pd.lobe_weight_reg[m, l]
         if wr >= 0:  # a textured METALLIC weight / Principled glass reflection weight
             md.lobe_fresnel[m, l, 4] = max(regs[wr, 0], 0.0)
+        ir = pd.lobe_ior_reg[m, l, 0]
+        tr = pd.lobe_ior_reg[m, l, 2]
+        if ir >= 0 or tr >= 0:  # a textured IOR / Specular IOR Level / specular tint
+            fresnel_from_registers(md, regs, m, l, ir, pd.lobe_ior_reg[m, l, 1], tr)
         rr = pd.lobe_rough_reg[m, l]
-        if rr >= 0:
-            rough = saturate(regs[rr, 0])
-            alpha = rough * rough
-            md.lobe_alpha[m, l] = alpha
+        if rr >= 0 or ir >= 0:
+            if rr >= 0:
+                rough = saturate(regs[rr, 0])
+                md.lobe_alpha[m, l] = rough * rough
+            alpha = md.lobe_alpha[m, l]
             t = md.lobe_type[m, l]
             # (as MaterialTable: Lambert (1), translucent (7), sheen (9) and velvet (10) never,
             # glass (3) and refraction (8) also at IOR ≈ 1, a holdout (11) always)
@@ -1175,11 +1209,11 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
         kr = pd.lobe_layer_reg[m, l, 0]
         if kr >= 0:  # a textured coat / sheen weight: k = the register's largest component
             md.lobe_coat[m, l, 0] = max(regs[kr, 0], regs[kr, 1], regs[kr, 2], 0.0)
-        tr = pd.lobe_layer_reg[m, l, 1]
-        if tr >= 0:  # a textured coat tint
-            md.lobe_coat[m, l, 1] = max(regs[tr, 0], 0.0)
-            md.lobe_coat[m, l, 2] = max(regs[tr, 1], 0.0)
-            md.lobe_coat[m, l, 3] = max(regs[tr, 2], 0.0)
+        ctr = pd.lobe_layer_reg[m, l, 1]
+        if ctr >= 0:  # a textured coat tint
+            md.lobe_coat[m, l, 1] = max(regs[ctr, 0], 0.0)
+            md.lobe_coat[m, l, 2] = max(regs[ctr, 1], 0.0)
+            md.lobe_coat[m, l, 3] = max(regs[ctr, 2], 0.0)
         total += (md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0] + md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]
                   + md.lobe_color[m, l, 2] * md.lobe_avg[m, l, 2]) * (1.0 / 3.0)
     cdf = 0.0
