@@ -148,9 +148,16 @@ def test_moving_hit_points_normals_and_transforms():
         n_ref = np.cross(world[:, 1] - world[:, 0], world[:, 2] - world[:, 0])
         n_ref /= np.linalg.norm(n_ref, axis=1, keepdims=True)
         np.testing.assert_allclose(hits.ng[hit], n_ref, atol=1e-9)
+        # the shading normals' map: the inverse transpose of the hit's transform, on moving hits
+        np.testing.assert_array_equal(hits.moving, hit)
+        np.testing.assert_allclose(hits.normal_xform[hit], np.linalg.inv(lin).transpose(0, 2, 1),
+                                   rtol=1e-12, atol=1e-12)
+        # misses end where they start
+        np.testing.assert_array_equal(hits.p[~hit], o[~hit])
+        assert np.isinf(hits.t[~hit]).all() and (hits.prim[~hit] == -1).all()
         # rays that miss everything: no moving hit, no transforms
         far = tr.intersect(o[~hit], d[~hit], tau=tau[~hit])
-        assert not far.hit.any() and far.moving_linear is None
+        assert not far.hit.any() and far.moving_linear is None and far.normal_xform is None
 
 
 def test_occlusion_of_moving_objects_respects_tmax():

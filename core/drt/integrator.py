@@ -174,12 +174,10 @@ class Integrator:
             self.loop_limit += int(settings.transparent_bounces)
 
     def _hit_arrays(self, hits) -> stages.HitArrays:
-        if hits.moving_linear is not None:
-            # normals transform by the inverse transpose of the local→world map
-            from .motion import invert_linear
-
-            xform = np.ascontiguousarray(np.swapaxes(invert_linear(hits.moving_linear), 1, 2))
-            moving = hits.prim >= self.geom.static_count
+        if hits.normal_xform is not None:
+            # normals transform by the inverse transpose of the local→world map (the tracer's
+            # surface kernel computes it for the hit points' normals anyway)
+            xform, moving = hits.normal_xform, hits.moving
         else:
             xform, moving = _NO_XFORM, _NO_MOVING
         return stages.HitArrays(prim=hits.prim, t=hits.t, b1=hits.b1, b2=hits.b2, p=hits.p,

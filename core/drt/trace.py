@@ -140,6 +140,10 @@ class Hits:
     ng: np.ndarray
     moving_linear: np.ndarray | None = None
     p: np.ndarray | None = None  # (n, 3) hit points, float64, shifted world frame
+    #: (n, 3, 3) the normal map (inverse transpose of ``moving_linear``) of hits on moving
+    #: objects, and (n,) bool: which rays hit one; None when none did
+    normal_xform: np.ndarray | None = None
+    moving: np.ndarray | None = None
 
     @property
     def hit(self) -> np.ndarray:
@@ -432,27 +436,68 @@ def _deforming_rows(dd, o, d, tau, t, prim, b1, b2):
 
 
 @kernel
-def _finish_linear(prim, first_moving, linear):
-    """Identity rows of ``linear`` for rays that did not hit a moving object (global triangle
-    ids of moving objects start at ``first_moving``); returns whether any ray did."""
+def _static_first(r_prim, r_tfar, r_u, r_v, tmax, t, prim, b1, b2):
+    """Embree's static answer as the start of a moving scene's closest hits: a hit's t, prim
+    and barycentrics; a miss keeps t = min(tmax, 3e38) (tmax (0,): unbounded), the bound the
+    moving objects are then searched within, and prim −1."""
+    for i in range(r_prim.shape[0]):
+        k = r_prim[i]
+        if k >= 0:
+            t[i] = r_tfar[i]
+            prim[i] = k
+            b1[i] = r_u[i]
+            b2[i] = r_v[i]
+        else:
+            t[i] = min(tmax[i], 3.0e38) if tmax.shape[0] else 3.0e38
+            prim[i] = -1
+            b1[i] = 0.0
+            b2[i] = 0.0
+
+
+@kernel
+def _unbounded_start(tmax, t, prim, b1, b2):
+    """The start of the closest hits when no static scene exists: nothing hit, t = min(tmax,
+    3e38)."""
+    for i in range(t.shape[0]):
+        t[i] = min(tmax[i], 3.0e38) if tmax.shape[0] else 3.0e38
+        prim[i] = -1
+        b1[i] = 0.0
+        b2[i] = 0.0
+
+
+@kernel
+def _finish_moving_hits(prim, first_moving, o, d, t, p, ng, linear, moving):
+    """After every object merged its hits: misses get t = inf and p = o (ng 0), rays that hit
+    nothing moving get identity rows in ``linear``; ``moving[i]``: ray i hit a moving object
+    (whose p, ng come from `_moving_surface`). Returns whether any ray did."""
     any_moving = False
     for i in range(prim.shape[0]):
-        if prim[i] >= first_moving:
+        k = prim[i]
+        if k >= first_moving:
+            moving[i] = True
             any_moving = True
             continue
+        moving[i] = False
         for r in range(3):
             for c in range(3):
                 linear[i, r, c] = 1.0 if r == c else 0.0
+        if k < 0:
+            t[i] = np.inf
+            for axis in range(3):
+                p[i, axis] = o[i, axis] + 0.0 * d[i, axis]
+                ng[i, axis] = 0.0
     return any_moving
 
 
 @kernel
 def _moving_surface(positions, positions_close, deforming, triangles, prim_offset, tau, d, prim,
-                    b1, b2, linear, translation, p, ng):
+                    b1, b2, linear, translation, p, ng, normal_xform):
     """Hit points and unit geometric normals (front = counter-clockwise side) of the hits on
     one moving object, in float64 from its local triangle (at the ray's τ if it deforms) mapped
-    by the hit's local→world transform; normals go through the inverse transpose. A degenerate
+    by the hit's local→world transform; normals go through the inverse transpose, which goes to
+    ``normal_xform`` (n, 3, 3) for the shading normals (when it has rows). A degenerate
     (zero-area) triangle has no normal: it faces the ray."""
+    store_xform = normal_xform.shape[0] > 0
     n_tri = triangles.shape[0]
     for i in range(prim.shape[0]):
         k = prim[i] - prim_offset
@@ -490,6 +535,11 @@ def _moving_surface(positions, positions_close, deforming, triangles, prim_offse
         for j in range(3):
             p[i, j] = pw[j] + translation[i, j]
         i0, i1, i2 = _inverse_rows(r0, r1, r2)
+        if store_xform:  # (the inverse's transpose: row r holds column r of the inverse)
+            for r in range(3):
+                normal_xform[i, r, 0] = i0[r]
+                normal_xform[i, r, 1] = i1[r]
+                normal_xform[i, r, 2] = i2[r]
         n_l = cross(e1, e2)
         nx = i0[0] * n_l[0] + i1[0] * n_l[1] + i2[0] * n_l[2]
         ny = i0[1] * n_l[0] + i1[1] * n_l[1] + i2[1] * n_l[2]
@@ -601,6 +651,15 @@ def _swept_box(mm) -> tuple[np.ndarray, np.ndarray]:
 _NO_SKIP = np.zeros(0, dtype=bool)
 
 
+def _column(a, n: int) -> np.ndarray:
+    """a as a contiguous, writable (n,) float64 array (a scalar or a (1,) array broadcast): the
+    kernels get one array type, so no extra compiled variants."""
+    a = np.asarray(a, dtype=np.float64)
+    if a.shape != (n,):
+        return np.array(np.broadcast_to(a.reshape(-1) if a.ndim else a, (n,)), dtype=np.float64)
+    return a if a.flags.c_contiguous and a.flags.writeable else a.copy()
+
+
 class Tracer:
     """Closest-hit and occlusion queries for batches of rays.
 
@@ -645,14 +704,6 @@ class Tracer:
         return out
 
     @staticmethod
-    def _moving_inputs(o, d, tau):
-        n = len(o)
-        o64 = np.ascontiguousarray(o, dtype=np.float64).reshape(n, 3)
-        d64 = np.ascontiguousarray(d, dtype=np.float64).reshape(n, 3)
-        tau = np.zeros(n) if tau is None else np.ascontiguousarray(tau, dtype=np.float64).reshape(n)
-        return o64, d64, tau
-
-    @staticmethod
     def _local_rays(n):
         """Scratch for the candidate rays of a rigid object: indices, local origins and
         directions, tfar (float32 for Embree)."""
@@ -662,38 +713,36 @@ class Tracer:
     # ------------------------------------------------------------------ queries
     def intersect(self, o, d, tau=None, tmax=None) -> Hits:
         n = len(o)
-        linear = None
-        translation = None
         if self.static is not None and n and not self.moving:
             return self._intersect_static(o, d, tmax)
-        t = np.full(n, np.inf) if tmax is None else np.asarray(tmax, dtype=np.float64).copy()
-        t = np.minimum(t, 3.0e38)
-        prim = np.full(n, -1, dtype=np.int64)
-        b1 = np.zeros(n)
-        b2 = np.zeros(n)
-        ng = np.zeros((n, 3))
+        o = np.ascontiguousarray(o, dtype=np.float64).reshape(n, 3)
+        d = np.ascontiguousarray(d, dtype=np.float64).reshape(n, 3)
+        tmax = _NO_TMAX if tmax is None else _column(tmax, n)
+        t, prim, b1, b2 = np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n)
         if self.static is not None and n:
-            r = self._run(self.static, o, d, t)
-            hit = r["primID"] >= 0
-            t[hit] = r["tfar"][hit]
-            prim[hit] = r["primID"][hit]
-            b1[hit], b2[hit] = r["u"][hit], r["v"][hit]
+            o32, d32, t32 = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.float32)
+            _rays32(o, d, tmax, o32, d32, t32)
+            r = self._run(self.static, o32, d32, t32, scratch=True)
+            _static_first(r["primID"], r["tfar"], r["u"], r["v"], tmax, t, prim, b1, b2)
+        else:
+            _unbounded_start(tmax, t, prim, b1, b2)
+        linear = translation = None
+        merged = 0
         if self.moving and n:
-            o64, d64, tau = self._moving_inputs(o, d, tau)
+            tau = np.zeros(n) if tau is None else _column(tau, n)
             linear = np.empty((n, 3, 3))
             translation = np.empty((n, 3))
             local = None
-            merged = 0
             for obj in self.moving:
                 if obj.deforming is not None:
                     merged += _deforming_intersect(obj.motion, obj.box_lo, obj.box_hi, obj.deforming,
-                                                   obj.prim_offset, o64, d64, tau, t, prim, b1, b2,
+                                                   obj.prim_offset, o, d, tau, t, prim, b1, b2,
                                                    linear, translation)
                     continue
                 if local is None:
                     local = self._local_rays(n)
                 idx, o_l, d_l, tfar = local
-                count = _rigid_candidates(obj.motion, obj.box_lo, obj.box_hi, o64, d64, tau, t,
+                count = _rigid_candidates(obj.motion, obj.box_lo, obj.box_hi, o, d, tau, t,
                                           _NO_SKIP, idx, o_l, d_l, tfar)
                 if not count:
                     continue
@@ -701,12 +750,25 @@ class Tracer:
                 merged += _rigid_merge(obj.motion, obj.prim_offset, tau, idx, count, r["tfar"],
                                        r["primID"], r["u"], r["v"], t, prim, b1, b2, linear,
                                        translation)
-            if not merged or not _finish_linear(prim, self.geom.static_count, linear):
-                linear = translation = None
-        t[prim < 0] = np.inf
-        hits = Hits(t, prim, b1, b2, ng, linear)
-        self._surface_geometry(hits, o, d, tau, translation)
-        return hits
+        # hit points and normals from the triangles themselves, in float64 (more accurate than
+        # Embree's float32 t; the winding is ours to define); misses end at p = o
+        p, ng = np.empty((n, 3)), np.empty((n, 3))
+        if linear is None:
+            linear = np.empty((n, 3, 3))
+        moving = np.empty(n, dtype=bool)
+        g = self.geom
+        any_moving = _finish_moving_hits(prim, g.static_count, o, d, t, p, ng, linear, moving) if n else False
+        if g.static_count:
+            static_surface(g.static_positions, g.static_triangles, self._static_ng, g.static_count,
+                           d, prim, b1, b2, p, ng)
+        if not (merged and any_moving):
+            return Hits(t, prim, b1, b2, ng, None, p)
+        xform = np.empty((n, 3, 3))
+        for obj in self.moving:
+            _moving_surface(obj.positions, obj.positions_close, obj.deforming is not None,
+                            obj.triangles, obj.prim_offset, tau, d, prim, b1, b2, linear,
+                            translation, p, ng, xform)
+        return Hits(t, prim, b1, b2, ng, linear, p, xform, moving)
 
     def _intersect_static(self, o, d, tmax) -> Hits:
         """`intersect` for scenes where nothing moves: two kernels around one Embree call, no
@@ -726,52 +788,32 @@ class Tracer:
                        d, prim, b1, b2, p, ng)
         return Hits(t, prim, b1, b2, ng, None, p)
 
-    def _surface_geometry(self, hits, o, d, tau, translation):
-        """Fill ``hits.p`` and ``hits.ng`` (unit, front side) from the triangles themselves, in
-        float64: more accurate than Embree's float32 values, and the winding is ours to define."""
-        n = len(hits.t)
-        hits.p = np.zeros((n, 3))
-        g = self.geom
-        d64 = np.ascontiguousarray(d, dtype=np.float64)
-        if g.static_count:
-            static_surface(g.static_positions, g.static_triangles, self._static_ng, g.static_count,
-                           d64, hits.prim, hits.b1, hits.b2, hits.p, hits.ng)
-        if hits.moving_linear is not None:
-            for obj in self.moving:
-                _moving_surface(obj.positions, obj.positions_close, obj.deforming is not None,
-                                obj.triangles, obj.prim_offset, tau, d64, hits.prim, hits.b1,
-                                hits.b2, hits.moving_linear, translation, hits.p, hits.ng)
-        miss = hits.prim < 0
-        if np.any(miss):  # on a miss, p is where the ray ends (o + tmax·d, or o)
-            t = np.where(np.isfinite(hits.t[miss]), hits.t[miss], 0.0)
-            hits.p[miss] = o[miss] + t[:, None] * d[miss]
-
     def occluded(self, o, d, tmax, tau=None) -> np.ndarray:
         """(n,) bool: is anything hit in (0, tmax)?"""
         n = len(o)
-        if self.static is not None and n and not self.moving:
-            o32, d32, t32 = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.float32)
-            _rays32(np.ascontiguousarray(o, dtype=np.float64), np.ascontiguousarray(d, dtype=np.float64),
-                    np.ascontiguousarray(np.broadcast_to(tmax, (n,)), dtype=np.float64), o32, d32, t32)
-            return self._run(self.static, o32, d32, t32, occluded=True, scratch=True) >= 0
-        blocked = np.zeros(n, dtype=bool)
-        tmax = np.minimum(np.asarray(tmax, dtype=np.float64), 3.0e38)
+        o = np.ascontiguousarray(o, dtype=np.float64).reshape(n, 3)
+        d = np.ascontiguousarray(d, dtype=np.float64).reshape(n, 3)
+        tmax = _column(tmax, n)
         if self.static is not None and n:
-            blocked = self._run(self.static, o, d, tmax, occluded=True) >= 0
+            o32, d32, t32 = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.float32)
+            _rays32(o, d, tmax, o32, d32, t32)
+            blocked = self._run(self.static, o32, d32, t32, occluded=True, scratch=True) >= 0
+        else:
+            blocked = np.zeros(n, dtype=bool)
         if self.moving and n:
-            o64, d64, tau = self._moving_inputs(o, d, tau)
-            tmax = np.ascontiguousarray(tmax).reshape(n)
+            tau = np.zeros(n) if tau is None else _column(tau, n)
+            tmax = np.minimum(tmax, 3.0e38)
             blocked = np.ascontiguousarray(blocked)
             local = None
             for obj in self.moving:
                 if obj.deforming is not None:
-                    _deforming_occluded(obj.motion, obj.box_lo, obj.box_hi, obj.deforming, o64, d64,
+                    _deforming_occluded(obj.motion, obj.box_lo, obj.box_hi, obj.deforming, o, d,
                                         tau, tmax, blocked)
                     continue
                 if local is None:
                     local = self._local_rays(n)
                 idx, o_l, d_l, tfar = local
-                count = _rigid_candidates(obj.motion, obj.box_lo, obj.box_hi, o64, d64, tau, tmax,
+                count = _rigid_candidates(obj.motion, obj.box_lo, obj.box_hi, o, d, tau, tmax,
                                           blocked, idx, o_l, d_l, tfar)
                 if count:
                     r = self._run(obj.scene, o_l[:count], d_l[:count], tfar[:count], occluded=True,

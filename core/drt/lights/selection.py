@@ -112,15 +112,21 @@ def bsdf_factor(to_light, radius2, hint):
     d = math.sqrt(d2)
     s = d if d > 0.0 else 1.0
     wi = (to_light[0] / s, to_light[1] / s, to_light[2] / s)
-    sin_l = math.sqrt(min(radius2 / max(d2, 1e-300), 1.0))
+    ratio = min(radius2 / max(d2, 1e-300), 1.0)  # sin²θ_L
+    sin_l = math.sqrt(ratio)
     cos_c = dot(wi, n)
     if cos_c < -1.0:
         cos_c = -1.0
     if cos_c > 1.0:
         cos_c = 1.0
-    # largest cosine over the light's cone: cos(max(θ − θ_L, 0))
-    theta = math.acos(cos_c) - math.asin(sin_l)
-    cos_bound = math.cos(theta) if theta > 0.0 else 1.0
+    # largest cosine over the light's cone: cos(max(θ − θ_L, 0)); θ > θ_L ⇔ cos θ < cos θ_L,
+    # then cos(θ − θ_L) = cos θ cos θ_L + sin θ sin θ_L (two square roots instead of acos, asin
+    # and cos: this runs once per strategy per light sample)
+    cos_l = math.sqrt(1.0 - ratio)
+    if cos_c < cos_l:
+        cos_bound = cos_c * cos_l + math.sqrt(max(1.0 - cos_c * cos_c, 0.0)) * sin_l
+    else:
+        cos_bound = 1.0
     value = (kd / np.pi) * max(cos_bound, 0.0)
     if kg > 0.0 and cos_bound > 0.0:
         h = (wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2])
