@@ -111,7 +111,7 @@ def tick():
     # a fresh install compiles the kernels first (in a background Blender): wait for that,
     # then give the viewport 10 s to render
     if len(plan) == 4 and not ready:
-        if not kernels_ready() and time.perf_counter() - started < 400:
+        if not kernels_ready() and time.perf_counter() - started < 1500:
             return 1.0
         ready.append(time.perf_counter() - started)
         result["kernels_ready_after"] = ready[0]
@@ -139,7 +139,7 @@ def test_rendered_viewport_in_blender(install, tmp_path):
     cmd = [XVFB, "-a", "-s", "-screen 0 1280x800x24", BLENDER,
            str(root / "cornell_box.blend"), "--addons", name, "--python", str(script), "--",
            str(tmp_path), name]
-    p = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600, cwd=root)
+    p = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=1800, cwd=root)  # cold compile: ~10 min
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     with open(tmp_path / "result.json") as f:
         r = json.load(f)

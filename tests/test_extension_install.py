@@ -92,7 +92,7 @@ def test_extension_zip_installs_enables_and_renders(tmp_path):
     env.pop("PYTHONPATH", None)  # the installed extension, not the source tree, must do the work
     p = subprocess.run([sys.executable, str(script), zip_path,
                         os.path.join(REPO, "blend_scenes", "cornell_box.blend"), str(out)],
-                       env=env, cwd=str(tmp_path), capture_output=True, text=True, timeout=600)
+                       env=env, cwd=str(tmp_path), capture_output=True, text=True, timeout=1800)  # cold compile: ~10 min
     log = p.stdout + p.stderr
     assert p.returncode == 0, log[-3000:]
     assert "INSTALL {'FINISHED'}" in log and "ENABLED ['bl_ext.user_default.drt']" in log, log[-3000:]
