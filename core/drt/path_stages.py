@@ -640,13 +640,6 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             store(out.albedo, slot, load(md.albedo, mat))
         t_ax, b_ax = build_frame(ns)
         wo_l = to_local(wo, t_ax, b_ax, ns)
-        # Cycles's side rule for smooth normals: sd->N is the smooth normal on wo's *geometric*
-        # side, and its lobes shade the hemisphere above it even where wo lies below it (a facet
-        # near a silhouette seen past its smooth normal). The lobes here are two-sided (they
-        # shade wo's side of z), so they are handed wo mirrored to that side (docs/lights.md)
-        smooth = not exiting and surf.normals.shape[0] > 0 and surf.has_normals[prim]
-        if smooth and wo_l[2] * dot(wo, ng) < 0.0:
-            wo_l = (wo_l[0], wo_l[1], -wo_l[2])
         # a normal-mapped hit: the unmapped normal in the mapped frame (bump map correction)
         ns_local = to_local(ns_unmapped, t_ax, b_ax, ns) if mapped else NO_BUMP
         # lights are sampled over the hemisphere wo is in; transmitted light stays reachable by
@@ -673,15 +666,13 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 wi_l = to_local(wi, t_ax, b_ax, ns)
                 f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local)
                 f = scale(f, shading_factor(surf, prim, wi_l[2] if wo_l[2] >= 0.0 else -wi_l[2]))
-                # geometric and shading normals must agree on reflection vs transmission, except
-                # on smooth normals: Cycles's light samples test the smooth side only and let the
-                # shadow ray (which skips its own facet) decide — a light below the facet's plane
-                # is then blocked by the mesh behind, or reached from a lifted origin
-                # (drt.terminator) or past a silhouette
+                # geometric and shading normals must agree on reflection vs transmission
                 same_geo = dot(wi, ng) * dot(wo, ng) > 0.0
                 same_sh = wi_l[2] * wo_l[2] > 0.0
-                o_shadow, _ = shadow_origin(surf, hits, i, prim, p, ng, ns_unmapped, wo, wi)
-                if (same_geo == same_sh or smooth) and any_positive(f):
+                # (a shadow ray lifted toward the smooth surface may reach a light below the
+                # facet's plane: drt.terminator)
+                o_shadow, lifted = shadow_origin(surf, hits, i, prim, p, ng, ns_unmapped, wo, wi)
+                if (same_geo == same_sh or (lifted and same_sh)) and any_positive(f):
                     w = nee_weight(direct, l_delta, lpdf, bpdf)
                     c = clamp(settings, scale(mul(mul(thr, f), le), w / lpdf), bounce > 0)
                     store(shadow.o, n_shadow, o_shadow)
@@ -692,7 +683,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                     shadow.slot[n_shadow] = slot
                     if vd.enabled:  # the shadow ray starts in the media on wi's side
                         stack_copy(paths.vstack, i, shadow.vstack, n_shadow)
-                        if not same_sh:  # (Cycles's is_transmission: the shading side)
+                        if not same_geo and not (lifted and same_sh):
                             stack_cross(vd, shadow.vstack, n_shadow, prim, mat, wi, ng)
                     n_shadow += 1
 

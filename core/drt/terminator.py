@@ -121,10 +121,10 @@ def shadow_origin(surf, hits, i, prim, p, ng, ns, wo, wi):
     ``offset_point`` of p, lifted toward the smooth surface first when the triangle's object has
     a terminator offset (Cycles's ``shadow_ray_offset``). One array-size test otherwise.
 
-    Returns (origin, lifted). ``lifted``: the origin was moved off the facet on wo's side (the
-    shadow ray may then hit the facet itself, as Cycles's, which skips its own triangle only
-    when the light is above the facet's plane); otherwise the origin is pushed to wi's side of
-    the facet, which is Cycles's skipping of its own triangle."""
+    Returns (origin, lifted). ``lifted``: the origin was moved off the facet on wo's side, so
+    a light below the facet's plane but above the smooth normal's horizon is reachable (Cycles
+    lights such points when the shadow ray from the lifted origin escapes; without the lift
+    the facet itself is in the way)."""
     if surf.terminator.shape[0] == 0 or surf.terminator[prim] <= 0.0:
         return offset_point(p, ng, wi), False
     if hits.moving.shape[0] and hits.moving[i]:
