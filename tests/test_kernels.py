@@ -118,3 +118,36 @@ def test_first_render_says_it_compiles_and_the_second_starts_warm(tmp_path):
     second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert second.returncode == 0, second.stderr
     assert "compiling" not in second.stderr
+
+
+_COMPILE_ONE_KERNEL = """
+import numpy as np
+from drt.sampling import pixel_filter as pf
+pf._interp(0.5, np.array([0.0, 1.0]), np.array([0.0, 2.0]))
+d = pf._interp
+print(sum(d.stats.cache_hits.values()), sum(d.stats.cache_misses.values()), d.stats.cache_path)
+"""
+
+
+def test_two_copies_of_the_sources_share_one_compiled_cache(tmp_path):
+    """A clone, a pip install and the add-on Blender installed are copies of the same sources
+    in different folders: the second copy loads what the first compiled (numba alone keys its
+    cache on each file's absolute folder and would compile everything again)."""
+    import shutil
+
+    env = dict(os.environ, DRT_CACHE_DIR=str(tmp_path / "cache"))
+    env.pop("NUMBA_CACHE_DIR", None)
+    runs = []
+    for copy in ("one", "two"):
+        shutil.copytree(os.path.join(REPO, "core", "drt"), tmp_path / copy / "drt",
+                        ignore=shutil.ignore_patterns("__pycache__"))
+        env["PYTHONPATH"] = str(tmp_path / copy)
+        out = subprocess.run([sys.executable, "-c", _COMPILE_ONE_KERNEL], env=env, cwd=tmp_path,
+                             capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr
+        hits, misses, path = out.stdout.split()
+        runs.append((int(hits), int(misses), path))
+    assert runs[0][:2] == (0, 1), runs  # the first copy compiles
+    assert runs[1][:2] == (1, 0), runs  # the second loads it
+    assert runs[0][2] == runs[1][2] and str(tmp_path / "cache") in runs[0][2]
+    assert os.path.join("drt", "sampling") in runs[0][2]

@@ -129,6 +129,11 @@ def _prune_old_caches(parent: str, keep: str) -> None:
             pass
 
 
+#: the source-keyed cache folder this process chose (None: the user set NUMBA_CACHE_DIR, or
+#: the user cache folder is not writable)
+_KEYED_CACHE_DIR = None
+
+
 def _configure_numba_cache() -> None:
     """Point numba's cache at ``cache_dir()/<source_key()>`` unless the user chose one
     (NUMBA_CACHE_DIR)."""
@@ -146,6 +151,8 @@ def _configure_numba_cache() -> None:
     if fresh:
         _prune_old_caches(parent, key)
     os.environ["NUMBA_CACHE_DIR"] = path
+    global _KEYED_CACHE_DIR
+    _KEYED_CACHE_DIR = path
     if "numba" in sys.modules:  # imported earlier (another add-on in Blender): set it live
         import numba.core.config as _config
 
@@ -188,10 +195,59 @@ def _load_cached_kernels_without_registry_refresh() -> None:
 
 _load_cached_kernels_without_registry_refresh()
 
+
+def _share_the_cache_between_copies_of_drt() -> None:
+    """Let every copy of these sources use one compiled cache: a git clone, the pip install, the
+    add-on Blender installed, a test's temporary install.
+
+    numba files a kernel's cache under a hash of its source file's *absolute folder*, so each
+    copy of identical sources compiled everything again (~10 min of one core, docs/kernels.md).
+    Inside the source-keyed folder (``source_key`` hashes every kernel source, Python and numba)
+    the file's place *within* the ``drt`` package is enough: same key, same sources. numba's
+    own per-file check (a hash of the file's contents) and per-signature check (bytecode, CPU)
+    still guard every entry. Only for files of this package and only when DRT chose the folder;
+    a user-set NUMBA_CACHE_DIR keeps numba's own locations. Private numba API (pinned range in
+    pyproject.toml); if it changes shape, numba's locators are kept."""
+    from numba.core import caching, config
+
+    base = getattr(caching, "UserProvidedCacheLocator", None) \
+        or getattr(caching, "_UserProvidedCacheLocator", None)
+    impl = getattr(caching, "CacheImpl", None)
+    if _KEYED_CACHE_DIR is None or base is None or impl is None \
+            or not isinstance(getattr(impl, "_locator_classes", None), list) \
+            or any(getattr(c, "_drt", False) for c in impl._locator_classes):
+        return
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+    class PackageRelativeLocator(base):
+        """numba's user-folder locator, with the cache sub-folder named by the file's folder
+        relative to the ``drt`` package (``drt/materials``) instead of its absolute path."""
+        _drt = True
+
+        def __init__(self, py_func, py_file):
+            super().__init__(py_func, py_file)
+            rel = os.path.relpath(os.path.dirname(os.path.abspath(py_file)), root)
+            self._cache_path = os.path.join(config.CACHE_DIR, "drt", *rel.split(os.sep)) \
+                if rel != "." else os.path.join(config.CACHE_DIR, "drt")
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            inside = os.path.abspath(py_file).startswith(root + os.sep)
+            if not inside or os.path.abspath(config.CACHE_DIR or "") != os.path.abspath(_KEYED_CACHE_DIR):
+                return None
+            return super().from_function(py_func, py_file)
+
+    impl._locator_classes.insert(0, PackageRelativeLocator)
+
+
+_share_the_cache_between_copies_of_drt()
+
 _READY_MARK = "compiled"
-#: what a user is told before the first render of an install (compiling takes ~30 s on 2 cores)
-COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this version takes about "
-                    "half a minute longer; later renders start in about a second")
+#: what a user is told before the first render of a version (measured: ~10 min of one core on
+#: the 2-vCPU development machine, docs/kernels.md)
+COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this version takes "
+                    "several minutes longer (once per version and machine); later renders start "
+                    "in about a second")
 
 
 def kernels_compiled() -> bool:
