@@ -151,3 +151,14 @@ def test_two_copies_of_the_sources_share_one_compiled_cache(tmp_path):
     assert runs[1][:2] == (1, 0), runs  # the second loads it
     assert runs[0][2] == runs[1][2] and str(tmp_path / "cache") in runs[0][2]
     assert os.path.join("drt", "sampling") in runs[0][2]
+    # imported under another name (the add-on's bundled ``drt_blender.drt``), cached code that
+    # names ``drt.…`` modules would not load: that copy keeps a cache of its own
+    bundle = tmp_path / "three" / "bundle"
+    shutil.copytree(os.path.join(REPO, "core", "drt"), bundle / "drt", ignore=shutil.ignore_patterns("__pycache__"))
+    (bundle / "__init__.py").write_text("")
+    env["PYTHONPATH"] = str(tmp_path / "three")
+    out = subprocess.run([sys.executable, "-c", _COMPILE_ONE_KERNEL.replace("from drt.", "from bundle.drt.")],
+                         env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    hits, misses, path = out.stdout.split()
+    assert (int(hits), int(misses)) == (0, 1) and path != runs[0][2]

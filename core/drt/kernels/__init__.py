@@ -67,8 +67,8 @@ def _module_name(root: str, path: str) -> str:
 
 
 def source_key() -> str:
-    """A short hash of the ``drt`` source files that kernels are compiled from, and of the
-    numba/Python versions.
+    """A short hash of the ``drt`` source files that kernels are compiled from, of the
+    numba/Python versions and of the name the package is imported under.
 
     numba's cache checks only the stamp of a kernel's *own* file, not of the kernels it calls in
     other files: after an upgrade (or an edit) a cached caller could keep stale inlined code. The
@@ -79,7 +79,11 @@ def source_key() -> str:
     import hashlib
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    h = hashlib.sha1(f"{sys.version_info[:2]}|{_numba_version()}".encode())
+    # the package's import name too ("drt", or "drt_blender.drt" inside the add-on): cached
+    # kernels refer to their modules by name, so copies imported under different names cannot
+    # share a cache (docs/kernels.md)
+    package = __name__.rpartition(".")[0]
+    h = hashlib.sha1(f"{sys.version_info[:2]}|{_numba_version()}|{package}".encode())
     for folder, dirs, files in sorted(os.walk(root)):
         dirs.sort()
         for name in sorted(files):
@@ -197,13 +201,16 @@ _load_cached_kernels_without_registry_refresh()
 
 
 def _share_the_cache_between_copies_of_drt() -> None:
-    """Let every copy of these sources use one compiled cache: a git clone, the pip install, the
-    add-on Blender installed, a test's temporary install.
+    """Let every copy of these sources imported under the same name use one compiled cache: a
+    git clone and the pip install (``drt``), each legacy add-on folder or test install of the
+    add-on (``drt_blender.drt``).
 
     numba files a kernel's cache under a hash of its source file's *absolute folder*, so each
     copy of identical sources compiled everything again (~10 min of one core, docs/kernels.md).
-    Inside the source-keyed folder (``source_key`` hashes every kernel source, Python and numba)
-    the file's place *within* the ``drt`` package is enough: same key, same sources. numba's
+    Inside the source-keyed folder (``source_key`` hashes every kernel source, Python, numba
+    and the package's import name — cached code names its modules, so the add-on's
+    ``drt_blender.drt`` keeps a cache apart from the CLI's ``drt``) the file's place *within*
+    the package is enough: same key, same sources. numba's
     own per-file check (a hash of the file's contents) and per-signature check (bytecode, CPU)
     still guard every entry. Only for files of this package and only when DRT chose the folder;
     a user-set NUMBA_CACHE_DIR keeps numba's own locations. Private numba API (pinned range in
