@@ -419,15 +419,15 @@ def assert_within_ci(estimate_samples, expected, k: float = 4.0, atol: float = 1
 
 
 def material_chi_square(table, mat: int, wo: np.ndarray, n: int, rng, z_lo: float = 0.0,
-                        bins_z: int = 10, bins_phi: int = 20, refine: int = 48):
+                        bins_z: int = 10, bins_phi: int = 20, refine: int = 48, coat_normal=None):
     """Chi-square of a MaterialTable material's sampled directions against its own eval pdf.
 
     ``wo`` (n, 3) local-frame outgoing directions (all equal); cells are uniform in cos θ over
     [z_lo, 1] (0: the upper hemisphere; −1: the whole sphere, for transmission) × φ, expected
     counts from ``eval``'s pdf averaged over ``refine``² points per cell (dω = dz dφ).
     Returns (p-value, fraction of samples valid, expected mass in the grid, observed mass in
-    the cells too small to test)."""
-    s = table.sample(np.full(n, mat), wo, rng.random(n), rng.random((n, 2)))
+    the cells too small to test). ``coat_normal``: passed to the table's sample and eval."""
+    s = table.sample(np.full(n, mat), wo, rng.random(n), rng.random((n, 2)), coat_normal=coat_normal)
     wi = s.wi[s.valid]
     span = 1.0 - z_lo
     iz = np.clip(((wi[:, 2] - z_lo) / span * bins_z).astype(int), 0, bins_z - 1)
@@ -438,7 +438,7 @@ def material_chi_square(table, mat: int, wo: np.ndarray, n: int, rng, z_lo: floa
     Z, P = np.meshgrid(zz, pp, indexing="ij")
     r = np.sqrt(1 - Z * Z)
     dirs = np.stack([r * np.cos(P), r * np.sin(P), Z], -1).reshape(-1, 3)
-    _, pdf = table.eval(np.full(len(dirs), mat), np.tile(wo[0], (len(dirs), 1)), dirs)
+    _, pdf = table.eval(np.full(len(dirs), mat), np.tile(wo[0], (len(dirs), 1)), dirs, coat_normal=coat_normal)
     cell = pdf.reshape(bins_z, refine, bins_phi, refine).mean(axis=(1, 3)) * (span / bins_z) \
         * (2 * np.pi / bins_phi)
     exp = cell.ravel() * n

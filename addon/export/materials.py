@@ -194,6 +194,8 @@ class MaterialExporter:
         emission = np.zeros(3)
         self._b = ProgramBuilder(self.images, self.attributes)
         self._normal = None  # (source key, Value) of the first BSDF Normal input that is linked
+        self._coat_normal = None  # (source key, Value or "SMOOTH") of the first coat with its own normal
+        self._disp_normal = None  # the Displacement's bumped normal (Value), if any
         self._emitters = 0  # shaders that may emit (Emission, Principled with emission)
         self._emission_layer = None  # the lowest coat / sheen lobe over a Principled's emission
         self._b.material_pass_index = int(getattr(material, "pass_index", 0))
@@ -209,6 +211,7 @@ class MaterialExporter:
             else:
                 # first: the displacement's bump sets the N every later input reads
                 disp_normal = self._displacement(material, out, problems)
+                self._disp_normal = disp_normal
                 lobes, emission = self._shader(src, ctx, 1.0, problems, material, depth=0)
                 if disp_normal is not None and self._normal is None:
                     self._normal = (None, disp_normal)
@@ -246,9 +249,16 @@ class MaterialExporter:
                 result["emission_layer"] = index_of[id(top)]
         if self._normal is not None and result["lobes"]:
             result["normal_reg"] = self._b.reg_of(self._normal[1])
+        if self._coat_normal is not None and any(lb.get("frame") for lb in result["lobes"]):
+            cn = self._coat_normal[1]
+            if isinstance(cn, Value):
+                result["coat_normal_reg"] = self._b.reg_of(cn)
+            else:
+                result["coat_normal"] = cn
         if getattr(getattr(material, "cycles", None), "emission_sampling", "AUTO") == "NONE":
             result["light"] = False  # Cycles: emission found by BSDF rays only, never sampled
         if "emission_reg" in result or "normal_reg" in result or "density_reg" in result.get("volume", {}) \
+                or "coat_normal_reg" in result or "coat_normal" in result \
                 or "color_reg" in result.get("volume", {}) or any(
                 "color_reg" in lb or "roughness_reg" in lb or "layer_weight_reg" in lb or "coat_tint_reg" in lb
                 or "ior_reg" in lb or "tint_reg" in lb
@@ -303,7 +313,8 @@ class MaterialExporter:
                 out["roughness"] = min(max(float(np.ravel(r)[0]), 0.0), 1.0)
         if "ior" in lb:
             out["ior"] = lb["ior"]
-        for key in ("radius", "method", "anisotropy", "tint", "multiscatter", "multiscatter_tint"):  # SSS, specular
+        for key in ("radius", "method", "anisotropy", "tint", "multiscatter", "multiscatter_tint",
+                    "frame"):  # SSS, specular, coat / sheen normal
             if key in lb:
                 out[key] = lb[key]
         for key in ("layer_weight", "coat_tint"):  # coat and sheen layers: constants or registers
@@ -685,9 +696,11 @@ class MaterialExporter:
         (wa·Coat Weight, Coat Roughness, Coat IOR, white tint), layer_weight = Coat Weight,
         coat_tint = Coat Tint (absorption of the layers below). Weights, tints and roughnesses may
         be textured (registers; k is the largest component of the weight register), and the coat
-        IOR (``ior_reg``, per hit). A Coat Normal driven differently from Normal (e.g. a normal map on the
-        base only) warns: both layers use the material's shading normal (Normal's); the same
-        source on both is exact."""
+        IOR (``ior_reg``, per hit). A Coat Normal driven apart from Normal (e.g. a normal map on
+        the base only, Coat Normal unlinked: the smooth normal) gives the coat lobe frame COAT
+        and the sheen frame SHEEN (Cycles: normalize(mix(Normal, Coat Normal, Coat Weight)));
+        the material's ``coat_normal_reg`` / ``coat_normal`` names that normal
+        (``_own_coat_normal``)."""
         layers = []
         sheen_w = self._value(node, "sheen", problems, 0.0, ctx)
         coat_w = self._value(node, "coat", problems, 0.0, ctx)
@@ -719,10 +732,39 @@ class MaterialExporter:
                                **({"layer": layers[-1]} if layers else {}),
                                **({"ior_reg": coat_ior_in, "ior_level_reg": 0.5, "tint_reg": np.ones(3)}
                                   if isinstance(coat_ior_in, Value) else {})})
-        if layers and _above_cutoff(coat_w) \
-                and _normal_key(node, "Coat Normal", ctx) != _normal_key(node, "Normal", ctx):
-            # Cycles's coat uses Coat Normal (unlinked: the unmapped normal) and the sheen a mix
-            # of it with Normal; DRT has one shading normal per material (Normal's)
-            problems.append(f"'{node.name}' Coat Normal differs from Normal: the coat and sheen use "
-                            f"the material's shading normal")
+        coat = [lb for lb in layers if lb["type"] == "DIELECTRIC_SPECULAR"]
+        if coat and self._own_coat_normal(node, ctx, problems):
+            coat[0]["frame"] = "COAT"
+            for lb in layers:
+                if lb["type"] == "SHEEN":
+                    lb["frame"] = "SHEEN"
         return layers
+
+    def _own_coat_normal(self, node, ctx, problems) -> bool:
+        """Does this Principled's coat have a normal of its own (Coat Normal driven apart from
+        Normal)? Records it as the material's coat normal: the Coat Normal input's Value, or for
+        an unlinked Coat Normal the normal Cycles links it to — the Displacement's bumped normal
+        if there is one, else "SMOOTH" (the unmapped shading normal). DRT has one coat normal
+        per material: a second, different one warns and shades that coat about the first."""
+        key = _normal_key(node, "Coat Normal", ctx)
+        main = _normal_key(node, "Normal", ctx)
+        if key == main or (key is None and self._disp_normal is None and main is None):
+            return False
+        if key is None:
+            value = self._disp_normal if self._disp_normal is not None else "SMOOTH"
+        else:
+            try:
+                value = self._b.input(node, node.inputs["Coat Normal"], ctx)
+            except Unsupported as e:
+                problems.append(f"'{node.name}' Coat Normal is driven by {e} (unsupported): the coat uses "
+                                f"the material's shading normal")
+                return False
+            if value.is_const:
+                value = self._b.emit(OP_VMATH_NORMALIZE[0], OP_VMATH_NORMALIZE[1], [value, value])
+        if self._coat_normal is not None:
+            if self._coat_normal[0] != key:
+                problems.append(f"'{node.name}' has its own Coat Normal; DRT uses one coat normal per "
+                                f"material (the first coat's)")
+            return True
+        self._coat_normal = (key, value)
+        return True

@@ -312,6 +312,14 @@ def fill_point(point, pd, surf, hits, i, prim, p, ng, ns, wo, flags, counts, ray
 
 
 @kernel
+def frame_normal(v, t, b, n):
+    """The unit vector v in the frame (t, b, n), or NO_BUMP when v is n within round-off (a
+    lobe frame that would not turn anything)."""
+    v_local = to_local(v, t, b, n)
+    return NO_BUMP if v_local[2] >= 1.0 - 1e-12 else v_local
+
+
+@kernel
 def valid_specular_normal(ng, wi, n):
     """Cycles's ``ensure_valid_specular_reflection`` (bump map correction): n (unit, on wi's
     side like ng) tilted toward ng just enough that the mirror reflection of wi stays above the
@@ -581,6 +589,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         ns = ng if sss_state == SSS_EXIT_FLAT else shading_normal(surf, hits, i, prim, ng)
         ns_unmapped = ns
         mapped = False
+        coat_n = -1  # the coat's own normal: none (ProgramData.coat_normal_reg)
         wo = neg(d)
         if exiting:
             # Cycles shades an SSS exit as a white Lambert without emission, facing the side of
@@ -596,6 +605,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 fill_point(point, pd, surf, hits, i, prim, p, ng, ns, wo, paths.prev_flags[i], paths.counts[i],
                            t_geom, camera)
             eval_material(pd, md, regs, mat, prim, hits.b1[i], hits.b2[i], point)
+            coat_n = pd.coat_normal_reg[mat]
             nr = pd.normal_reg[mat]
             if nr >= 0:  # a Normal Map: Cycles's orientation (wo's side) → the geometric front side
                 nm, nl = normalize((regs[nr, 0], regs[nr, 1], regs[nr, 2]))
@@ -614,6 +624,25 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             if dot(nv, ns) * side < 1.0 - 1e-12:
                 ns = scale(nv, side)
                 mapped = True
+        nv = ns
+        if (not exiting and md.has_diffuse[mat] and not md.pure_diffuse[mat]
+                and (mapped or (surf.normals.shape[0] and surf.has_normals[prim]))):
+            # a material with a diffuse lobe keeps ns for it; its glossy-class lobes are shaded
+            # about Cycles's valid-reflection correction of ns (FRAME_VALID)
+            side = 1.0 if dot(wo, ng) >= 0.0 else -1.0
+            nv = scale(valid_specular_normal(scale(ng, side), wo, scale(ns, side)), side)
+        nc = ns
+        if coat_n != -1:
+            # a Principled Coat Normal apart from Normal: the coat (and sheen) lobes are shaded
+            # about it (FRAME_COAT), with Cycles's valid-reflection correction (always applied
+            # to a coat normal), on the geometric front side like ns
+            side = 1.0 if dot(wo, ng) >= 0.0 else -1.0
+            nc_wo = scale(ns_unmapped, side)
+            if coat_n >= 0:  # a program's normal is on wo's side (Cycles's orientation)
+                nm, nl = normalize((regs[coat_n, 0], regs[coat_n, 1], regs[coat_n, 2]))
+                if nl > 0.0 and math.isfinite(nl):
+                    nc_wo = nm
+            nc = scale(valid_specular_normal(scale(ng, side), wo, nc_wo), side)
         if camera and not exiting and md.transmission_or_delta[mat]:
             # a holdout lobe (always delta) cuts a camera-visible hit out of the alpha, as
             # Cycles's integrate_surface_holdout; a full holdout ends the path
@@ -626,7 +655,9 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         if md.has_emission[mat] and not exiting:
             le = load(md.emission, mat)
             if md.emission_layer[mat] >= 0:  # a Principled's emission under its coat / sheen
-                le = layered_emission(md, mat, le, (0.0, 0.0, dot(wo, ns)))
+                te, be = build_frame(ns)  # the layers' own normals: in ns's frame
+                le = layered_emission(md, mat, le, to_local(wo, te, be, ns), frame_normal(nc, te, be, ns),
+                                      frame_normal(nv, te, be, ns))
             lpdf = emissive_pdf(ld, prim, prev_p, p, ng, prev_hint)
             w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
             acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
@@ -642,6 +673,10 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         wo_l = to_local(wo, t_ax, b_ax, ns)
         # a normal-mapped hit: the unmapped normal in the mapped frame (bump map correction)
         ns_local = to_local(ns_unmapped, t_ax, b_ax, ns) if mapped else NO_BUMP
+        # the coat's own normal and the glossy lobes' valid-reflection normal in that frame
+        # (NO_BUMP: the lobes are shaded about ns)
+        nc_local = frame_normal(nc, t_ax, b_ax, ns)
+        nv_local = frame_normal(nv, t_ax, b_ax, ns)
         # lights are sampled over the hemisphere wo is in; transmitted light stays reachable by
         # BSDF sampling, whose MIS weight is then 1
         n_wo = ns if wo_l[2] >= 0.0 else neg(ns)
@@ -664,7 +699,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                                              add(p, scale(wi, dist)))
             if l_valid and lpdf > 0.0:
                 wi_l = to_local(wi, t_ax, b_ax, ns)
-                f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local)
+                f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local, nc_local, nv_local)
                 f = scale(f, shading_factor(surf, prim, wi_l[2] if wo_l[2] >= 0.0 else -wi_l[2]))
                 # geometric and shading normals must agree on reflection vs transmission
                 same_geo = dot(wi, ng) * dot(wo, ng) > 0.0
@@ -692,7 +727,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # lobe drawn from its own padded dimension a pixel's directions stratify within the
         # union of lobes but not within each lobe (glass, mixes: docs/estimators.md)
         ub0, ub1, u_lobe = sample_3d(sd, pixel, idx, base + 2)
-        wi_l, weight, bpdf, kind, b_delta, b_valid = bsdf_sample_bump(md, mat, wo_l, u_lobe, ub0, ub1, ns_local)
+        wi_l, weight, bpdf, kind, b_delta, b_valid = bsdf_sample_bump(md, mat, wo_l, u_lobe, ub0, ub1, ns_local,
+                                                                      nc_local, nv_local)
         if settings.indirect != INDIRECT_BSDF and not md.transmission_or_delta[mat]:
             # the lecture's hemisphere estimators, on wo's side of the surface
             if settings.indirect == INDIRECT_COSINE:
@@ -703,7 +739,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 bpdf = 0.5 / math.pi
             if wo_l[2] < 0.0:
                 wi_l = (wi_l[0], wi_l[1], -wi_l[2])
-            f, _ = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local)
+            f, _ = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local, nc_local, nv_local)
             b_valid = bpdf > 0.0
             weight = scale(f, 1.0 / bpdf) if b_valid else (0.0, 0.0, 0.0)
             b_delta = False

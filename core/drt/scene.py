@@ -415,6 +415,11 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
                 entry["layer"] = _number(lobe, "layer", lp, integer=True, lo=0, hi=len(lobes) - 1)
             if "layer_weight" in lobe:  # a coat / sheen layer's weight relative to what lies under it
                 entry["layer_weight"] = _number(lobe, "layer_weight", lp, 1.0, lo=0)
+            if "frame" in lobe:  # COAT: shaded about the coat normal; SHEEN: about its mix with the normal
+                entry["frame"] = _enum(lobe, "frame", lp, ("COAT", "SHEEN"))
+                if (entry["frame"], t) not in (("COAT", "DIELECTRIC_SPECULAR"), ("SHEEN", "SHEEN")):
+                    raise SceneError(lp + ".frame", f"{entry['frame']} is only allowed on a "
+                                     f"{'DIELECTRIC_SPECULAR' if entry['frame'] == 'COAT' else 'SHEEN'} lobe")
             if "coat_tint" in lobe:  # a coat's tint: absorption of the lobes under it
                 entry["coat_tint"] = _vector(lobe, "coat_tint", lp, 3, default=[1, 1, 1], lo=0.0).tolist()
             if t in ("GLASS", "REFRACTION"):
@@ -461,6 +466,10 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
                 mat["emission_reg"] = _number(m, "emission_reg", p, integer=True, lo=0)
             if "normal_reg" in m:
                 mat["normal_reg"] = _number(m, "normal_reg", p, integer=True, lo=0)
+            if "coat_normal_reg" in m:  # a Principled Coat Normal driven apart from Normal
+                mat["coat_normal_reg"] = _number(m, "coat_normal_reg", p, integer=True, lo=0)
+            elif "coat_normal" in m:  # "SMOOTH": an unlinked Coat Normal (the unmapped normal)
+                mat["coat_normal"] = _enum(m, "coat_normal", p, ("SMOOTH",))
         for key in ("density_reg", "color_reg"):
             if volume is not None and key in volume:
                 prog = mat.get("program")

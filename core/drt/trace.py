@@ -107,21 +107,29 @@ def _rays32(o, d, tmax, o32, d32, t32):
 
 
 @kernel
+def _copy_embree_hits(r_prim, r_tfar, r_u, r_v, i, miss_t, t, prim, b1, b2):
+    """Ray i of Embree's answer into float64 arrays: a hit's t, prim and barycentrics, or on a
+    miss t = ``miss_t``, prim −1, barycentrics 0. Returns whether it hit."""
+    k = r_prim[i]
+    if k >= 0:
+        t[i] = r_tfar[i]
+        prim[i] = k
+        b1[i] = r_u[i]
+        b2[i] = r_v[i]
+        return True
+    t[i] = miss_t
+    prim[i] = -1
+    b1[i] = 0.0
+    b2[i] = 0.0
+    return False
+
+
+@kernel
 def _static_hits(r_prim, r_tfar, r_u, r_v, o, d, t, prim, b1, b2, p):
     """Embree's static answer in float64 arrays: t (inf on a miss), prim (−1), barycentrics, and
     p = o for misses (hits get their point from the triangle in `static_surface`)."""
     for i in range(r_prim.shape[0]):
-        k = r_prim[i]
-        if k >= 0:
-            t[i] = r_tfar[i]
-            prim[i] = k
-            b1[i] = r_u[i]
-            b2[i] = r_v[i]
-        else:
-            t[i] = np.inf
-            prim[i] = -1
-            b1[i] = 0.0
-            b2[i] = 0.0
+        if not _copy_embree_hits(r_prim, r_tfar, r_u, r_v, i, np.inf, t, prim, b1, b2):
             for axis in range(3):
                 p[i, axis] = o[i, axis]
 
@@ -441,17 +449,8 @@ def _static_first(r_prim, r_tfar, r_u, r_v, tmax, t, prim, b1, b2):
     and barycentrics; a miss keeps t = min(tmax, 3e38) (tmax (0,): unbounded), the bound the
     moving objects are then searched within, and prim −1."""
     for i in range(r_prim.shape[0]):
-        k = r_prim[i]
-        if k >= 0:
-            t[i] = r_tfar[i]
-            prim[i] = k
-            b1[i] = r_u[i]
-            b2[i] = r_v[i]
-        else:
-            t[i] = min(tmax[i], 3.0e38) if tmax.shape[0] else 3.0e38
-            prim[i] = -1
-            b1[i] = 0.0
-            b2[i] = 0.0
+        _copy_embree_hits(r_prim, r_tfar, r_u, r_v, i, min(tmax[i], 3.0e38) if tmax.shape[0] else 3.0e38,
+                          t, prim, b1, b2)
 
 
 @kernel

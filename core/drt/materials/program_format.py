@@ -92,6 +92,10 @@ NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WO
 LUMINANCE = (0.2126729, 0.7151522, 0.0721750)
 MAX_REGISTERS = 4096
 
+#: ``ProgramData.coat_normal_reg`` of a coat whose normal is the unmapped (smooth) shading
+#: normal: an unlinked Coat Normal under a linked Normal (Cycles links it to the Geometry normal)
+COAT_NORMAL_SMOOTH = -2
+
 ProgramData = namedtuple("ProgramData", [
     "prog_of",          # (M,) int64 program of each material, −1: constant material
     "op_start",         # (P+1,) int64 rows of ``ops`` per program
@@ -112,6 +116,9 @@ ProgramData = namedtuple("ProgramData", [
     "attrs",            # (A, T, 3, 3) float32 named per-corner attributes (header "attributes")
     "reads_point",      # (M,) bool: the material's program reads shading-point rows (POINT_P...)
     "normal_reg",       # (M,) int64 register of the shading normal (Normal Map), −1: none
+    "coat_normal_reg",  # (M,) int64 the coat's normal (Principled Coat Normal ≠ Normal; the
+                        # lobes with ``frame``): a register, COAT_NORMAL_SMOOTH (the unmapped
+                        # shading normal), −1: none (the coat uses the shading normal)
     "origin",           # (3,) float64 Blender world position of the renderer's origin (P rows)
     "object_of",        # (T,) int32 object of each global triangle ((0,): no Object Info)
     "object_info",      # (O, 18) float64 [location xyz, colour rgb, alpha, pass index, random,
@@ -236,6 +243,7 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
     ior_reg = np.full((m_count, n_slots, 3), -1, np.int64)
     emission_reg = np.full(m_count, -1, np.int64)
     normal_reg = np.full(m_count, -1, np.int64)
+    coat_normal_reg = np.full(m_count, -1, np.int64)
     reads_point = np.zeros(m_count, bool)
     op_rows, const_rows, data, op_start, const_start = [], [], [], [0], [0]
     for i, mat in enumerate(materials):
@@ -270,6 +278,10 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
             slot += 1
         emission_reg[i] = _reg(mat.get("emission_reg"), n, f"{where} emission_reg")
         normal_reg[i] = _reg(mat.get("normal_reg"), n, f"{where} normal_reg")
+        if mat.get("coat_normal") == "SMOOTH":
+            coat_normal_reg[i] = COAT_NORMAL_SMOOTH
+        else:
+            coat_normal_reg[i] = _reg(mat.get("coat_normal_reg"), n, f"{where} coat_normal_reg")
         reads_point[i] = bool(np.isin(ops[:, 0], list(POINT_OPS)).any()) or normal_reg[i] >= 0
     if world is not None:
         op_rows.append(world["ops"].copy())
@@ -309,7 +321,7 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         img_f32=np.ascontiguousarray(np.concatenate(f32) if f32 else np.zeros(0, np.float32)),
         uv=arr(uv, np.float32, (0, 3, 2)), generated=arr(generated, np.float32, (0, 3, 3)),
         objco=arr(objco, np.float32, (0, 3, 3)), attrs=arr(attrs, np.float32, (0, 0, 3, 3)),
-        reads_point=reads_point, normal_reg=normal_reg,
+        reads_point=reads_point, normal_reg=normal_reg, coat_normal_reg=coat_normal_reg,
         origin=np.asarray(origin if origin is not None else np.zeros(3), np.float64).reshape(3),
         object_of=arr(object_of, np.int32, (0,)), object_info=arr(object_info, np.float64, (0, 9)),
         positions=arr(positions, np.float32, (0, 3)), triangles=arr(triangles, np.int32, (0, 3)),
@@ -334,7 +346,8 @@ def empty_program_data() -> ProgramData:
                        img_f32=np.zeros(0, np.float32), uv=np.zeros((0, 3, 2), np.float32),
                        generated=np.zeros((0, 3, 3), np.float32),
                        objco=np.zeros((0, 3, 3), np.float32), attrs=np.zeros((0, 0, 3, 3), np.float32),
-                       reads_point=np.zeros(0, bool), normal_reg=z, origin=np.zeros(3),
+                       reads_point=np.zeros(0, bool), normal_reg=z, coat_normal_reg=z,
+                       origin=np.zeros(3),
                        object_of=np.zeros(0, np.int32), object_info=np.zeros((0, 9)),
                        positions=np.zeros((0, 3), np.float32), triangles=np.zeros((0, 3), np.int32),
                        footprint=np.zeros((0, 3)), camera=np.zeros((0, 4)),

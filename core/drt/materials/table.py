@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..kernels import inline_kernel, kernel
-from ..kernels.vec3 import load, store
+from ..kernels.vec3 import build_frame, load, store, to_local, to_world
 from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample, refraction_eval, refraction_sample
 from .diffuse import INV_PI, diffuse_eval, diffuse_sample, translucent_eval, translucent_sample
 from .dielectric_specular import (average_albedo, dielectric_spec_delta_weight, dielectric_spec_eval,
@@ -164,6 +164,12 @@ _ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
 #:   the lobes below get (white: none); (1, 1, 1, 1) for other lobes; emission_layer (M,) int64:
 #:   slot of the lowest coat / sheen layer over the material's emission (a Principled's), whose
 #:   chain attenuates emission seen by camera and BSDF rays (``layered_emission``), −1: none;
+#:   lobe_frame (M, L) int64: the normal a lobe is shaded about — FRAME_SHADING (0) the hit's
+#:   shading normal, FRAME_COAT the coat normal (a Principled Coat Normal apart from Normal:
+#:   ``ProgramData.coat_normal_reg``), FRAME_SHEEN normalize(mix(shading, coat normal, Coat
+#:   Weight)) as Cycles's sheen, FRAME_VALID (glossy-class lobes of a material that also has a
+#:   DIFFUSE lobe) the valid-reflection normal; only a hit's ``nc_local`` / ``nv_local`` ≠
+#:   NO_BUMP make them differ;
 #:   lobe_avg (M, L, 3) f64: per unit colour, the lobe's cosine-averaged share (the specular
 #:   layer's average albedo, 1 − its max for the lobes under it, 1 otherwise): lobe selection
 #:   and the albedo pass weigh colours by it (also per hit, in ``programs.eval_material``).
@@ -171,11 +177,26 @@ MaterialData = namedtuple("MaterialData", [
     "lobe_type", "lobe_color", "lobe_alpha", "lobe_ior", "lobe_delta", "lobe_select", "lobe_cdf",
     "lobe_count", "emission", "has_emission", "albedo", "delta_only", "pure_diffuse",
     "transmission_or_delta", "has_diffuse", "summary", "lobe_sss", "sss_exit",
-    "lobe_fresnel", "lobe_layer", "has_layers", "lobe_avg", "lobe_coat", "emission_layer"])
+    "lobe_fresnel", "lobe_layer", "has_layers", "lobe_avg", "lobe_coat", "emission_layer",
+    "lobe_frame"])
 
 
-#: ``ns_local`` of a surface without a bump/normal map: the shading frame's own z
+#: ``ns_local`` of a surface without a bump/normal map: the shading frame's own z (also
+#: ``nc_local`` of a hit whose coat has no normal of its own)
 NO_BUMP = (0.0, 0.0, 1.0)
+
+#: ``MaterialData.lobe_frame`` values: which normal a lobe is shaded about
+FRAME_SHADING = 0
+FRAME_COAT = 1
+FRAME_SHEEN = 2
+#: a glossy-class lobe of a material with a diffuse lobe: shaded about the shading normal
+#: with Cycles's valid-reflection correction (``maybe_ensure_valid_specular_reflection``, which
+#: Cycles applies to every closure but diffuse, sheen and velvet); set by the table, not the file
+FRAME_VALID = 3
+FRAMES = {"COAT": FRAME_COAT, "SHEEN": FRAME_SHEEN}
+#: lobe types Cycles shades about the valid-reflection normal
+VALID_FRAME_TYPES = (BSDF_GLOSSY, BSDF_GLASS, BSDF_DIELECTRIC_SPECULAR, BSDF_METALLIC, BSDF_TRANSLUCENT,
+                     BSDF_REFRACTION)
 
 
 @kernel
@@ -183,11 +204,19 @@ def bump_shadowing(ns_local, wi):
     """Cycles's ``bump_shadowing_term`` for a normal-mapped hit, as (keep, diffuse factor):
     ``ns_local`` is the unmapped (smooth) shading normal in the mapped normal's local frame, wi
     the light direction. A direction on different sides of the two normals is dropped (light
-    leaking through the surface); diffuse lobes are softened toward the terminator by a GGX
-    shadowing term whose roughness grows with the normals' deviation."""
+    leaking through the surface); diffuse-class lobes (Cycles's CLOSURE_IS_BSDF_DIFFUSE:
+    diffuse, sheen, translucent) are softened toward the terminator by a GGX shadowing term
+    whose roughness grows with the normals' deviation."""
+    return bump_shadowing_about(ns_local, NO_BUMP, wi)
+
+
+@kernel
+def bump_shadowing_about(ns_local, n, wi):
+    """``bump_shadowing`` for a lobe shaded about the unit normal ``n`` (local frame; Cycles's
+    closure normal sc->N) instead of the frame's z."""
     cos_nsi = ns_local[0] * wi[0] + ns_local[1] * wi[1] + ns_local[2] * wi[2]
-    cos_nsn = ns_local[2]
-    if cos_nsi * cos_nsn * wi[2] < 0.0:
+    cos_nsn = ns_local[0] * n[0] + ns_local[1] * n[1] + ns_local[2] * n[2]
+    if cos_nsi * cos_nsn * (n[0] * wi[0] + n[1] * wi[1] + n[2] * wi[2]) < 0.0:
         return False, 0.0
     cos_i = abs(cos_nsi)
     cos_d = abs(cos_nsn)
@@ -205,19 +234,64 @@ def bsdf_eval(md, m, wo, wi):
     """md: MaterialData; m: material index; wo, wi: local unit 3-tuples. Returns (f, pdf): f the
     3-tuple Σ color_l·f_l·|cos θi| over the material's non-delta lobes, pdf = Σ p_l·pdf_l per
     unit solid angle of wi (exactly what ``bsdf_sample`` reports for a non-delta sample)."""
-    return bsdf_eval_bump(md, m, wo, wi, NO_BUMP)
+    return bsdf_eval_bump(md, m, wo, wi, NO_BUMP, NO_BUMP, NO_BUMP)
 
 
 @inline_kernel
-def bsdf_eval_bump(md, m, wo, wi, ns_local):
+def slot_normal(md, m, s, nc_local, nv_local):
+    """The unit normal slot s is shaded about, in the hit's local frame (z = the shading
+    normal): z itself (FRAME_SHADING), the coat normal ``nc_local`` (FRAME_COAT), the
+    valid-reflection normal ``nv_local`` (FRAME_VALID), or Cycles's sheen normal
+    normalize(mix(z, coat normal, Coat Weight)) (FRAME_SHEEN; the weight is the coat slot's k,
+    per hit when textured)."""
+    f = md.lobe_frame[m, s]
+    if f == FRAME_SHADING:
+        return NO_BUMP
+    if f == FRAME_COAT:
+        return nc_local
+    if f == FRAME_VALID:
+        return nv_local
+    k = 0.0
+    for j in range(md.lobe_frame.shape[1]):
+        if md.lobe_frame[m, j] == FRAME_COAT:
+            k = min(max(md.lobe_coat[m, j, 0], 0.0), 1.0)
+    n0 = k * nc_local[0]
+    n1 = k * nc_local[1]
+    n2 = 1.0 - k + k * nc_local[2]
+    length = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    if not length > 1e-12:
+        return NO_BUMP
+    return (n0 / length, n1 / length, n2 / length)
+
+
+@inline_kernel
+def slot_cos(md, m, s, wo, nc_local, nv_local):
+    """cos θo of slot s: wo's component along the normal the slot is shaded about."""
+    if (nc_local[2] >= 1.0 and nv_local[2] >= 1.0) or md.lobe_frame[m, s] == FRAME_SHADING:
+        return wo[2]
+    n = slot_normal(md, m, s, nc_local, nv_local)
+    return wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
+
+
+@inline_kernel
+def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local):
     """``bsdf_eval`` at a normal-mapped hit (the local frame's z is the mapped normal;
     ``ns_local`` the unmapped one in that frame, ``NO_BUMP`` when there is no map): Cycles's
-    bump map correction (``bump_shadowing``) applied."""
+    bump map correction (``bump_shadowing``) applied. ``nc_local``: the coat normal in that
+    frame (``NO_BUMP``: the coat has none of its own); ``nv_local`` the valid-reflection
+    normal of glossy-class lobes (FRAME_VALID; NO_BUMP: the shading normal itself). Lobes with a
+    ``lobe_frame`` are evaluated with wo and wi in their own normal's frame, and get Cycles's
+    bump side check and diffuse softening against their own normal."""
     g_diffuse = 1.0
-    if ns_local[2] < 1.0:
+    keep = True
+    bumped = ns_local[2] < 1.0
+    if bumped:
         keep, g_diffuse = bump_shadowing(ns_local, wi)
-        if not keep:
-            return (0.0, 0.0, 0.0), 0.0
+    framed = nc_local[2] < 1.0 or nv_local[2] < 1.0
+    if not keep and not framed:
+        return (0.0, 0.0, 0.0), 0.0
+    wo_main = wo
+    wi_main = wi
     f0 = 0.0
     f1 = 0.0
     f2 = 0.0
@@ -228,11 +302,28 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
         t = md.lobe_type[m, s]
         if t == BSDF_NONE or md.lobe_delta[m, s]:
             continue  # a delta lobe has no density to evaluate
+        wo = wo_main
+        wi = wi_main
+        g = g_diffuse
+        if framed and md.lobe_frame[m, s] != FRAME_SHADING:
+            n = slot_normal(md, m, s, nc_local, nv_local)
+            if n[2] < 1.0:
+                # Cycles's bump_shadowing_term against this lobe's own normal (sc->N)
+                ok, g = bump_shadowing_about(ns_local, n, wi)
+                if not ok:
+                    continue
+                tx, bx = build_frame(n)
+                wo = to_local(wo_main, tx, bx, n)
+                wi = to_local(wi_main, tx, bx, n)
+            elif not keep:
+                continue
+        elif not keep:
+            continue
         if t == BSDF_DIELECTRIC_SPECULAR:
             fc, p = dielectric_spec_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s],
                                          lobe_f0(md, m, s), md.lobe_fresnel[m, s, 3] > 0.0)
             if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
-                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, memo_top, memo_w)
+                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, memo_top, memo_w)
                 fc = (fc[0] * uw[0], fc[1] * uw[1], fc[2] * uw[2])
             f0 += md.lobe_color[m, s, 0] * fc[0]
             f1 += md.lobe_color[m, s, 1] * fc[1]
@@ -244,7 +335,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
             fc, p = metallic_eval(wo, wi, md.lobe_alpha[m, s], metal_f0(md, m, s), lobe_f0(md, m, s),
                                   md.lobe_fresnel[m, s, 3] > 0.0)
             if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
-                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, memo_top, memo_w)
+                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, memo_top, memo_w)
                 fc = (fc[0] * uw[0], fc[1] * uw[1], fc[2] * uw[2])
             f0 += k * fc[0]
             f1 += k * fc[1]
@@ -253,7 +344,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
             continue
         if t == BSDF_DIFFUSE:
             v, p = diffuse_eval(wo, wi)
-            v *= g_diffuse
+            v *= g
         elif t == BSDF_GLOSSY:
             v, p = glossy_eval(wo, wi, md.lobe_alpha[m, s])
         elif t == BSDF_GLASS:
@@ -268,31 +359,33 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local):
                 k = glass_energy_factor(md.lobe_alpha[m, s], md.lobe_ior[m, s], wo[2], fss)
                 c0, c1, c2 = c0 * k[0], c1 * k[1], c2 * k[2]
             if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
-                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, memo_top, memo_w)
+                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, memo_top, memo_w)
                 c0, c1, c2 = c0 * uw[0], c1 * uw[1], c2 * uw[2]
             f0 += c0 * v
             f1 += c1 * v
             f2 += c2 * v
             pdf += md.lobe_select[m, s] * p
             continue
-        elif t == BSDF_TRANSLUCENT:
+        elif t == BSDF_TRANSLUCENT:  # diffuse-class in Cycles: softened like diffuse
             v, p = translucent_eval(wo, wi)
+            v *= g
         elif t == BSDF_REFRACTION:
             v, p = refraction_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
-        elif t == BSDF_SHEEN:
+        elif t == BSDF_SHEEN:  # diffuse-class in Cycles: softened like diffuse
             v, p = sheen_eval(wo, wi, md.lobe_alpha[m, s])
+            v *= g
         elif t == BSDF_VELVET:
             v, p = velvet_eval(wo, wi, md.lobe_alpha[m, s])
         else:
             continue
         if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
             if md.has_layers[m] == 1:  # one plain specular layer: a scalar factor
-                v *= single_layer_weight(md, m, md.lobe_layer[m, s], wo)
+                v *= single_layer_weight(md, m, md.lobe_layer[m, s], wo_main)
                 f0 += md.lobe_color[m, s, 0] * v
                 f1 += md.lobe_color[m, s, 1] * v
                 f2 += md.lobe_color[m, s, 2] * v
             else:
-                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, memo_top, memo_w)
+                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, memo_top, memo_w)
                 f0 += md.lobe_color[m, s, 0] * (v * uw[0])
                 f1 += md.lobe_color[m, s, 1] * (v * uw[1])
                 f2 += md.lobe_color[m, s, 2] * (v * uw[2])
@@ -321,23 +414,24 @@ def metal_f0(md, m, s):
 
 
 @inline_kernel
-def under_weight(md, m, s, wo):
+def under_weight(md, m, s, wo, nc_local, nv_local):
     """Scale (3-tuple) of slot s for this wo: the product over the layers above it (the chain
     md.lobe_layer[m, s], its lobe_layer, ...) of Cycles's closure_layering_weight
     1 − k·max_c albedo_c(wo), and for a tinted coat its absorption mix(1, tint^(1/cos θt), k)
     with θt the view direction refracted into the coat (Cycles's principled_bsdf_emission)."""
-    return chain_weight(md, m, md.lobe_layer[m, s], wo)
+    return chain_weight(md, m, md.lobe_layer[m, s], wo, nc_local, nv_local)
 
 
 @inline_kernel
-def layered_emission(md, m, le, wo):
-    """Emission le (3-tuple) of material m seen from wo (local frame, or any vector whose z is
-    cos θo): attenuated by the coat / sheen layers over it (Cycles 5.0 does so for camera and
+def layered_emission(md, m, le, wo, nc_local, nv_local):
+    """Emission le (3-tuple) of material m seen from wo (local frame; ``nc_local`` the coat
+    normal and ``nv_local`` the valid-reflection normal in it, or NO_BUMP, and then any vector
+    whose z is cos θo will do): attenuated by the coat / sheen layers over it (Cycles 5.0 does so for camera and
     BSDF rays; its light samples see the unattenuated emission — Cycles fixed that after 5.1)."""
     top = md.emission_layer[m]
     if top < 0:
         return le
-    w = chain_weight(md, m, top, wo)
+    w = chain_weight(md, m, top, wo, nc_local, nv_local)
     return (le[0] * w[0], le[1] * w[1], le[2] * w[2])
 
 
@@ -350,13 +444,13 @@ def single_layer_weight(md, m, top, wo):
 
 
 @inline_kernel
-def chain_weight(md, m, top, wo):
+def chain_weight(md, m, top, wo, nc_local, nv_local):
     """Product of the layer weights of the chain starting at slot ``top`` (−1: (1, 1, 1))."""
     w0 = 1.0
     w1 = 1.0
     w2 = 1.0
     while top >= 0:
-        f = layer_factor(md, m, top, wo)
+        f = layer_factor(md, m, top, wo, nc_local, nv_local)
         w0 *= f[0]
         w1 *= f[1]
         w2 *= f[2]
@@ -365,7 +459,7 @@ def chain_weight(md, m, top, wo):
 
 
 @inline_kernel
-def memo_under_weight(md, m, s, wo, memo_top, memo_w):
+def memo_under_weight(md, m, s, wo, nc_local, nv_local, memo_top, memo_w):
     """``under_weight`` of slot s reusing the chain weight of the last layer asked for
     (memo_top, memo_w; −1 and (1, 1, 1) at first): lobes come top layer first, so each layer's
     chain is the one above it, already known, times its own factor. Returns (weight, memo_top,
@@ -375,32 +469,34 @@ def memo_under_weight(md, m, s, wo, memo_top, memo_w):
         return memo_w, memo_top, memo_w
     up = md.lobe_layer[m, top]
     if up < 0:  # a single layer (the plain Principled's specular layer): its factor
-        w = layer_factor(md, m, top, wo)
+        w = layer_factor(md, m, top, wo, nc_local, nv_local)
         return w, top, w
     if up == memo_top:
-        f = layer_factor(md, m, top, wo)
+        f = layer_factor(md, m, top, wo, nc_local, nv_local)
         w = (memo_w[0] * f[0], memo_w[1] * f[1], memo_w[2] * f[2])
     else:
-        w = chain_weight(md, m, top, wo)
+        w = chain_weight(md, m, top, wo, nc_local, nv_local)
     return w, top, w
 
 
 @inline_kernel
-def layer_factor(md, m, top, wo):
-    """One layer's factor (3-tuple): 1 − k·albedo(wo), × the coat tint's absorption."""
+def layer_factor(md, m, top, wo, nc_local, nv_local):
+    """One layer's factor (3-tuple): 1 − k·albedo(wo), × the coat tint's absorption; cos θo
+    taken about the layer's own normal (``slot_cos``), as Cycles's albedo of the closure."""
     k = md.lobe_coat[m, top, 0]
+    cos_o = slot_cos(md, m, top, wo, nc_local, nv_local)
     if md.lobe_type[m, top] == BSDF_SHEEN:
-        a = sheen_albedo(md.lobe_alpha[m, top], wo[2])
+        a = sheen_albedo(md.lobe_alpha[m, top], cos_o)
     else:
         a = layer_albedo_max(md.lobe_alpha[m, top], md.lobe_ior[m, top], lobe_f0(md, m, top),
-                             md.lobe_fresnel[m, top, 3] > 0.0, wo[2])
+                             md.lobe_fresnel[m, top, 3] > 0.0, cos_o)
     lw = min(max(1.0 - k * a, 0.0), 1.0)
     t0 = md.lobe_coat[m, top, 1]
     t1 = md.lobe_coat[m, top, 2]
     t2 = md.lobe_coat[m, top, 3]
     if t0 != 1.0 or t1 != 1.0 or t2 != 1.0:
         inv = 1.0 / md.lobe_ior[m, top]
-        c = min(abs(wo[2]), 1.0)
+        c = min(abs(cos_o), 1.0)
         depth = 1.0 / math.sqrt(max(1.0 - inv * inv * (1.0 - c * c), 1e-12))
         return (lw * (1.0 + k * (t0 ** depth - 1.0)), lw * (1.0 + k * (t1 ** depth - 1.0)),
                 lw * (1.0 + k * (t2 ** depth - 1.0)))
@@ -425,18 +521,20 @@ def pick_lobe(md, m, u_lobe):
 @inline_kernel
 def bsdf_sample(md, m, wo, u_lobe, u0, u1):
     """``bsdf_sample_bump`` without a normal map (see there)."""
-    return bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, NO_BUMP)
+    return bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, NO_BUMP, NO_BUMP, NO_BUMP)
 
 
 @inline_kernel
-def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
+def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local):
     """md: MaterialData; m: material index; wo: local unit 3-tuple; u_lobe in [0, 1) picks the
     lobe (and, rescaled inside the picked interval, glass's reflect/refract choice); (u0, u1) in
     [0, 1)² picks the direction. Returns (wi, weight, pdf, lobe_kind, is_delta, valid):
     weight = f·|cos θi| / pdf (3-tuple), pdf the whole material's solid-angle pdf, or for a delta
     event its discrete probability; lobe_kind a LOBE_* value. Invalid samples have zero weight
     and pdf, LOBE_NONE and is_delta False (wi is kept where one was drawn). ``ns_local``: the
-    unmapped shading normal at a normal-mapped hit (``bsdf_eval_bump``), else ``NO_BUMP``."""
+    unmapped shading normal at a normal-mapped hit (``bsdf_eval_bump``), else ``NO_BUMP``;
+    ``nc_local``, ``nv_local`` the coat and valid-reflection normals (``bsdf_eval_bump``): a lobe
+    with a ``lobe_frame`` samples wi about its own normal."""
     zero = (0.0, 0.0, 0.0)
     count = md.lobe_count[m]
     if count == 0 or wo[2] == 0.0:
@@ -449,6 +547,18 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
     alpha = 0.0 if is_delta else md.lobe_alpha[m, slot]
     ior = md.lobe_ior[m, slot]
     refracted = False
+    wo_main = wo
+    framed = False
+    n_slot = NO_BUMP
+    tx = NO_BUMP
+    bx = NO_BUMP
+    if (nc_local[2] < 1.0 or nv_local[2] < 1.0) and md.lobe_frame[m, slot] != FRAME_SHADING:
+        # sample in the lobe's own frame; wi goes back to the hit's frame below
+        n_slot = slot_normal(md, m, slot, nc_local, nv_local)
+        framed = n_slot[2] < 1.0
+        if framed:
+            tx, bx = build_frame(n_slot)
+            wo = to_local(wo_main, tx, bx, n_slot)
     if t == BSDF_DIFFUSE:
         wi = diffuse_sample(wo, u0, u1)
         kind = LOBE_DIFFUSE
@@ -481,13 +591,15 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
                                   md.lobe_sss[m, slot, SSS_IOR], wo, u_rest, u0, u1)
         if not ok or p_sel <= 0.0:
             return wi, zero, 0.0, LOBE_NONE, False, False
-        uw = under_weight(md, m, slot, wo) if md.has_layers[m] else (1.0, 1.0, 1.0)
+        uw = under_weight(md, m, slot, wo_main, nc_local, nv_local) if md.has_layers[m] else (1.0, 1.0, 1.0)
         weight = (md.lobe_color[m, slot, 0] * (uw[0] / p_sel), md.lobe_color[m, slot, 1] * (uw[1] / p_sel),
                   md.lobe_color[m, slot, 2] * (uw[2] / p_sel))
         return wi, weight, 1.0, LOBE_SUBSURFACE, False, True
     else:
         return zero, zero, 0.0, LOBE_NONE, False, False
     side = wo[2] * wi[2]
+    if framed:
+        wi = to_world(wi, tx, bx, n_slot)
     if not (side < 0.0 if refracted else side > 0.0):
         return wi, zero, 0.0, LOBE_NONE, False, False
 
@@ -511,11 +623,11 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
             k = md.lobe_fresnel[m, slot, 4] / p_sel
             weight = (k * fc[0], k * fc[1], k * fc[2])
         if md.has_layers[m] and md.lobe_layer[m, slot] >= 0:  # a smooth lobe under a coat / sheen
-            uw = under_weight(md, m, slot, wo)
+            uw = under_weight(md, m, slot, wo_main, nc_local, nv_local)
             weight = (weight[0] * uw[0], weight[1] * uw[1], weight[2] * uw[2])
         return wi, weight, pdf, kind, True, True
 
-    if md.pure_diffuse[m] and ns_local[2] >= 1.0:
+    if md.pure_diffuse[m] and ns_local[2] >= 1.0:  # (never framed: one Lambert lobe)
         # One Lambert lobe needs no evaluation: pdf = |cos θi|/π, weight = its colour.
         pdf = abs(wi[2]) * INV_PI
         if not pdf > 0.0:
@@ -524,24 +636,25 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local):
         return wi, color, pdf, kind, False, True
 
     # One-sample MIS over lobes: the whole material's f and pdf at the sampled wi.
-    f, pdf = bsdf_eval_bump(md, m, wo, wi, ns_local)
+    f, pdf = bsdf_eval_bump(md, m, wo_main, wi, ns_local, nc_local, nv_local)
     if not pdf > 0.0:
         return wi, zero, 0.0, LOBE_NONE, False, False
     return wi, (f[0] / pdf, f[1] / pdf, f[2] / pdf), pdf, kind, False, True
 
 
 @kernel
-def _eval_rows(md, mat, wo, wi, f, pdf):
+def _eval_rows(md, mat, wo, wi, nc, f, pdf):
     for i in range(mat.shape[0]):
-        fi, p = bsdf_eval(md, mat[i], load(wo, i), load(wi, i))
+        fi, p = bsdf_eval_bump(md, mat[i], load(wo, i), load(wi, i), NO_BUMP, load(nc, i), NO_BUMP)
         store(f, i, fi)
         pdf[i] = p
 
 
 @kernel
-def _sample_rows(md, mat, wo, u_lobe, u2, wi, weight, pdf, kind, is_delta, valid):
+def _sample_rows(md, mat, wo, u_lobe, u2, nc, wi, weight, pdf, kind, is_delta, valid):
     for i in range(mat.shape[0]):
-        w, wt, p, k, d, ok = bsdf_sample(md, mat[i], load(wo, i), u_lobe[i], u2[i, 0], u2[i, 1])
+        w, wt, p, k, d, ok = bsdf_sample_bump(md, mat[i], load(wo, i), u_lobe[i], u2[i, 0], u2[i, 1], NO_BUMP,
+                                              load(nc, i), NO_BUMP)
         store(wi, i, w)
         store(weight, i, wt)
         pdf[i] = p
@@ -682,7 +795,8 @@ class MaterialTable:
     """All materials of a scene; see the module docstring for the arrays."""
 
     def __init__(self, names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission, lobe_sss=None,
-                 lobe_fresnel=None, lobe_layer=None, lobe_coat=None, emission_layer=None):
+                 lobe_fresnel=None, lobe_layer=None, lobe_coat=None, emission_layer=None,
+                 lobe_frame=None):
         self.names = list(names)
         self.lobe_type = np.asarray(lobe_type, dtype=np.int8)
         self.lobe_color = np.asarray(lobe_color, dtype=np.float64)
@@ -709,6 +823,14 @@ class MaterialTable:
         self.lobe_coat = np.ones((m, n_slots, 4)) if lobe_coat is None else np.asarray(lobe_coat, np.float64)
         self.emission_layer = np.full(m, -1, np.int64) if emission_layer is None \
             else np.asarray(emission_layer, np.int64)
+        self.lobe_frame = np.zeros((m, n_slots), np.int64) if lobe_frame is None \
+            else np.array(lobe_frame, np.int64)
+        # Cycles keeps the diffuse closures on the shading normal and shades the others about
+        # its valid-reflection correction; without a diffuse lobe the kernel corrects the
+        # shading normal itself (path_stages.shade), so only mixed materials need the frame
+        with_diffuse = np.any(self.lobe_type == BSDF_DIFFUSE, axis=1)[:, None] if n_slots else np.zeros((m, 1), bool)
+        self.lobe_frame[with_diffuse & np.isin(self.lobe_type, VALID_FRAME_TYPES)
+                        & (self.lobe_frame == FRAME_SHADING)] = FRAME_VALID
         # the specular layer's cosine-averaged albedo per unit colour, and the share its lower
         # layers keep on average: lobe selection and the albedo pass use these averages (the
         # per-hit values depend on wo; any selection probability keeps the estimator unbiased)
@@ -784,6 +906,7 @@ class MaterialTable:
             lobe_avg=c(eff.reshape(m, n_slots, 3), np.float64),
             lobe_coat=c(self.lobe_coat.reshape(m, n_slots, 4), np.float64),
             emission_layer=c(self.emission_layer, np.int64),
+            lobe_frame=c(np.where(used, self.lobe_frame, FRAME_SHADING).reshape(m, n_slots), np.int64),
         )
         self.has_subsurface = bool(sss.any())
 
@@ -874,6 +997,11 @@ class MaterialTable:
                     fr = _metallic_lobe(lobe, lw)
                 under = _layer_of(lobes, j, lw)
                 coat = _layer_params(lobe, kind, lw)
+                frame = FRAMES.get(lobe.get("frame"), FRAME_SHADING)
+                if "frame" in lobe and (lobe["frame"] not in FRAMES or (kind, lobe["frame"]) not in (
+                        ("DIELECTRIC_SPECULAR", "COAT"), ("SHEEN", "SHEEN"))):
+                    raise _fail(lw, f"frame must be COAT on a DIELECTRIC_SPECULAR or SHEEN on a SHEEN "
+                                    f"lobe, got {lobe['frame']!r} on {kind}")
                 if kind == "GLASS" and "reflection_weight" in lobe:
                     # a Principled transmission: reflection × this weight, refraction × colour
                     k = _number(lobe["reflection_weight"], lw, "reflection_weight")
@@ -893,12 +1021,13 @@ class MaterialTable:
                 if kind == "SUBSURFACE":
                     sss, color, split = _subsurface_lobe(lobe, color, lw)
                     if split is not None and split.mean() >= CLOSURE_WEIGHT_CUTOFF:
-                        extra.append((BSDF_DIFFUSE, split, 0.0, 1.0, np.zeros(8), fr, under, np.ones(4)))
+                        extra.append((BSDF_DIFFUSE, split, 0.0, 1.0, np.zeros(8), fr, under, np.ones(4),
+                                      FRAME_SHADING))
                     if not np.any(sss[SSS_RADIUS:SSS_RADIUS + 3] > 0):
                         continue  # every channel became Lambert
                 if color.mean() >= CLOSURE_WEIGHT_CUTOFF:
                     slot_of[j] = len(rows)
-                    rows.append((BSDF_TYPES[kind], color, alpha, ior, sss, fr, under, coat))
+                    rows.append((BSDF_TYPES[kind], color, alpha, ior, sss, fr, under, coat, frame))
             # Lambert lobes split off SSS channels go last: program registers address the
             # slots of the file's own lobes
             rows += extra
@@ -911,7 +1040,8 @@ class MaterialTable:
         if any(r[0] == BSDF_SUBSURFACE for rows in parsed for r in rows):
             # SSS exit points are shaded by a white Lambert (Cycles's subsurface_shader_data_setup)
             names.append(SSS_EXIT_MATERIAL)
-            parsed.append([(BSDF_DIFFUSE, np.ones(3), 0.0, 1.0, np.zeros(8), np.zeros(5), -1, np.ones(4))])
+            parsed.append([(BSDF_DIFFUSE, np.ones(3), 0.0, 1.0, np.zeros(8), np.zeros(5), -1, np.ones(4),
+                            FRAME_SHADING)])
             emissions.append(np.zeros(3))
             em_layers.append(-1)
         m = len(parsed)
@@ -924,14 +1054,16 @@ class MaterialTable:
         lobe_fresnel = np.zeros((m, n_slots, 5))
         lobe_layer = np.full((m, n_slots), -1, np.int64)
         lobe_coat = np.ones((m, n_slots, 4))
+        lobe_frame = np.zeros((m, n_slots), np.int64)
         for i, rows in enumerate(parsed):
-            for j, (t, c, a, eta, ss, fr, under, coat) in enumerate(rows):
+            for j, (t, c, a, eta, ss, fr, under, coat, frame) in enumerate(rows):
                 lobe_type[i, j], lobe_color[i, j], lobe_alpha[i, j], lobe_ior[i, j] = t, c, a, eta
                 lobe_sss[i, j], lobe_fresnel[i, j], lobe_layer[i, j] = ss, fr, under
-                lobe_coat[i, j] = coat
+                lobe_coat[i, j], lobe_frame[i, j] = coat, frame
         emission = np.array(emissions).reshape(m, 3)
         table = cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission, lobe_sss,
-                    lobe_fresnel, lobe_layer, lobe_coat, np.array(em_layers, np.int64).reshape(m))
+                    lobe_fresnel, lobe_layer, lobe_coat, np.array(em_layers, np.int64).reshape(m),
+                    lobe_frame)
         table.program_source = None
         table.images = list(images)  # a world program may read them without any material program
         for i, mat in enumerate(materials):
@@ -1026,24 +1158,33 @@ class MaterialTable:
         """mat (n,) int; (n,) bool: the material has a diffuse lobe."""
         return self.data.has_diffuse[np.asarray(mat, dtype=np.intp)]
 
+    @staticmethod
+    def _coat_rows(coat_normal, n: int) -> np.ndarray:
+        """(n, 3) rows of the coat normal (NO_BUMP when None)."""
+        return np.ascontiguousarray(np.broadcast_to(np.asarray(NO_BUMP if coat_normal is None else coat_normal,
+                                                               np.float64), (n, 3)))
+
     def eval(self, mat: np.ndarray, wo: np.ndarray,
-             wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+             wi: np.ndarray, coat_normal=None) -> tuple[np.ndarray, np.ndarray]:
         """mat (n,) int; wo, wi (n, 3) local unit vectors. Returns (f·|cos θi| (n, 3) summed over
         the non-delta lobes, pdf (n,) per unit solid angle of wi, Σ p_l pdf_l, exactly what
-        sample() reports for a non-delta sample). Applies ``bsdf_eval`` to each row."""
+        sample() reports for a non-delta sample). Applies ``bsdf_eval`` to each row;
+        ``coat_normal``: a local unit 3-vector the lobes with a ``lobe_frame`` are shaded about
+        (``bsdf_eval_bump``'s nc_local; default the frame's z)."""
         mat = self._mat_rows(mat)
         n = mat.shape[0]
         f = np.empty((n, 3))
         pdf = np.empty(n)
-        _eval_rows(self.data, mat, vec3_rows(wo), vec3_rows(wi), f, pdf)
+        _eval_rows(self.data, mat, vec3_rows(wo), vec3_rows(wi), self._coat_rows(coat_normal, n), f, pdf)
         return f, pdf
 
     def sample(self, mat: np.ndarray, wo: np.ndarray, u_lobe: np.ndarray,
-               u2: np.ndarray) -> BSDFSample:
+               u2: np.ndarray, coat_normal=None) -> BSDFSample:
         """mat (n,) int; wo (n, 3) local; u_lobe (n,) in [0, 1) picks the lobe (and, rescaled
         inside the picked interval, glass's reflect/refract choice); u2 (n, 2) in [0, 1)² picks
         the direction. See BSDFSample and the module docstring for weight and pdf. Applies
-        ``bsdf_sample`` to each row; wi is 0 in rows where no lobe could be sampled."""
+        ``bsdf_sample`` to each row; wi is 0 in rows where no lobe could be sampled.
+        ``coat_normal`` as in ``eval``."""
         mat = self._mat_rows(mat)
         n = mat.shape[0]
         wi = np.empty((n, 3))
@@ -1053,6 +1194,6 @@ class MaterialTable:
         is_delta = np.empty(n, bool)
         valid = np.empty(n, bool)
         _sample_rows(self.data, mat, vec3_rows(wo), scalar_rows(u_lobe, n),
-                     f64_array(u2).reshape(n, 2),
+                     f64_array(u2).reshape(n, 2), self._coat_rows(coat_normal, n),
                      wi, weight, pdf, kind, is_delta, valid)
         return BSDFSample(wi, weight, pdf, kind, is_delta, valid)

@@ -276,9 +276,34 @@ def sample_2d(sd, pixel, index, dim):
                 min((sy + jy) / sd.ny, _ONE_MINUS_EPS))
     # SOBOL
     shuffled = nested_uniform_scramble32(index, h)
-    x = nested_uniform_scramble32(reverse32(shuffled), hash32(h ^ 0x2545F491))
-    y = nested_uniform_scramble32(sobol_fast(1, shuffled), hash32(h ^ 0x9E3779B9))
-    return float(x) * _INV_2_32, float(y) * _INV_2_32
+    return _owen_u(reverse32(shuffled), h, _SEED_U0), _owen_u(sobol_fast(1, shuffled), h, _SEED_U1)
+
+
+#: seeds of the Owen scramble of each Sobol dimension of a sample (one per dimension, so the
+#: dimensions are scrambled independently)
+_SEED_U0 = 0x2545F491
+_SEED_U1 = 0x9E3779B9
+_SEED_U2 = 0x5BD1E995
+_SEED_U3 = 0x27D4EB2F
+_SEED_U4 = 0x165667B1
+
+
+@kernel
+def _owen_u(bits, h, seed):
+    """One Sobol dimension's 32 bits, Owen-scrambled with the pixel/dimension hash h and the
+    dimension's seed, as a float in [0, 1)."""
+    return float(nested_uniform_scramble32(bits, hash32(h ^ seed))) * _INV_2_32
+
+
+@kernel
+def _sobol_shuffled(sd, pixel, index, dim):
+    """(h, shuffled) of a SOBOL sample: the hash of (prefix, pixel, dim) and the sample index
+    Owen-shuffled by it (Burley 2020), from which every Sobol dimension of the sample is read."""
+    pixel &= 0xFFFFFFFF
+    index &= 0xFFFFFFFF
+    dim &= 0xFFFFFFFF
+    h = hash32(hash32(sd.prefix ^ pixel) ^ dim)
+    return h, nested_uniform_scramble32(index, h)
 
 
 @kernel
@@ -294,19 +319,10 @@ def sample_5d(sd, pixel, index, dim, with_fifth):
         u2, u3 = sample_2d(sd, pixel, index, dim + 1)
         u4 = sample_2d(sd, pixel, index, dim + 2)[0] if with_fifth else 0.0
         return u0, u1, u2, u3, u4
-    pixel &= 0xFFFFFFFF
-    index &= 0xFFFFFFFF
-    dim &= 0xFFFFFFFF
-    h = hash32(hash32(sd.prefix ^ pixel) ^ dim)
-    shuffled = nested_uniform_scramble32(index, h)
-    x = nested_uniform_scramble32(reverse32(shuffled), hash32(h ^ 0x2545F491))
-    y = nested_uniform_scramble32(sobol_fast(1, shuffled), hash32(h ^ 0x9E3779B9))
-    z = nested_uniform_scramble32(sobol_fast(2, shuffled), hash32(h ^ 0x5BD1E995))
-    w = nested_uniform_scramble32(sobol_fast(3, shuffled), hash32(h ^ 0x27D4EB2F))
-    u4 = 0.0
-    if with_fifth:
-        u4 = float(nested_uniform_scramble32(sobol_fast(4, shuffled), hash32(h ^ 0x165667B1))) * _INV_2_32
-    return (float(x) * _INV_2_32, float(y) * _INV_2_32, float(z) * _INV_2_32, float(w) * _INV_2_32, u4)
+    h, shuffled = _sobol_shuffled(sd, pixel, index, dim)
+    u4 = _owen_u(sobol_fast(4, shuffled), h, _SEED_U4) if with_fifth else 0.0
+    return (_owen_u(reverse32(shuffled), h, _SEED_U0), _owen_u(sobol_fast(1, shuffled), h, _SEED_U1),
+            _owen_u(sobol_fast(2, shuffled), h, _SEED_U2), _owen_u(sobol_fast(3, shuffled), h, _SEED_U3), u4)
 
 
 #: offset of the padded dimension that gives STRATIFIED and RANDOM the third value of a
@@ -324,15 +340,9 @@ def sample_3d(sd, pixel, index, dim):
     if sd.kind != KIND_SOBOL:
         u0, u1 = sample_2d(sd, pixel, index, dim)
         return u0, u1, sample_2d(sd, pixel, index, dim + PAD_3D)[0]
-    pixel &= 0xFFFFFFFF
-    index &= 0xFFFFFFFF
-    dim &= 0xFFFFFFFF
-    h = hash32(hash32(sd.prefix ^ pixel) ^ dim)
-    shuffled = nested_uniform_scramble32(index, h)
-    x = nested_uniform_scramble32(reverse32(shuffled), hash32(h ^ 0x2545F491))
-    y = nested_uniform_scramble32(sobol_fast(1, shuffled), hash32(h ^ 0x9E3779B9))
-    z = nested_uniform_scramble32(sobol_fast(2, shuffled), hash32(h ^ 0x5BD1E995))
-    return float(x) * _INV_2_32, float(y) * _INV_2_32, float(z) * _INV_2_32
+    h, shuffled = _sobol_shuffled(sd, pixel, index, dim)
+    return (_owen_u(reverse32(shuffled), h, _SEED_U0), _owen_u(sobol_fast(1, shuffled), h, _SEED_U1),
+            _owen_u(sobol_fast(2, shuffled), h, _SEED_U2))
 
 
 @kernel
