@@ -237,14 +237,16 @@ def bsdf_eval(md, m, wo, wi):
     return bsdf_eval_bump(md, m, wo, wi, NO_BUMP, NO_BUMP, NO_BUMP)
 
 
-@inline_kernel
-def slot_normal(md, m, s, nc_local, nv_local):
+@kernel
+def slot_normal(lobe_frame, lobe_coat, m, s, nc_local, nv_local):
     """The unit normal slot s is shaded about, in the hit's local frame (z = the shading
     normal): z itself (FRAME_SHADING), the coat normal ``nc_local`` (FRAME_COAT), the
     valid-reflection normal ``nv_local`` (FRAME_VALID), or Cycles's sheen normal
     normalize(mix(z, coat normal, Coat Weight)) (FRAME_SHEEN; the weight is the coat slot's k,
-    per hit when textured)."""
-    f = md.lobe_frame[m, s]
+    per hit when textured). Takes ``md.lobe_frame`` and ``md.lobe_coat``, not the whole
+    MaterialData: a plain kernel (not inlined: it sits inside every inlined layer weight, and
+    inlining it there doubled the cold compile time), cheap to call with two arrays."""
+    f = lobe_frame[m, s]
     if f == FRAME_SHADING:
         return NO_BUMP
     if f == FRAME_COAT:
@@ -252,9 +254,9 @@ def slot_normal(md, m, s, nc_local, nv_local):
     if f == FRAME_VALID:
         return nv_local
     k = 0.0
-    for j in range(md.lobe_frame.shape[1]):
-        if md.lobe_frame[m, j] == FRAME_COAT:
-            k = min(max(md.lobe_coat[m, j, 0], 0.0), 1.0)
+    for j in range(lobe_frame.shape[1]):
+        if lobe_frame[m, j] == FRAME_COAT:
+            k = min(max(lobe_coat[m, j, 0], 0.0), 1.0)
     n0 = k * nc_local[0]
     n1 = k * nc_local[1]
     n2 = 1.0 - k + k * nc_local[2]
@@ -264,12 +266,13 @@ def slot_normal(md, m, s, nc_local, nv_local):
     return (n0 / length, n1 / length, n2 / length)
 
 
-@inline_kernel
-def slot_cos(md, m, s, wo, nc_local, nv_local):
-    """cos θo of slot s: wo's component along the normal the slot is shaded about."""
-    if (nc_local[2] >= 1.0 and nv_local[2] >= 1.0) or md.lobe_frame[m, s] == FRAME_SHADING:
+@kernel
+def slot_cos(lobe_frame, lobe_coat, m, s, wo, nc_local, nv_local):
+    """cos θo of slot s: wo's component along the normal the slot is shaded about (a plain
+    kernel, as ``slot_normal``)."""
+    if (nc_local[2] >= 1.0 and nv_local[2] >= 1.0) or lobe_frame[m, s] == FRAME_SHADING:
         return wo[2]
-    n = slot_normal(md, m, s, nc_local, nv_local)
+    n = slot_normal(lobe_frame, lobe_coat, m, s, nc_local, nv_local)
     return wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
 
 
@@ -306,7 +309,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local):
         wi = wi_main
         g = g_diffuse
         if framed and md.lobe_frame[m, s] != FRAME_SHADING:
-            n = slot_normal(md, m, s, nc_local, nv_local)
+            n = slot_normal(md.lobe_frame, md.lobe_coat, m, s, nc_local, nv_local)
             if n[2] < 1.0:
                 # Cycles's bump_shadowing_term against this lobe's own normal (sc->N)
                 ok, g = bump_shadowing_about(ns_local, n, wi)
@@ -484,7 +487,8 @@ def layer_factor(md, m, top, wo, nc_local, nv_local):
     """One layer's factor (3-tuple): 1 − k·albedo(wo), × the coat tint's absorption; cos θo
     taken about the layer's own normal (``slot_cos``), as Cycles's albedo of the closure."""
     k = md.lobe_coat[m, top, 0]
-    cos_o = slot_cos(md, m, top, wo, nc_local, nv_local)
+    cos_o = wo[2] if nc_local[2] >= 1.0 and nv_local[2] >= 1.0 else \
+        slot_cos(md.lobe_frame, md.lobe_coat, m, top, wo, nc_local, nv_local)
     if md.lobe_type[m, top] == BSDF_SHEEN:
         a = sheen_albedo(md.lobe_alpha[m, top], cos_o)
     else:
@@ -554,7 +558,7 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local):
     bx = NO_BUMP
     if (nc_local[2] < 1.0 or nv_local[2] < 1.0) and md.lobe_frame[m, slot] != FRAME_SHADING:
         # sample in the lobe's own frame; wi goes back to the hit's frame below
-        n_slot = slot_normal(md, m, slot, nc_local, nv_local)
+        n_slot = slot_normal(md.lobe_frame, md.lobe_coat, m, slot, nc_local, nv_local)
         framed = n_slot[2] < 1.0
         if framed:
             tx, bx = build_frame(n_slot)
