@@ -162,3 +162,18 @@ def test_two_copies_of_the_sources_share_one_compiled_cache(tmp_path):
     assert out.returncode == 0, out.stderr
     hits, misses, path = out.stdout.split()
     assert (int(hits), int(misses)) == (0, 1) and path != runs[0][2]
+    # a child of a DRT process inherits NUMBA_CACHE_DIR (the viewport's warm-up Blender, a
+    # test's subprocess): DRT's own value is recomputed, so the child finds the shared cache
+    env["PYTHONPATH"] = str(tmp_path / "two")
+    env["NUMBA_CACHE_DIR"] = env["DRT_SET_NUMBA_CACHE_DIR"] = str(tmp_path / "parents_choice")
+    out = subprocess.run([sys.executable, "-c", _COMPILE_ONE_KERNEL], env=env, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    hits, misses, path = out.stdout.split()
+    assert (int(hits), int(misses)) == (1, 0) and path == runs[0][2]
+    # a user's own NUMBA_CACHE_DIR is kept
+    env["DRT_SET_NUMBA_CACHE_DIR"] = "something else"
+    out = subprocess.run([sys.executable, "-c", _COMPILE_ONE_KERNEL], env=env, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert str(tmp_path / "parents_choice") in out.stdout.split()[2]

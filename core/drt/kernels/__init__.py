@@ -138,10 +138,18 @@ def _prune_old_caches(parent: str, keep: str) -> None:
 _KEYED_CACHE_DIR = None
 
 
+#: environment variable holding the NUMBA_CACHE_DIR value DRT itself set, so that a child
+#: process (a viewport warm-up Blender, a test's subprocess) inheriting NUMBA_CACHE_DIR can tell
+#: DRT's choice — which it recomputes for its own sources and import name — from a user's
+_DRT_SET_MARK = "DRT_SET_NUMBA_CACHE_DIR"
+
+
 def _configure_numba_cache() -> None:
     """Point numba's cache at ``cache_dir()/<source_key()>`` unless the user chose one
-    (NUMBA_CACHE_DIR)."""
-    if os.environ.get("NUMBA_CACHE_DIR"):
+    (NUMBA_CACHE_DIR not set by a DRT process)."""
+    inherited = os.environ.get("NUMBA_CACHE_DIR")
+    ours = bool(inherited) and inherited == os.environ.get(_DRT_SET_MARK)
+    if inherited and not ours:
         return
     parent = cache_dir()
     key = source_key()
@@ -151,10 +159,13 @@ def _configure_numba_cache() -> None:
         os.makedirs(path, exist_ok=True)
         os.utime(path)  # marks the folder as in use for _prune_old_caches
     except OSError:
+        if ours:  # another process's folder, maybe of other sources: not for this one
+            os.environ.pop("NUMBA_CACHE_DIR", None)
         return  # numba falls back to its own locations (beside the sources or the user dir)
     if fresh:
         _prune_old_caches(parent, key)
     os.environ["NUMBA_CACHE_DIR"] = path
+    os.environ[_DRT_SET_MARK] = path
     global _KEYED_CACHE_DIR
     _KEYED_CACHE_DIR = path
     if "numba" in sys.modules:  # imported earlier (another add-on in Blender): set it live
