@@ -240,8 +240,8 @@ def test_coat_normal_apart_from_normal_matches_cycles(tmp_path):
     twin whose Coat Normal and Normal share one source: a normal map on the base under a
     smooth coat (dielectric, metal, under a sheen, textured coat weight), a normal map on the
     coat only. Tile channel means within 1 % of Cycles's (measured ≤ 0.13 %), the twins within
-    2 %; each pair differs in Cycles by more than 2.5 % (what DRT rendered before, with the
-    warning, was the twin: 0.4–7.3 % off Cycles then)."""
+    2 %; each pair differs in Cycles by more than 2 % (what DRT rendered before, with the
+    warning, was the twin)."""
     pytest.importorskip("bpy")
     from node_parity import render_tiles, tile
 
@@ -268,7 +268,10 @@ def test_coat_normal_apart_from_normal_matches_cycles(tmp_path):
     # DRT's at |cos θo| (docs/materials.md, "Coat Normal")
     tol = np.array([0.01, 0.02] * 4 + [0.01])
     assert np.all(np.abs(errs).max(axis=1) < tol), np.round(100 * errs, 3)
-    assert np.all(np.abs(effect).max(axis=1) > 0.025), np.round(100 * effect, 2)
+    # each pair differs in Cycles by more than twice the 1 % value tolerance, so the twin DRT
+    # rendered before (within 0.1 % of Cycles's twin) would fail the value check; the metal
+    # pair is the closest (2.2 %: the metal base dominates its tile)
+    assert np.all(np.abs(effect).max(axis=1) > 0.02), np.round(100 * effect, 2)
     mats = {m["name"]: m for m in res.header["materials"]}
     assert mats["case0"]["coat_normal"] == "SMOOTH" and "coat_normal_reg" in mats["case2"]
     assert "coat_normal" not in mats["case1"] and "coat_normal_reg" not in mats["case1"]
