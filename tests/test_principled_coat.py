@@ -202,17 +202,6 @@ def test_coat_sheen_spheres_match_cycles(tmp_path):
     assert res.header["materials"][0]["emission_layer"] == 1  # the coat, under the sheen
 
 
-def _tilted_normal(nt, uv):
-    """A tangent-space Normal Map whose colour varies over the UVs: tilts up to ~35°."""
-    from node_parity import node
-
-    sep = node(nt, "ShaderNodeSeparateXYZ", {0: uv})
-    x = node(nt, "ShaderNodeMath", {0: sep.outputs[0], 1: 0.7, 2: 0.15}, operation="MULTIPLY_ADD")
-    y = node(nt, "ShaderNodeMath", {0: sep.outputs[1], 1: 0.7, 2: 0.15}, operation="MULTIPLY_ADD")
-    col = node(nt, "ShaderNodeCombineXYZ", {0: x.outputs[0], 1: y.outputs[0], 2: 0.85}).outputs[0]
-    return node(nt, "ShaderNodeNormalMap", {"Color": col}).outputs[0]
-
-
 def _coat_normal_case(normal, coat_normal, base=(0.8, 0.3, 0.1, 1), rough=0.5, metal=0.0, coat=1.0,
                       coat_r=0.15, sheen=0.0, textured_coat=False):
     """A coated Principled whose Normal / Coat Normal are the tilted map ("map"), the same map
@@ -225,7 +214,9 @@ def _coat_normal_case(normal, coat_normal, base=(0.8, 0.3, 0.1, 1), rough=0.5, m
         if textured_coat:
             ck = node(nt, "ShaderNodeTexChecker", {"Vector": uv, "Scale": 4.0})
             ins["Coat Weight"] = node(nt, "ShaderNodeMapRange", {0: ck.outputs["Fac"], 3: 0.3, 4: 1.0}).outputs[0]
-        nm = _tilted_normal(nt, uv) if "map" in (normal, coat_normal) or normal == "same" else None
+        from test_shading_inputs import _normal_map  # tilts up to ~35° over the UVs
+
+        nm = _normal_map()(nt, uv) if "map" in (normal, coat_normal) or normal == "same" else None
         if normal in ("map", "same"):
             ins["Normal"] = nm
         if coat_normal == "map" or normal == "same":
