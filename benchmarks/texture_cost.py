@@ -12,6 +12,11 @@ neighbours). Prints both times, the rays each traced and the ratio (also per ray
 colours change path lengths); asserts nothing. ``--procedural``: the 20 nodes are
 procedural textures instead (noise, Voronoi, wave, magic, brick, white noise, curves, ...);
 ``--scene X.npz``: a shipped scene as is against its programs stripped.
+
+``--cycles SPP``: the same two scenes rendered by Cycles in this process (one render thread, SPP
+samples, no denoising or adaptive sampling; the untextured twin unlinks the Base Color, so its
+colour is the socket's constant), best of two each, alternated, in process CPU time: Cycles's
+own cost of the same 20 nodes, the yardstick for DRT's ratio.
 """
 
 from __future__ import annotations
@@ -160,6 +165,7 @@ def main(argv=None):
     p.add_argument("--procedural", action="store_true", help="20 procedural texture nodes instead")
     p.add_argument("--scene", help="instead: a scene file (.npz) as is vs its programs stripped")
     p.add_argument("--save", help="also write the built (textured) scene to this .npz (for --scene)")
+    p.add_argument("--cycles", type=int, metavar="SPP", help="also time Cycles on both scenes at SPP samples")
     o = p.parse_args(argv)
     w, h = (int(x) for x in o.resolution.split("x"))
     if o.scene:
@@ -178,7 +184,48 @@ def main(argv=None):
     kind = "procedural " if o.procedural else ""
     report(header, arrays, o.spp, f"{w}x{h} at {o.spp} spp, one thread; every material: 20 {kind}nodes "
                                   f"-> {n_ops} operations")
+    if o.cycles:
+        cycles_report(o.cycles)
     return 0
+
+
+def cycles_report(spp):
+    """Cycles on the scene ``build`` left in bpy, with and without the Base Color links."""
+    import bpy
+
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    cy = scene.cycles
+    cy.device, cy.samples, cy.use_adaptive_sampling, cy.use_denoising = "CPU", spp, False, False
+    scene.render.threads_mode, scene.render.threads = "FIXED", 1
+    links = []  # (tree, from socket, to socket) of every Principled's Base Color link
+    for mat in bpy.data.materials:
+        for ln in mat.node_tree.links:
+            if ln.to_node.bl_idname == "ShaderNodeBsdfPrincipled" and ln.to_socket.name == "Base Color":
+                links.append((mat.node_tree, ln.from_socket, ln.to_socket))
+
+    def textured(on):
+        for tree, a, b in links:
+            if on:
+                tree.links.new(a, b)
+            else:
+                for ln in list(b.links):
+                    tree.links.remove(ln)
+
+    def cpu_time():
+        t0 = time.process_time()
+        bpy.ops.render.render()
+        return time.process_time() - t0
+
+    times = {True: [], False: []}
+    cpu_time()  # warm: kernels loaded, images cached
+    for on in (True, False, True, False):
+        textured(on)
+        times[on].append(cpu_time())
+    tex, plain = min(times[True]), min(times[False])
+    print(f"Cycles, {spp} spp, one thread (CPU time of the whole render, sync included)")
+    print(f"  constant materials : {plain:.3f} s")
+    print(f"  textures           : {tex:.3f} s  ({tex / plain:.2f}x)")
 
 
 def report(header, arrays, spp, title):
