@@ -261,10 +261,10 @@ def _share_the_cache_between_copies_of_drt() -> None:
 _share_the_cache_between_copies_of_drt()
 
 _READY_MARK = "compiled"
-#: what a user is told before the first render of a version (measured: ~10 min of one core on
+#: what a user is told before the first render of a version (measured: ~2.5 min of one core on
 #: the 2-vCPU development machine, docs/kernels.md)
 COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this version takes "
-                    "several minutes longer (once per version and machine); later renders start "
+                    "a few minutes longer (once per version and machine); later renders start "
                     "in about a second")
 
 
