@@ -141,7 +141,7 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         for w in getattr(context, "warnings", []):
             self.report({"WARNING"}, f"DRT: {w}")
         if not kernels.kernels_compiled():
-            self.update_stats("", "DRT | Compiling render kernels (first render only: several minutes)")
+            self.update_stats("", "DRT | Compiling render kernels (first render only: a few minutes)")
         t_render = time.perf_counter()
         last_draw = [0.0]
         crop = border_crop(scene, width, height)

@@ -261,10 +261,10 @@ def _share_the_cache_between_copies_of_drt() -> None:
 _share_the_cache_between_copies_of_drt()
 
 _READY_MARK = "compiled"
-#: what a user is told before the first render of a version (measured: ~10 min of one core on
+#: what a user is told before the first render of a version (measured: ~2.5 min of one core on
 #: the 2-vCPU development machine, docs/kernels.md)
 COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this version takes "
-                    "several minutes longer (once per version and machine); later renders start "
+                    "a few minutes longer (once per version and machine); later renders start "
                     "in about a second")
 
 
@@ -285,21 +285,47 @@ def mark_kernels_compiled() -> None:
         except OSError:
             pass
 
-KERNEL_OPTIONS = dict(nogil=True, cache=True, error_model="numpy", _nrt=False)
+#: ``forceinline=False`` is explicit so that a plain kernel never inherits it from the caller
+#: that happens to be compiling when numba first compiles it (numba's flags inherit when unset)
+KERNEL_OPTIONS = dict(nogil=True, cache=True, error_model="numpy", _nrt=False, forceinline=False)
 
 
 def kernel(fn=None, **overrides):
     """``numba.njit`` with DRT's options (see the module docstring). Use as ``@kernel``."""
     opts = {**KERNEL_OPTIONS, **overrides}
     if fn is None:
-        return lambda f: numba.njit(**opts)(f)
-    return numba.njit(**opts)(fn)
+        return lambda f: _typed_without_literals(numba.njit(**opts)(f))
+    return _typed_without_literals(numba.njit(**opts)(fn))
+
+
+def _typed_without_literals(dispatcher):
+    """Make calls from other kernels compile ``dispatcher`` for the plain types of their
+    arguments. numba otherwise compiles one more copy of a kernel for every constant a caller
+    passes (``f(ld, 0)``, ``f(ld, 1)``, ...: 178 of the 469 compiled functions of a render, e.g.
+    58 copies of ``load_col3``, 16 of the light selection's per-strategy weights, two of
+    ``run_program``). What a constant argument is worth, LLVM still gets: small kernels and
+    ``inline_kernel`` functions are inlined into the caller, where the constant folds."""
+    from numba.core import types
+
+    typed = dispatcher.get_call_template
+
+    def get_call_template(args, kws):
+        return typed(tuple(types.unliteral(a) for a in args),
+                     {k: types.unliteral(v) for k, v in kws.items()})
+
+    dispatcher.get_call_template = get_call_template
+    return dispatcher
 
 
 def inline_kernel(fn=None, **overrides):
-    """``@kernel`` inlined into its callers at numba's IR level (``inline="always"``), for the
-    functions that take a per-scene namedtuple (lights, materials, camera). numba passes a
-    namedtuple of N arrays to a call as ~7N scalar arguments — about 4 KB for `LightData` — and
-    LLVM does not inline large callees: measured, `light_sample` cost 425 ns a call that way and
-    62 ns inlined. The price is compile time, paid once per install (the cache keeps it)."""
-    return kernel(fn, **{"inline": "always", **overrides})
+    """``@kernel`` that LLVM inlines into every caller (numba's ``forceinline``: the LLVM
+    ``alwaysinline`` attribute), for the functions that take a per-scene namedtuple (lights,
+    materials, camera). numba passes a namedtuple of N arrays to a call as ~7N scalar arguments —
+    about 4 KB for `LightData` — and LLVM does not inline large callees by itself: measured,
+    `light_sample` cost 425 ns a call that way and 62 ns inlined.
+
+    Inlined by LLVM, not at numba's IR level (``inline="always"``, as before 2026-12-02): numba
+    then types and lowers each such function once, instead of once per call site inside a
+    caller whose type inference grows faster than linearly with its size — that made `shade`
+    alone ~280 s of a ~390 s cold compile (docs/kernels.md)."""
+    return kernel(fn, **{"forceinline": True, **overrides})
