@@ -1,0 +1,129 @@
+"""Cold compile and warm start of DRT's kernels, with a profile of where the compile goes.
+
+    python benchmarks/compile_cost.py [SCENE.npz] [--top 25]
+
+Renders SCENE (default: the shipped Cornell box, 1 spp) in a child process whose kernel cache
+is an empty temporary folder (``DRT_CACHE_DIR``), so everything its render needs compiles, then
+again in a second child that loads that cache. The first child records numba's compile events
+(``numba.core.event``: one start/end pair per function numba compiles, nested as the calls
+are discovered, and the LLVM lock); the script prints
+
+- wall and CPU time of both processes (cold compile, warm start),
+- the CPU time inside numba's compiler, of which LLVM, and the number of functions compiled,
+- the functions with the most *exclusive* compile time (their own typing, lowering and LLVM
+  work, without the callees compiled while they were typed) and their *inclusive* time.
+
+Asserts nothing; docs/kernels.md ("Cost and cache") records the figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+
+#: the child: installs a listener on numba's compile events, runs the CLI, dumps the events
+_CHILD = r"""
+import json, sys, time
+from numba.core import event
+events = []
+
+class Recorder(event.Listener):
+    def _add(self, tag, ev):
+        data = ev.data if isinstance(ev.data, dict) else {}
+        d = data.get("dispatcher")
+        name = getattr(getattr(d, "py_func", None), "__qualname__", "") if d is not None else ""
+        module = getattr(getattr(d, "py_func", None), "__module__", "") if d is not None else ""
+        events.append((time.process_time(), tag, ev.kind, module + "." + name if name else ""))
+    def on_start(self, ev):
+        self._add("S", ev)
+    def on_end(self, ev):
+        self._add("E", ev)
+
+rec = Recorder()
+event.register("numba:compile", rec)
+event.register("numba:llvm_lock", rec)
+from drt.cli import main
+code = main(sys.argv[2:])
+with open(sys.argv[1], "w") as f:
+    json.dump(events, f)
+sys.exit(code)
+"""
+
+
+def _child(args, cache, events=None):
+    """Run the CLI in a child process with the kernel cache ``cache``; (wall s, CPU s)."""
+    env = dict(os.environ, DRT_CACHE_DIR=cache)
+    env.pop("NUMBA_CACHE_DIR", None)
+    env.pop("DRT_SET_NUMBA_CACHE_DIR", None)
+    cmd = [sys.executable, "-c", _CHILD, events or os.devnull, *args]
+    t0 = time.perf_counter()
+    r0 = os.times()
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    r1 = os.times()
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"render failed:\n{proc.stderr[-2000:]}")
+    return wall, (r1.children_user - r0.children_user) + (r1.children_system - r0.children_system)
+
+
+def profile(events):
+    """(compile CPU s, LLVM CPU s, functions compiled, {name: [exclusive, inclusive, count]})."""
+    stack, table, llvm, llvm_t0, n = [], {}, 0.0, None, 0
+    for t, tag, kind, name in events:
+        if kind == "numba:llvm_lock":
+            if tag == "S":
+                llvm_t0 = t
+            elif llvm_t0 is not None:
+                llvm += t - llvm_t0
+            continue
+        if tag == "S":
+            stack.append([name, t, 0.0])
+            continue
+        name, t0, children = stack.pop()
+        took = t - t0
+        row = table.setdefault(name, [0.0, 0.0, 0])
+        row[0] += took - children
+        row[1] += took
+        row[2] += 1
+        n += 1
+        if stack:
+            stack[-1][2] += took
+    return sum(r[0] for r in table.values()), llvm, n, table
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("scene", nargs="?", default=os.path.join(REPO, "blend_scenes", "cornell_box.npz"))
+    ap.add_argument("--top", type=int, default=25)
+    ap.add_argument("--spp", type=int, default=1)
+    o = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="drt_compile_") as tmp:
+        cache = os.path.join(tmp, "cache")
+        out = os.path.join(tmp, "out.exr")
+        events_path = os.path.join(tmp, "events.json")
+        args = ["render", o.scene, "-o", out, "--spp", str(o.spp), "--threads", "1"]
+        cold_wall, cold_cpu = _child(args, cache, events_path)
+        warm_wall, warm_cpu = _child(args, cache)
+        with open(events_path) as f:
+            events = json.load(f)
+    total, llvm, n, table = profile(events)
+    print(f"scene {os.path.basename(o.scene)}, {o.spp} spp, one thread, empty kernel cache")
+    print(f"  cold process : {cold_wall:7.1f} s wall, {cold_cpu:7.1f} s CPU")
+    print(f"  warm process : {warm_wall:7.1f} s wall, {warm_cpu:7.1f} s CPU (same cache, loaded)")
+    print(f"  numba compiler: {total:.1f} s CPU, of which LLVM {llvm:.1f} s; {n} functions compiled")
+    print(f"  top {o.top} by exclusive compile time (s CPU: exclusive, inclusive, compiles):")
+    for name, (excl, incl, count) in sorted(table.items(), key=lambda kv: -kv[1][0])[:o.top]:
+        print(f"    {excl:7.2f} {incl:7.2f}  x{count:<3d} {name}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
