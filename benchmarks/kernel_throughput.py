@@ -10,7 +10,10 @@ thread scaling in one process (the CLI's core, and inside Blender through the ad
    exactly those batches through embreex alone on one thread, and prints Embree's raw rays/s and
    the renderer's rays/s (its best unrecorded 1-thread run) as a fraction of it, both in process
    CPU time (the rest of the time is DRT's own work).
-3. Unless --no-blender: in a bpy subprocess with the add-on registered, F12-renders the .blend
+3. Where the 1-thread time goes (best of three renders, process CPU time, each stage wrapped in
+   a timer): the camera stage, `shade` (all per-hit work), Embree itself, DRT's glue around
+   Embree (float32 rays, hit arrays, surface data), and the rest (render loop, film).
+4. Unless --no-blender: in a bpy subprocess with the add-on registered, F12-renders the .blend
    beside the scene with Performance > Threads fixed at 1 and at 2 (after a warm-up render) and
    prints the speed-up inside Blender.
 Nothing is asserted: it prints figures.
@@ -118,6 +121,8 @@ def main(argv=None) -> int:
           f"DRT whole renderer (1 thread, CPU time): {drt_rate / 1e6:.2f} Mrays/s = {100 * drt_rate / raw_rate:.0f}% "
           f"of Embree's rate")
 
+    stage_breakdown(scene, ctx, args.spp, n_rays)
+
     blend = os.path.splitext(args.scene)[0] + ".blend"
     if not args.no_blender and os.path.exists(blend):
         p = subprocess.run([sys.executable, "-c", BLENDER_SCRIPT, REPO, blend, str(w), str(h), str(args.spp)],
@@ -129,6 +134,53 @@ def main(argv=None) -> int:
             one, two = (float(v) for v in line[-1].split()[1:])
             print(f"  inside Blender (bpy, F12): 1 thread {one:.3f} s, 2 threads {two:.3f} s: {one / two:.2f}x")
     return 0
+
+
+def stage_breakdown(scene, ctx, spp, n_rays):
+    """Per-stage process CPU time of 1-thread renders (best of three per stage)."""
+    import drt.path_stages as stages
+    from drt.render import render
+
+    tracer = ctx.tracer
+    spent = {}
+
+    def timed(name, fn):
+        def wrapper(*a, **k):
+            c0 = time.process_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                spent[name] = spent.get(name, 0.0) + time.process_time() - c0
+        return wrapper
+
+    originals = dict(shade=stages.shade, camera_stage=stages.camera_stage)
+    patched_tracer = ("intersect", "occluded", "_run")
+    best = {}
+    try:
+        stages.shade = timed("shade", originals["shade"])
+        stages.camera_stage = timed("camera_stage", originals["camera_stage"])
+        for name in patched_tracer:
+            setattr(tracer, name, timed(name, getattr(tracer, name)))
+        for _ in range(3):
+            spent.clear()
+            c0 = time.process_time()
+            render(scene, spp=spp, threads=1, context=ctx)
+            spent["total"] = time.process_time() - c0
+            for k, v in spent.items():
+                best[k] = min(best.get(k, 1e9), v)
+    finally:
+        stages.shade, stages.camera_stage = originals["shade"], originals["camera_stage"]
+        for name in patched_tracer:
+            tracer.__dict__.pop(name, None)
+    rows = [("shade (per-hit work: emission, MIS, NEE, BSDF sampling)", best.get("shade", 0.0)),
+            ("camera_stage", best.get("camera_stage", 0.0)),
+            ("Embree itself (Tracer._run)", best.get("_run", 0.0)),
+            ("glue around Embree (intersect + occluded - Embree)",
+             best.get("intersect", 0.0) + best.get("occluded", 0.0) - best.get("_run", 0.0))]
+    rest = best["total"] - sum(v for _, v in rows)
+    print(f"  where one thread's time goes (process CPU time, best of 3 per stage; {n_rays} rays):")
+    for name, v in rows + [("render loop, film, the rest", rest), ("total", best["total"])]:
+        print(f"    {name:58s} {v:7.3f} s {100 * v / best['total']:5.1f} %")
 
 
 if __name__ == "__main__":
