@@ -524,24 +524,30 @@ class MaterialExporter:
     def _bsdf_normal(self, node, ctx, problems):
         """Record a BSDF's linked Normal input (a Normal Map...) as the material's shading normal.
         DRT has one shading normal per material: a second, different linked normal warns."""
-        sock = node.inputs.get("Normal")
-        src, sctx = resolve(sock, ctx)
-        if src is None:
+        key = _normal_key(node, "Normal", ctx)
+        if key is None:
             return
-        key = (src.node.as_pointer(), src.identifier, tuple(n.as_pointer() for n in sctx))
         if self._normal is not None:
             if self._normal[0] != key:
                 problems.append(f"'{node.name}' has its own Normal input; DRT uses one shading normal "
                                 f"per material (the first BSDF's)")
             return
+        v = self._normal_value(node, "Normal", ctx, problems, "using the mesh normal")
+        if v is not None:
+            self._normal = (key, v)
+
+    def _normal_value(self, node, name, ctx, problems, fallback):
+        """The program value of a BSDF's linked normal input ``name`` (a constant one
+        normalised, as Cycles does), or None after a warning ending in ``fallback`` when an
+        unsupported node drives it."""
         try:
-            v = self._b.input(node, sock, ctx)
+            v = self._b.input(node, node.inputs[name], ctx)
         except Unsupported as e:
-            problems.append(f"'{node.name}' Normal is driven by {e} (unsupported), using the mesh normal")
-            return
+            problems.append(f"'{node.name}' {name} is driven by {e} (unsupported), {fallback}")
+            return None
         if v.is_const:
             v = self._b.emit(OP_VMATH_NORMALIZE[0], OP_VMATH_NORMALIZE[1], [v, v])
-        self._normal = (key, v)
+        return v
 
     def _sss_radius(self, node, radius_name, scale_name, problems, ctx):
         """Radius × scale (metres per channel, ≥ 0), constant-only."""
@@ -753,14 +759,10 @@ class MaterialExporter:
         if key is None:
             value = self._disp_normal if self._disp_normal is not None else "SMOOTH"
         else:
-            try:
-                value = self._b.input(node, node.inputs["Coat Normal"], ctx)
-            except Unsupported as e:
-                problems.append(f"'{node.name}' Coat Normal is driven by {e} (unsupported): the coat uses "
-                                f"the material's shading normal")
+            value = self._normal_value(node, "Coat Normal", ctx, problems,
+                                       "the coat uses the material's shading normal")
+            if value is None:
                 return False
-            if value.is_const:
-                value = self._b.emit(OP_VMATH_NORMALIZE[0], OP_VMATH_NORMALIZE[1], [value, value])
         if self._coat_normal is not None:
             if self._coat_normal[0] != key:
                 problems.append(f"'{node.name}' has its own Coat Normal; DRT uses one coat normal per "
