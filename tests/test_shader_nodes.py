@@ -352,6 +352,13 @@ def _cases():
             return n.outputs[0]
         return case
 
+    def glossy(col, rough, dist):  # a Glossy BSDF: Multiscatter GGX (its default) or GGX
+        def case(nt, uv):
+            n = node(nt, "ShaderNodeBsdfGlossy", {"Color": col, "Roughness": rough})
+            n.distribution = dist
+            return n.outputs[0]
+        return case
+
     return [translucent((0.8, 0.5, 0.2, 1)), translucent((0.3, 0.9, 0.6, 1)), mixed,
             refraction(0.3, 1.45), refraction(0.6, 1.2, (0.9, 0.7, 0.4, 1)), refraction(0.15, 2.0),
             principled_glass((0.8, 0.4, 0.2, 1), 0.3), principled_glass((0.3, 0.6, 0.9, 1), 0.6),
@@ -364,11 +371,13 @@ def _cases():
             textured_principled("Alpha", {"Base Color": (0.8, 0.8, 0.8, 1), "Metallic": 1.0, "Roughness": 0.3}),
             textured_principled("Transmission Weight", {"Base Color": (0.8, 0.4, 0.2, 1), "Roughness": 0.35}),
             textured_principled("Metallic", {"Base Color": (0.3, 0.6, 0.9, 1), "Roughness": 0.6,
-                                             "Transmission Weight": 1.0}, dist="MULTI_GGX")]
+                                             "Transmission Weight": 1.0}, dist="MULTI_GGX"),
+            glossy((0.9, 0.6, 0.3, 1), 0.6, "MULTI_GGX"), glossy((1, 1, 1, 1), 0.9, "MULTI_GGX"),
+            glossy((0.9, 0.6, 0.3, 1), 0.6, "GGX")]
 
 
 #: per-case tolerance of the channel means (measured ≤ 0.4 %)
-_TOL = [0.01] * 19
+_TOL = [0.01] * 22
 
 
 @pytest.mark.parametrize("shape, side", [("plane", "behind"), ("plane", "front"), ("sphere", "front")])
@@ -400,6 +409,8 @@ def test_shader_nodes_under_a_sun_match_cycles(tmp_path, shape, side):
           "\nchannel mean errors (%):\n", np.round(100 * errs, 2))
     bad = [(k, np.round(100 * errs[k], 2).tolist()) for k in range(len(cases)) if np.abs(errs[k]).max() > _TOL[k]]
     assert not bad, bad
+    if side == "front":  # the Glossy BSDF's Multiscatter GGX matters in Cycles (vs its GGX twin)
+        assert means[19].mean() > (1 + 2 * _TOL[19]) * means[21].mean(), (means[19], means[21])
 
 
 @pytest.mark.parametrize("transparent_film", [False, True])

@@ -9,8 +9,8 @@ Value node falls back to the socket's own value with a warning.
 Mapping (see docs/addon.md, "Materials"):
 
 - Diffuse BSDF → DIFFUSE(color) (roughness > 0, Oren-Nayar in Cycles, is rendered as Lambert).
-- Glossy BSDF → GLOSSY(color, roughness) (GGX; Cycles's Multiscatter GGX keeps slightly more
-  energy at high roughness).
+- Glossy BSDF → GLOSSY(color, roughness; Multiscatter GGX, the node's default:
+  multiscatter_tint = color, Cycles's energy compensation with constant Fresnel).
 - Glass BSDF → GLASS(color, roughness, ior; Multiscatter GGX: multiscatter_tint = color, Cycles's
   energy compensation). Transparent BSDF → GLASS(color, 0, ior 1), a dielectric with no Fresnel
   and no bending, i.e. straight transmission.
@@ -133,7 +133,7 @@ def _stand_in(v, lo: float) -> float:
 
 
 def _multiscatter_tint(color) -> list:
-    """Fss of Cycles's Multiscatter GGX glass compensation, in [0, 1]: the colour, or for a
+    """Fss of Cycles's Multiscatter GGX compensation (glass, glossy), in [0, 1]: the colour, or for a
     program-driven one its constant stand-in (the compensation is per material, not per hit)."""
     c = _representative(color, 0.0) if isinstance(color, Value) else np.broadcast_to(color, 3)
     return [float(min(max(x, 0.0), 1.0)) for x in c]
@@ -441,8 +441,11 @@ class MaterialExporter:
         if kind in _GLOSSY_IDS:
             if kind == "ShaderNodeBsdfAnisotropic" and abs(self._const_value(node, "Anisotropy", problems, 0.0, ctx)) > 0:
                 problems.append(f"'{node.name}' anisotropy ignored")
-            return [{"type": "GLOSSY", "color": w * self._color(node, "Color", problems, ctx=ctx),
-                     "roughness": self._roughness(node, problems, ctx)}], np.zeros(3)
+            col = self._color(node, "Color", problems, ctx=ctx)
+            lobe = {"type": "GLOSSY", "color": w * col, "roughness": self._roughness(node, problems, ctx)}
+            if getattr(node, "distribution", "") == "MULTI_GGX":  # Cycles's compensation, Fss = colour
+                lobe["multiscatter_tint"] = _multiscatter_tint(col)
+            return [lobe], np.zeros(3)
         if kind == "ShaderNodeBsdfGlass":
             col = self._color(node, "Color", problems, ctx=ctx)
             ior = self._value(node, "IOR", problems, 1.45, ctx)

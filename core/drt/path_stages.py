@@ -677,9 +677,18 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # (NO_BUMP: the lobes are shaded about ns)
         nc_local = frame_normal(nc, t_ax, b_ax, ns)
         nv_local = frame_normal(nv, t_ax, b_ax, ns)
-        # lights are sampled over the hemisphere wo is in; transmitted light stays reachable by
-        # BSDF sampling, whose MIS weight is then 1
-        n_wo = ns if wo_l[2] >= 0.0 else neg(ns)
+        # front: the z sign of Cycles's closure normal N', the shading normal turned to wo's
+        # *geometric* side (sd->N flips with Ng). It equals wo's side of ns except at a smooth
+        # mesh's silhouette (wo above the facet, below ns): there reflection means wi above N',
+        # as Cycles's diffuse lobe lights it (materials.table.facing_front)
+        front = 1.0 if dot(wo, ng) >= 0.0 else -1.0
+        # there the two sides disagree by definition, so the side checks below (geometric vs
+        # shading reflection) cannot hold for every lobe: the BSDF and the rays decide, as in
+        # Cycles, which has no such check (a wi below the facet starts inside the mesh)
+        silhouette = wo_l[2] * front < 0.0
+        # lights are sampled over N''s hemisphere; transmitted light stays reachable by BSDF
+        # sampling, whose MIS weight is then 1
+        n_wo = ns if front > 0.0 else neg(ns)
 
         # --- next-event estimation
         if direct != DIRECT_BSDF and ld.n_strategies > 0 and not md.delta_only[mat]:
@@ -699,15 +708,15 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                                              add(p, scale(wi, dist)))
             if l_valid and lpdf > 0.0:
                 wi_l = to_local(wi, t_ax, b_ax, ns)
-                f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local, nc_local, nv_local)
-                f = scale(f, shading_factor(surf, prim, wi_l[2] if wo_l[2] >= 0.0 else -wi_l[2]))
+                f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local, nc_local, nv_local, front)
+                f = scale(f, shading_factor(surf, prim, wi_l[2] * front))
                 # geometric and shading normals must agree on reflection vs transmission
                 same_geo = dot(wi, ng) * dot(wo, ng) > 0.0
-                same_sh = wi_l[2] * wo_l[2] > 0.0
+                same_sh = wi_l[2] * front > 0.0
                 # (a shadow ray lifted toward the smooth surface may reach a light below the
                 # facet's plane: drt.terminator)
                 o_shadow, lifted = shadow_origin(surf, hits, i, prim, p, ng, ns_unmapped, wo, wi)
-                if (same_geo == same_sh or (lifted and same_sh)) and any_positive(f):
+                if (same_geo == same_sh or (lifted and same_sh) or silhouette) and any_positive(f):
                     w = nee_weight(direct, l_delta, lpdf, bpdf)
                     c = clamp(settings, scale(mul(mul(thr, f), le), w / lpdf), bounce > 0)
                     store(shadow.o, n_shadow, o_shadow)
@@ -728,7 +737,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # union of lobes but not within each lobe (glass, mixes: docs/estimators.md)
         ub0, ub1, u_lobe = sample_3d(sd, pixel, idx, base + 2)
         wi_l, weight, bpdf, kind, b_delta, b_valid = bsdf_sample_bump(md, mat, wo_l, u_lobe, ub0, ub1, ns_local,
-                                                                      nc_local, nv_local)
+                                                                      nc_local, nv_local, front)
         if settings.indirect != INDIRECT_BSDF and not md.transmission_or_delta[mat]:
             # the lecture's hemisphere estimators, on wo's side of the surface
             if settings.indirect == INDIRECT_COSINE:
@@ -737,19 +746,21 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             else:
                 wi_l = uniform_hemisphere(ub0, ub1)
                 bpdf = 0.5 / math.pi
-            if wo_l[2] < 0.0:
+            if front < 0.0:
                 wi_l = (wi_l[0], wi_l[1], -wi_l[2])
-            f, _ = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local, nc_local, nv_local)
+            f, _ = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local, nc_local, nv_local, front)
             b_valid = bpdf > 0.0
             weight = scale(f, 1.0 / bpdf) if b_valid else (0.0, 0.0, 0.0)
             b_delta = False
             kind = LOBE_DIFFUSE if md.has_diffuse[mat] else LOBE_GLOSSY
         wi = to_world(wi_l, t_ax, b_ax, ns)
         refl_geo = dot(wi, ng) * dot(wo, ng) > 0.0
-        refl_sh = wi_l[2] * wo_l[2] > 0.0
+        # reflection about the sampled lobe's side: N''s for diffuse-class lobes, else wo's
+        lobe_side = front if kind == LOBE_DIFFUSE or kind == LOBE_TRANSLUCENT else wo_l[2]
+        refl_sh = wi_l[2] * lobe_side > 0.0
         if refl_sh:  # shadow terminator shading offset (reflections only, as Cycles)
             weight = scale(weight, shading_factor(surf, prim, abs(wi_l[2])))
-        alive = b_valid and refl_geo == refl_sh and any_positive(weight)
+        alive = b_valid and (refl_geo == refl_sh or silhouette) and any_positive(weight)
         if alive and b_delta and kind == LOBE_TRANSMISSION and straight_lobe(md, mat, u_lobe):
             # --- an IOR-1 lobe (alpha, Transparent BSDF): the ray passes straight on, a
             # transparent bounce. No bounce is counted and the MIS state of the last real

@@ -426,7 +426,7 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
                 entry["ior"] = _number(lobe, "ior", lp, 1.45, lo=0, lo_open=True, hi=100)
             if t == "GLASS" and "reflection_weight" in lobe:  # a Principled transmission (issue 11)
                 entry["reflection_weight"] = _number(lobe, "reflection_weight", lp, 1.0, lo=0)
-            if t == "GLASS" and "multiscatter_tint" in lobe:  # Multiscatter GGX glass: Fss (issue 11)
+            if t in ("GLASS", "GLOSSY") and "multiscatter_tint" in lobe:  # Multiscatter GGX: Fss (issue 11)
                 entry["multiscatter_tint"] = _vector(lobe, "multiscatter_tint", lp, 3, lo=0.0).tolist()
             if t == "SUBSURFACE":
                 if version < 2:

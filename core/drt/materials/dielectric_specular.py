@@ -261,9 +261,28 @@ def metal_energy(alpha, f0, b, multiscatter, cos_o):
 
 @kernel
 def _metal_comp(f0, b, e_avg, missing):
-    fss = f0 + (1.0 - f0) * (1.0 / 21.0) - b * (1.0 / 126.0)
+    return energy_comp(f0 + (1.0 - f0) * (1.0 / 21.0) - b * (1.0 / 126.0), e_avg, missing)
+
+
+@kernel
+def energy_comp(fss, e_avg, missing):
+    """Cycles's Multiscatter GGX factor on a single-scattering lobe (microfacet_ggx_preserve_energy,
+    after Kulla & Conty): 1 + Fms·(1 − E)/E with Fms = Fss·E_avg / (1 − Fss·(1 − E_avg)), Fss
+    the lobe's average Fresnel (one channel), ``missing`` = (1 − E)/E."""
     fms = fss * e_avg / (1.0 - fss * (1.0 - e_avg))
     return 1.0 + fms * missing
+
+
+@kernel
+def glossy_energy(alpha, cos_o, fss):
+    """k(wo) per channel of a Glossy BSDF with Cycles's Multiscatter GGX: constant Fresnel, so
+    Fss is the node's colour (``fss``, a 3-tuple in [0, 1]); cos_o about the lobe's normal."""
+    rough = math.sqrt(alpha)
+    e = max(table_2d(GGX_E, rough, abs(cos_o)), 1e-6)
+    e_avg = table_1d(GGX_EAVG, rough)
+    missing = (1.0 - e) / e
+    return (energy_comp(fss[0], e_avg, missing), energy_comp(fss[1], e_avg, missing),
+            energy_comp(fss[2], e_avg, missing))
 
 
 @kernel

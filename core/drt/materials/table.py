@@ -53,7 +53,7 @@ from ..kernels.vec3 import build_frame, load, store, to_local, to_world
 from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample, refraction_eval, refraction_sample
 from .diffuse import INV_PI, diffuse_eval, diffuse_sample, translucent_eval, translucent_sample
 from .dielectric_specular import (average_albedo, dielectric_spec_delta_weight, dielectric_spec_eval,
-                                  layer_albedo_max, layer_weight, metallic_average_albedo,
+                                  glossy_energy, layer_albedo_max, layer_weight, metallic_average_albedo,
                                   metallic_delta_weight,
                                   metallic_eval)
 from .glass_ms import glass_energy_factor
@@ -148,7 +148,8 @@ _ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
 #:   lobe_fresnel (M, L, 5) f64: DIELECTRIC_SPECULAR lobes' (f0·tint r, g, b, multiscatter 0/1,
 #:   unused); METALLIC lobes' (F82 tint r, g, b, multiscatter 0/1, scalar weight k: the colour
 #:   is k × the base colour, Fresnel F0 = min(colour / k, 1)); GLASS lobes' (multiscatter Fss
-#:   r, g, b (0: none, drt.materials.glass_ms), reflection_weight set 0/1, reflection weight k)
+#:   r, g, b (0: none, drt.materials.glass_ms), reflection_weight set 0/1, reflection weight k);
+#:   GLOSSY lobes' (multiscatter Fss r, g, b (0: single-scatter GGX), unused, unused)
 #:   (drt.materials.dielectric_specular); lobe_layer (M, L) int64: slot of the
 #:   (drt.materials.dielectric_specular); lobe_layer (M, L) int64: slot of the layer lobe
 #:   (DIELECTRIC_SPECULAR or SHEEN) this lobe lies directly under, −1: none. Layers chain (a
@@ -234,7 +235,21 @@ def bsdf_eval(md, m, wo, wi):
     """md: MaterialData; m: material index; wo, wi: local unit 3-tuples. Returns (f, pdf): f the
     3-tuple Σ color_l·f_l·|cos θi| over the material's non-delta lobes, pdf = Σ p_l·pdf_l per
     unit solid angle of wi (exactly what ``bsdf_sample`` reports for a non-delta sample)."""
-    return bsdf_eval_bump(md, m, wo, wi, NO_BUMP, NO_BUMP, NO_BUMP)
+    return bsdf_eval_bump(md, m, wo, wi, NO_BUMP, NO_BUMP, NO_BUMP, 1.0 if wo[2] >= 0.0 else -1.0)
+
+
+@kernel
+def facing_front(wo, front):
+    """``wo`` as a diffuse-class lobe sees it: mirrored through the tangent plane when it lies
+    below the side ``front`` (±1, the local z's sign of Cycles's closure normal N', the shading
+    normal on the geometric side of wo). A Lambertian or translucent lobe depends on wo only
+    through that side: Cycles's ``bsdf_diffuse_eval`` lights every wi above N' and
+    ``bsdf_translucent_eval`` every wi below it, whatever wo's own angle to N'. At a smooth
+    mesh's silhouette wo is above the facet but below the smooth normal; there this, not wo's
+    side, picks the hemisphere (docs/lights.md, "silhouettes of smooth meshes")."""
+    if wo[2] * front < 0.0:
+        return (wo[0], wo[1], -wo[2])
+    return wo
 
 
 @kernel
@@ -277,14 +292,16 @@ def slot_cos(lobe_frame, lobe_coat, m, s, wo, nc_local, nv_local):
 
 
 @inline_kernel
-def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local):
+def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
     """``bsdf_eval`` at a normal-mapped hit (the local frame's z is the mapped normal;
     ``ns_local`` the unmapped one in that frame, ``NO_BUMP`` when there is no map): Cycles's
     bump map correction (``bump_shadowing``) applied. ``nc_local``: the coat normal in that
     frame (``NO_BUMP``: the coat has none of its own); ``nv_local`` the valid-reflection
     normal of glossy-class lobes (FRAME_VALID; NO_BUMP: the shading normal itself). Lobes with a
     ``lobe_frame`` are evaluated with wo and wi in their own normal's frame, and get Cycles's
-    bump side check and diffuse softening against their own normal."""
+    bump side check and diffuse softening against their own normal. ``front``: ±1, the z sign of
+    Cycles's N' (the shading normal on wo's geometric side) — it differs from wo's own side only
+    at a smooth silhouette, where diffuse-class lobes follow it (``facing_front``)."""
     g_diffuse = 1.0
     keep = True
     bumped = ns_local[2] < 1.0
@@ -346,10 +363,24 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local):
             pdf += md.lobe_select[m, s] * p
             continue
         if t == BSDF_DIFFUSE:
-            v, p = diffuse_eval(wo, wi)
+            v, p = diffuse_eval(facing_front(wo, front), wi)
             v *= g
         elif t == BSDF_GLOSSY:
             v, p = glossy_eval(wo, wi, md.lobe_alpha[m, s])
+            fss = (md.lobe_fresnel[m, s, 0], md.lobe_fresnel[m, s, 1], md.lobe_fresnel[m, s, 2])
+            if fss[0] + fss[1] + fss[2] > 0.0:  # Multiscatter GGX: a factor per channel
+                k = glossy_energy(md.lobe_alpha[m, s], wo[2], fss)
+                c0 = md.lobe_color[m, s, 0] * k[0]
+                c1 = md.lobe_color[m, s, 1] * k[1]
+                c2 = md.lobe_color[m, s, 2] * k[2]
+                if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
+                    uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, memo_top, memo_w)
+                    c0, c1, c2 = c0 * uw[0], c1 * uw[1], c2 * uw[2]
+                f0 += c0 * v
+                f1 += c1 * v
+                f2 += c2 * v
+                pdf += md.lobe_select[m, s] * p
+                continue
         elif t == BSDF_GLASS:
             v, p = glass_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
             c0, c1, c2 = md.lobe_color[m, s, 0], md.lobe_color[m, s, 1], md.lobe_color[m, s, 2]
@@ -370,7 +401,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local):
             pdf += md.lobe_select[m, s] * p
             continue
         elif t == BSDF_TRANSLUCENT:  # diffuse-class in Cycles: softened like diffuse
-            v, p = translucent_eval(wo, wi)
+            v, p = translucent_eval(facing_front(wo, front), wi)
             v *= g
         elif t == BSDF_REFRACTION:
             v, p = refraction_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
@@ -525,11 +556,11 @@ def pick_lobe(md, m, u_lobe):
 @inline_kernel
 def bsdf_sample(md, m, wo, u_lobe, u0, u1):
     """``bsdf_sample_bump`` without a normal map (see there)."""
-    return bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, NO_BUMP, NO_BUMP, NO_BUMP)
+    return bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, NO_BUMP, NO_BUMP, NO_BUMP, 1.0 if wo[2] >= 0.0 else -1.0)
 
 
 @inline_kernel
-def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local):
+def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, front):
     """md: MaterialData; m: material index; wo: local unit 3-tuple; u_lobe in [0, 1) picks the
     lobe (and, rescaled inside the picked interval, glass's reflect/refract choice); (u0, u1) in
     [0, 1)² picks the direction. Returns (wi, weight, pdf, lobe_kind, is_delta, valid):
@@ -538,7 +569,8 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local):
     and pdf, LOBE_NONE and is_delta False (wi is kept where one was drawn). ``ns_local``: the
     unmapped shading normal at a normal-mapped hit (``bsdf_eval_bump``), else ``NO_BUMP``;
     ``nc_local``, ``nv_local`` the coat and valid-reflection normals (``bsdf_eval_bump``): a lobe
-    with a ``lobe_frame`` samples wi about its own normal."""
+    with a ``lobe_frame`` samples wi about its own normal; ``front`` the side diffuse-class lobes
+    reflect on (``bsdf_eval_bump``)."""
     zero = (0.0, 0.0, 0.0)
     count = md.lobe_count[m]
     if count == 0 or wo[2] == 0.0:
@@ -564,6 +596,7 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local):
             tx, bx = build_frame(n_slot)
             wo = to_local(wo_main, tx, bx, n_slot)
     if t == BSDF_DIFFUSE:
+        wo = facing_front(wo, front)
         wi = diffuse_sample(wo, u0, u1)
         kind = LOBE_DIFFUSE
     elif t == BSDF_GLOSSY or t == BSDF_DIELECTRIC_SPECULAR or t == BSDF_METALLIC:
@@ -579,6 +612,7 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local):
         wi, refracted = glass_sample(wo, alpha, ior, u_rest, u0, u1)
         kind = LOBE_TRANSMISSION if refracted else LOBE_GLOSSY
     elif t == BSDF_TRANSLUCENT:
+        wo = facing_front(wo, front)
         wi = translucent_sample(wo, u0, u1)
         refracted = True
         kind = LOBE_TRANSLUCENT
@@ -640,7 +674,7 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local):
         return wi, color, pdf, kind, False, True
 
     # One-sample MIS over lobes: the whole material's f and pdf at the sampled wi.
-    f, pdf = bsdf_eval_bump(md, m, wo_main, wi, ns_local, nc_local, nv_local)
+    f, pdf = bsdf_eval_bump(md, m, wo_main, wi, ns_local, nc_local, nv_local, front)
     if not pdf > 0.0:
         return wi, zero, 0.0, LOBE_NONE, False, False
     return wi, (f[0] / pdf, f[1] / pdf, f[2] / pdf), pdf, kind, False, True
@@ -649,7 +683,9 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local):
 @kernel
 def _eval_rows(md, mat, wo, wi, nc, f, pdf):
     for i in range(mat.shape[0]):
-        fi, p = bsdf_eval_bump(md, mat[i], load(wo, i), load(wi, i), NO_BUMP, load(nc, i), NO_BUMP)
+        w_o = load(wo, i)
+        fi, p = bsdf_eval_bump(md, mat[i], w_o, load(wi, i), NO_BUMP, load(nc, i), NO_BUMP,
+                               1.0 if w_o[2] >= 0.0 else -1.0)
         store(f, i, fi)
         pdf[i] = p
 
@@ -657,8 +693,9 @@ def _eval_rows(md, mat, wo, wi, nc, f, pdf):
 @kernel
 def _sample_rows(md, mat, wo, u_lobe, u2, nc, wi, weight, pdf, kind, is_delta, valid):
     for i in range(mat.shape[0]):
-        w, wt, p, k, d, ok = bsdf_sample_bump(md, mat[i], load(wo, i), u_lobe[i], u2[i, 0], u2[i, 1], NO_BUMP,
-                                              load(nc, i), NO_BUMP)
+        w_o = load(wo, i)
+        w, wt, p, k, d, ok = bsdf_sample_bump(md, mat[i], w_o, u_lobe[i], u2[i, 0], u2[i, 1], NO_BUMP,
+                                              load(nc, i), NO_BUMP, 1.0 if w_o[2] >= 0.0 else -1.0)
         store(wi, i, w)
         store(weight, i, wt)
         pdf[i] = p
@@ -1012,8 +1049,8 @@ class MaterialTable:
                     if k < 0.0:
                         raise _fail(lw, f"reflection_weight must be >= 0, got {k!r}")
                     fr[3], fr[4] = 1.0, k
-                if kind == "GLASS" and "multiscatter_tint" in lobe:
-                    # Cycles's Multiscatter GGX glass: Fss of its energy compensation
+                if kind in ("GLASS", "GLOSSY") and "multiscatter_tint" in lobe:
+                    # Cycles's Multiscatter GGX glass / glossy: Fss of its energy compensation
                     fr[:3] = np.clip(_rgb(lobe["multiscatter_tint"], lw, "multiscatter_tint"), 0.0, 1.0)
                 if kind in ("GLASS", "REFRACTION"):
                     if "ior" not in lobe:
