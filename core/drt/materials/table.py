@@ -325,6 +325,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
         wo = wo_main
         wi = wi_main
         g = g_diffuse
+        c0, c1, c2 = md.lobe_color[m, s, 0], md.lobe_color[m, s, 1], md.lobe_color[m, s, 2]
         if framed and md.lobe_frame[m, s] != FRAME_SHADING:
             n = slot_normal(md.lobe_frame, md.lobe_coat, m, s, nc_local, nv_local)
             if n[2] < 1.0:
@@ -370,20 +371,9 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             fss = (md.lobe_fresnel[m, s, 0], md.lobe_fresnel[m, s, 1], md.lobe_fresnel[m, s, 2])
             if fss[0] + fss[1] + fss[2] > 0.0:  # Multiscatter GGX: a factor per channel
                 k = glossy_energy(md.lobe_alpha[m, s], wo[2], fss)
-                c0 = md.lobe_color[m, s, 0] * k[0]
-                c1 = md.lobe_color[m, s, 1] * k[1]
-                c2 = md.lobe_color[m, s, 2] * k[2]
-                if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
-                    uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, memo_top, memo_w)
-                    c0, c1, c2 = c0 * uw[0], c1 * uw[1], c2 * uw[2]
-                f0 += c0 * v
-                f1 += c1 * v
-                f2 += c2 * v
-                pdf += md.lobe_select[m, s] * p
-                continue
+                c0, c1, c2 = c0 * k[0], c1 * k[1], c2 * k[2]
         elif t == BSDF_GLASS:
             v, p = glass_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
-            c0, c1, c2 = md.lobe_color[m, s, 0], md.lobe_color[m, s, 1], md.lobe_color[m, s, 2]
             if md.lobe_fresnel[m, s, 3] > 0.0 and wo[2] * wi[2] > 0.0:
                 # a Principled transmission: the reflection is weighted by the lobe's
                 # scalar weight (untinted), only the refraction by its colour
@@ -392,14 +382,6 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             if fss[0] + fss[1] + fss[2] > 0.0:  # Multiscatter GGX glass (drt.materials.glass_ms)
                 k = glass_energy_factor(md.lobe_alpha[m, s], md.lobe_ior[m, s], wo[2], fss)
                 c0, c1, c2 = c0 * k[0], c1 * k[1], c2 * k[2]
-            if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
-                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, memo_top, memo_w)
-                c0, c1, c2 = c0 * uw[0], c1 * uw[1], c2 * uw[2]
-            f0 += c0 * v
-            f1 += c1 * v
-            f2 += c2 * v
-            pdf += md.lobe_select[m, s] * p
-            continue
         elif t == BSDF_TRANSLUCENT:  # diffuse-class in Cycles: softened like diffuse
             v, p = translucent_eval(facing_front(wo, front), wi)
             v *= g
@@ -412,21 +394,21 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             v, p = velvet_eval(wo, wi, md.lobe_alpha[m, s])
         else:
             continue
-        if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
+        if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
             if md.has_layers[m] == 1:  # one plain specular layer: a scalar factor
                 v *= single_layer_weight(md, m, md.lobe_layer[m, s], wo_main)
-                f0 += md.lobe_color[m, s, 0] * v
-                f1 += md.lobe_color[m, s, 1] * v
-                f2 += md.lobe_color[m, s, 2] * v
+                f0 += c0 * v
+                f1 += c1 * v
+                f2 += c2 * v
             else:
                 uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, memo_top, memo_w)
-                f0 += md.lobe_color[m, s, 0] * (v * uw[0])
-                f1 += md.lobe_color[m, s, 1] * (v * uw[1])
-                f2 += md.lobe_color[m, s, 2] * (v * uw[2])
+                f0 += c0 * (v * uw[0])
+                f1 += c1 * (v * uw[1])
+                f2 += c2 * (v * uw[2])
         else:
-            f0 += md.lobe_color[m, s, 0] * v
-            f1 += md.lobe_color[m, s, 1] * v
-            f2 += md.lobe_color[m, s, 2] * v
+            f0 += c0 * v
+            f1 += c1 * v
+            f2 += c2 * v
         pdf += md.lobe_select[m, s] * p
     return (f0, f1, f2), pdf
 
