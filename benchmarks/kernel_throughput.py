@@ -12,7 +12,8 @@ thread scaling in one process (the CLI's core, and inside Blender through the ad
    CPU time (the rest of the time is DRT's own work).
 3. Where the 1-thread time goes (best of three renders, process CPU time, each stage wrapped in
    a timer): the camera stage, `shade` (all per-hit work), Embree itself, DRT's glue around
-   Embree (float32 rays, hit arrays, surface data), and the rest (render loop, film).
+   Embree (float32 rays, hit arrays, surface data), the subsurface walks if the scene has any
+   (their own Embree calls included), and the rest (render loop, film).
 4. Unless --no-blender: in a bpy subprocess with the add-on registered, F12-renders the .blend
    beside the scene with Performance > Threads fixed at 1 and at 2 (after a warm-up render) and
    prints the speed-up inside Blender.
@@ -140,6 +141,7 @@ def stage_breakdown(scene, ctx, spp, n_rays):
     """Per-stage process CPU time of 1-thread renders (best of three per stage)."""
     import drt.path_stages as stages
     from drt.render import render
+    from drt.subsurface import SubsurfaceWalker
 
     tracer = ctx.tracer
     spent = {}
@@ -153,12 +155,13 @@ def stage_breakdown(scene, ctx, spp, n_rays):
                 spent[name] = spent.get(name, 0.0) + time.process_time() - c0
         return wrapper
 
-    originals = dict(shade=stages.shade, camera_stage=stages.camera_stage)
+    originals = dict(shade=stages.shade, camera_stage=stages.camera_stage, walk=SubsurfaceWalker.run)
     patched_tracer = ("intersect", "occluded", "_run")
     best = {}
     try:
         stages.shade = timed("shade", originals["shade"])
         stages.camera_stage = timed("camera_stage", originals["camera_stage"])
+        SubsurfaceWalker.run = timed("walk", originals["walk"])
         for name in patched_tracer:
             setattr(tracer, name, timed(name, getattr(tracer, name)))
         for _ in range(3):
@@ -170,6 +173,7 @@ def stage_breakdown(scene, ctx, spp, n_rays):
                 best[k] = min(best.get(k, 1e9), v)
     finally:
         stages.shade, stages.camera_stage = originals["shade"], originals["camera_stage"]
+        SubsurfaceWalker.run = originals["walk"]
         for name in patched_tracer:
             tracer.__dict__.pop(name, None)
     rows = [("shade (per-hit work: emission, MIS, NEE, BSDF sampling)", best.get("shade", 0.0)),
@@ -177,6 +181,8 @@ def stage_breakdown(scene, ctx, spp, n_rays):
             ("Embree itself (Tracer._run)", best.get("_run", 0.0)),
             ("glue around Embree (intersect + occluded - Embree)",
              best.get("intersect", 0.0) + best.get("occluded", 0.0) - best.get("_run", 0.0))]
+    if best.get("walk", 0.0) > 0.0:  # its Embree calls are inside, not in the rows above
+        rows.append(("subsurface random walks (SubsurfaceWalker.run)", best["walk"]))
     rest = best["total"] - sum(v for _, v in rows)
     print(f"  where one thread's time goes (process CPU time, best of 3 per stage; {n_rays} rays):")
     for name, v in rows + [("render loop, film, the rest", rest), ("total", best["total"])]:

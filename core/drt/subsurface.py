@@ -47,6 +47,8 @@ from collections import namedtuple
 
 import numpy as np
 
+from . import embree_direct
+from .embree_direct import ray_buffer, trace1
 from .kernels import inline_kernel, kernel
 from .kernels.vec3 import build_frame, dot, load, normalize, store, to_world
 from .materials.subsurface_lobe import MIN_ALPHA, remap
@@ -174,94 +176,99 @@ def _coeffs(ws, i, step):
     return st2, ss2, 0.0, 0.75
 
 
+@inline_kernel
+def _sample_row(ws, i):
+    """Sample channel, direction and free flight of walk i; sets o/d/tmax of the ray to cast
+    (tmax: the flight, or on the first step ≥ 10 mean free paths to look for the opposite
+    side)."""
+    step = ws.step[i]
+    key = ws.key[i]
+    st, ss, g, guided_frac = _coeffs(ws, i, step)
+    # channel ∝ |throughput · α| (balance-heuristic MIS over channels)
+    w0 = abs(ws.thr[i, 0] * ws.alpha[i, 0])
+    w1 = abs(ws.thr[i, 1] * ws.alpha[i, 1])
+    w2 = abs(ws.thr[i, 2] * ws.alpha[i, 2])
+    total = w0 + w1 + w2
+    if total > 1e-30:
+        p0, p1, p2 = w0 / total, w1 / total, w2 / total
+    else:
+        p0 = p1 = p2 = 1.0 / 3.0
+    u = walk_rand(key, step, 0)
+    if u < p0:
+        sample_st = st[0]
+    elif u < p0 + p1:
+        sample_st = st[1]
+    else:
+        sample_st = st[2]
+    ut = walk_rand(key, step, 1)
+    fwd_factor = 0.0
+    bwd_factor = 0.0
+    fwd_stretch = 1.0
+    bwd_stretch = 1.0
+    bwd_frac = 0.0
+    if step > 0:
+        v = ws.diff_len[i]
+        plog = ws.phase_log[i]
+        guided = walk_rand(key, step, 2) < guided_frac
+        n = load(ws.n_entry, i)
+        backward = False
+        if ws.opposite[i]:
+            od = ws.opp_dist[i]
+            x = -((ws.o[i, 0] - ws.p_entry[i, 0]) * n[0] + (ws.o[i, 1] - ws.p_entry[i, 1]) * n[1]
+                  + (ws.o[i, 2] - ws.p_entry[i, 2]) * n[2])
+            x = min(max(x, 0.0), od)
+            bwd_frac = 1.0 / (1.0 + math.exp(min((od - 2.0 * x) / v, 700.0)))
+            backward = walk_rand(key, step, 3) < bwd_frac
+        us0 = walk_rand(key, step, 4)
+        us1 = walk_rand(key, step, 5)
+        d_old = load(ws.d, i)
+        if guided:
+            cos_theta = v - (v + 1.0) * math.exp(-us0 * plog)
+            if backward:
+                cos_theta = -cos_theta
+            nd = direction_from_cosine(n, cos_theta, us1)
+            hg = hg_pdf(dot(d_old, nd), g)
+        else:
+            ct = 1.0 - 2.0 * us0
+            if abs(g) >= 1e-3:
+                k = (1.0 - g * g) / (1.0 - g * ct)
+                ct = (1.0 + g * g - k * k) / (2.0 * g)
+            ct = min(max(ct, -1.0), 1.0)
+            hg = hg_pdf(ct, g)
+            nd = direction_from_cosine(d_old, ct, us1)
+            cos_theta = dot(nd, n)
+        nd, _ = normalize(nd)
+        store(ws.d, i, nd)
+        # guided / classic pdf ratio of the direction (channel independent)
+        fwd_factor = (0.5 / math.pi) / ((v - cos_theta) * plog) / hg
+        bwd_factor = (0.5 / math.pi) / ((v + cos_theta) * plog) / hg
+        fwd_stretch = 1.0 - cos_theta / v
+        bwd_stretch = 1.0 + cos_theta / v
+        if guided:
+            sample_st *= bwd_stretch if backward else fwd_stretch
+    t = -math.log(1.0 - ut) / sample_st
+    if step == 0:
+        st_min = min(st[0], min(st[1], st[2]))
+        ws.tmax[i] = max(t, 10.0 / st_min)
+    else:
+        ws.tmax[i] = t
+    ws.t_sample[i] = t
+    ws.guided_frac[i] = guided_frac if step > 0 else 0.0
+    ws.pend[i, 0] = p0
+    ws.pend[i, 1] = p1
+    ws.pend[i, 2] = p2
+    ws.pend[i, 3] = fwd_factor
+    ws.pend[i, 4] = bwd_factor
+    ws.pend[i, 5] = fwd_stretch
+    ws.pend[i, 6] = bwd_stretch
+    ws.pend[i, 7] = bwd_frac
+
+
 @kernel
 def walk_sample(ws, rows):
-    """Sample channel, direction and free flight of every row in ``rows``; sets o/d/tmax of
-    the ray to cast (tmax: the flight, or on the first step ≥ 10 mean free paths to look for
-    the opposite side)."""
+    """``_sample_row`` for every walk in ``rows`` (one wavefront step)."""
     for r in range(rows.shape[0]):
-        i = rows[r]
-        step = ws.step[i]
-        key = ws.key[i]
-        st, ss, g, guided_frac = _coeffs(ws, i, step)
-        # channel ∝ |throughput · α| (balance-heuristic MIS over channels)
-        w0 = abs(ws.thr[i, 0] * ws.alpha[i, 0])
-        w1 = abs(ws.thr[i, 1] * ws.alpha[i, 1])
-        w2 = abs(ws.thr[i, 2] * ws.alpha[i, 2])
-        total = w0 + w1 + w2
-        if total > 1e-30:
-            p0, p1, p2 = w0 / total, w1 / total, w2 / total
-        else:
-            p0 = p1 = p2 = 1.0 / 3.0
-        u = walk_rand(key, step, 0)
-        if u < p0:
-            sample_st = st[0]
-        elif u < p0 + p1:
-            sample_st = st[1]
-        else:
-            sample_st = st[2]
-        ut = walk_rand(key, step, 1)
-        fwd_factor = 0.0
-        bwd_factor = 0.0
-        fwd_stretch = 1.0
-        bwd_stretch = 1.0
-        bwd_frac = 0.0
-        if step > 0:
-            v = ws.diff_len[i]
-            plog = ws.phase_log[i]
-            guided = walk_rand(key, step, 2) < guided_frac
-            n = load(ws.n_entry, i)
-            backward = False
-            if ws.opposite[i]:
-                od = ws.opp_dist[i]
-                x = -((ws.o[i, 0] - ws.p_entry[i, 0]) * n[0] + (ws.o[i, 1] - ws.p_entry[i, 1]) * n[1]
-                      + (ws.o[i, 2] - ws.p_entry[i, 2]) * n[2])
-                x = min(max(x, 0.0), od)
-                bwd_frac = 1.0 / (1.0 + math.exp(min((od - 2.0 * x) / v, 700.0)))
-                backward = walk_rand(key, step, 3) < bwd_frac
-            us0 = walk_rand(key, step, 4)
-            us1 = walk_rand(key, step, 5)
-            d_old = load(ws.d, i)
-            if guided:
-                cos_theta = v - (v + 1.0) * math.exp(-us0 * plog)
-                if backward:
-                    cos_theta = -cos_theta
-                nd = direction_from_cosine(n, cos_theta, us1)
-                hg = hg_pdf(dot(d_old, nd), g)
-            else:
-                ct = 1.0 - 2.0 * us0
-                if abs(g) >= 1e-3:
-                    k = (1.0 - g * g) / (1.0 - g * ct)
-                    ct = (1.0 + g * g - k * k) / (2.0 * g)
-                ct = min(max(ct, -1.0), 1.0)
-                hg = hg_pdf(ct, g)
-                nd = direction_from_cosine(d_old, ct, us1)
-                cos_theta = dot(nd, n)
-            nd, _ = normalize(nd)
-            store(ws.d, i, nd)
-            # guided / classic pdf ratio of the direction (channel independent)
-            fwd_factor = (0.5 / math.pi) / ((v - cos_theta) * plog) / hg
-            bwd_factor = (0.5 / math.pi) / ((v + cos_theta) * plog) / hg
-            fwd_stretch = 1.0 - cos_theta / v
-            bwd_stretch = 1.0 + cos_theta / v
-            if guided:
-                sample_st *= bwd_stretch if backward else fwd_stretch
-        t = -math.log(1.0 - ut) / sample_st
-        if step == 0:
-            st_min = min(st[0], min(st[1], st[2]))
-            ws.tmax[i] = max(t, 10.0 / st_min)
-        else:
-            ws.tmax[i] = t
-        ws.t_sample[i] = t
-        ws.guided_frac[i] = guided_frac if step > 0 else 0.0
-        ws.pend[i, 0] = p0
-        ws.pend[i, 1] = p1
-        ws.pend[i, 2] = p2
-        ws.pend[i, 3] = fwd_factor
-        ws.pend[i, 4] = bwd_factor
-        ws.pend[i, 5] = fwd_stretch
-        ws.pend[i, 6] = bwd_stretch
-        ws.pend[i, 7] = bwd_frac
+        _sample_row(ws, rows[r])
 
 
 @inline_kernel
@@ -271,73 +278,122 @@ def _flight_pdf(sigma, t, hit):
     return tr if hit else sigma * tr
 
 
+@inline_kernel
+def _advance_row(ws, i, th):
+    """After walk i's ray cast (th: distance to the object's surface, inf if none within tmax):
+    advance, update the throughput with the MIS pdf, decide exit / death. Returns whether the
+    walk goes on."""
+    step = ws.step[i]
+    st, ss, g, guided_frac = _coeffs(ws, i, step)
+    t = ws.t_sample[i]
+    hit = th < ws.tmax[i] and math.isfinite(th)
+    if step == 0:
+        if hit:
+            ws.opposite[i] = True
+            n = load(ws.n_entry, i)
+            ws.opp_dist[i] = -((ws.o[i, 0] + th * ws.d[i, 0] - ws.p_entry[i, 0]) * n[0]
+                               + (ws.o[i, 1] + th * ws.d[i, 1] - ws.p_entry[i, 1]) * n[1]
+                               + (ws.o[i, 2] + th * ws.d[i, 2] - ws.p_entry[i, 2]) * n[2])
+        hit = hit and th < t
+    if hit:
+        t = th
+    fwd_factor = ws.pend[i, 3]
+    bwd_factor = ws.pend[i, 4]
+    fwd_stretch = ws.pend[i, 5]
+    bwd_stretch = ws.pend[i, 6]
+    bwd_frac = ws.pend[i, 7]
+    denom = 0.0
+    contrib = (0.0, 0.0, 0.0)
+    for c in range(3):
+        s = st[c]
+        tr = math.exp(-s * t)
+        pdf = tr if hit else s * tr
+        if step > 0:
+            guided = _flight_pdf(fwd_stretch * s, t, hit)
+            if ws.opposite[i]:
+                back = _flight_pdf(bwd_stretch * s, t, hit)
+                guided = guided * fwd_factor * (1.0 - bwd_frac) + back * bwd_factor * bwd_frac
+            else:
+                guided *= fwd_factor
+            pdf = pdf * (1.0 - guided_frac) + guided * guided_frac
+        denom += ws.pend[i, c] * pdf
+        val = tr if hit else ss[c] * tr
+        if c == 0:
+            contrib = (val, contrib[1], contrib[2])
+        elif c == 1:
+            contrib = (contrib[0], val, contrib[2])
+        else:
+            contrib = (contrib[0], contrib[1], val)
+    for c in range(3):
+        ws.o[i, c] += t * ws.d[i, c]
+    if not denom > 0.0 or not math.isfinite(denom):
+        ws.state[i] = SSS_DEAD
+        return False
+    for c in range(3):
+        ws.thr[i, c] *= contrib[c] / denom
+    ws.step[i] = step + 1
+    if hit:
+        ws.state[i] = SSS_EXIT
+        return False
+    tmaxc = max(ws.thr[i, 0], max(ws.thr[i, 1], ws.thr[i, 2]))
+    if not tmaxc >= VOLUME_THROUGHPUT_EPSILON or step + 1 >= BSSRDF_MAX_BOUNCES:
+        ws.state[i] = SSS_DEAD
+        return False
+    return True
+
+
 @kernel
 def walk_advance(ws, rows, hit_t):
-    """After the ray cast (hit_t: distance to the object's surface, inf if none within tmax):
-    advance, update the throughput with the MIS pdf, decide exit / death. Returns how many rows
+    """``_advance_row`` for every walk in ``rows`` (hit_t[r]: row r's answer). Returns how many
     are still walking."""
     walking = 0
     for r in range(rows.shape[0]):
-        i = rows[r]
-        step = ws.step[i]
-        st, ss, g, guided_frac = _coeffs(ws, i, step)
-        t = ws.t_sample[i]
-        th = hit_t[r]
-        hit = th < ws.tmax[i] and math.isfinite(th)
-        if step == 0:
-            if hit:
-                ws.opposite[i] = True
-                n = load(ws.n_entry, i)
-                ws.opp_dist[i] = -((ws.o[i, 0] + th * ws.d[i, 0] - ws.p_entry[i, 0]) * n[0]
-                                   + (ws.o[i, 1] + th * ws.d[i, 1] - ws.p_entry[i, 1]) * n[1]
-                                   + (ws.o[i, 2] + th * ws.d[i, 2] - ws.p_entry[i, 2]) * n[2])
-            hit = hit and th < t
-        if hit:
-            t = th
-        fwd_factor = ws.pend[i, 3]
-        bwd_factor = ws.pend[i, 4]
-        fwd_stretch = ws.pend[i, 5]
-        bwd_stretch = ws.pend[i, 6]
-        bwd_frac = ws.pend[i, 7]
-        denom = 0.0
-        contrib = (0.0, 0.0, 0.0)
-        for c in range(3):
-            s = st[c]
-            tr = math.exp(-s * t)
-            pdf = tr if hit else s * tr
-            if step > 0:
-                guided = _flight_pdf(fwd_stretch * s, t, hit)
-                if ws.opposite[i]:
-                    back = _flight_pdf(bwd_stretch * s, t, hit)
-                    guided = guided * fwd_factor * (1.0 - bwd_frac) + back * bwd_factor * bwd_frac
-                else:
-                    guided *= fwd_factor
-                pdf = pdf * (1.0 - guided_frac) + guided * guided_frac
-            denom += ws.pend[i, c] * pdf
-            val = tr if hit else ss[c] * tr
-            if c == 0:
-                contrib = (val, contrib[1], contrib[2])
-            elif c == 1:
-                contrib = (contrib[0], val, contrib[2])
-            else:
-                contrib = (contrib[0], contrib[1], val)
-        for c in range(3):
-            ws.o[i, c] += t * ws.d[i, c]
-        if not denom > 0.0 or not math.isfinite(denom):
-            ws.state[i] = SSS_DEAD
-            continue
-        for c in range(3):
-            ws.thr[i, c] *= contrib[c] / denom
-        ws.step[i] = step + 1
-        if hit:
-            ws.state[i] = SSS_EXIT
-            continue
-        tmaxc = max(ws.thr[i, 0], max(ws.thr[i, 1], ws.thr[i, 2]))
-        if not tmaxc >= VOLUME_THROUGHPUT_EPSILON or step + 1 >= BSSRDF_MAX_BOUNCES:
-            ws.state[i] = SSS_DEAD
-            continue
-        walking += 1
+        if _advance_row(ws, rows[r], hit_t[r]):
+            walking += 1
     return walking
+
+
+@kernel
+def walk_local(ws, rows, fn, scene, words, positions, triangles, face_ng, offset, eps0,
+               ex_prim, ex_b, ex_p, ex_ng):
+    """Every remaining step of the walks in ``rows``, all on one static object whose Embree
+    scene (``scene``, its own triangles: prim ids local, ``offset`` added for global ids) this
+    kernel queries itself, one ray per step (``drt.embree_direct``): the same steps as the
+    wavefront (``walk_sample``, one Embree query, ``walk_advance``) without a Python round trip
+    per step. The exit vertex of every hit goes to ex_prim/ex_b/ex_p/ex_ng (as
+    ``trace.static_surface`` computes hit points); eps0: the first ray's push off the entry
+    point. Returns the number of steps taken."""
+    bits, base, addr = ray_buffer(words)
+    steps = 0
+    for r in range(rows.shape[0]):
+        i = rows[r]
+        while ws.state[i] == SSS_WALK:
+            _sample_row(ws, i)
+            d = load(ws.d, i)
+            push = 0.0
+            tmax = ws.tmax[i]
+            if ws.step[i] == 0:
+                push = eps0[i]
+                tmax = max(tmax - push, 0.0)
+            o = (ws.o[i, 0] + push * d[0], ws.o[i, 1] + push * d[1], ws.o[i, 2] + push * d[2])
+            t, prim, u, v = trace1(fn, scene, words, bits, base, addr, o, d, tmax)
+            th = math.inf
+            if prim >= 0 and (ws.step[i] > 0 or tmax > 0.0):  # (as the wavefront's first-ray rule)
+                th = t + push
+                ex_prim[i] = prim + offset
+                ex_b[i, 0] = u
+                ex_b[i, 1] = v
+                a, b, c = triangles[prim, 0], triangles[prim, 1], triangles[prim, 2]
+                for axis in range(3):
+                    v0 = float(positions[a, axis])
+                    ex_p[i, axis] = v0 + u * (float(positions[b, axis]) - v0) + v * (float(positions[c, axis]) - v0)
+                    ex_ng[i, axis] = face_ng[prim, axis]
+                if ex_ng[i, 0] == 0.0 and ex_ng[i, 1] == 0.0 and ex_ng[i, 2] == 0.0:
+                    for axis in range(3):
+                        ex_ng[i, axis] = -d[axis]
+            _advance_row(ws, i, th)
+            steps += 1
+    return steps
 
 
 @kernel
@@ -362,9 +418,36 @@ def _patch_exits(state, live, sss_prim, sss_b, sss_p, sss_n, prim, t, b1, b2, p,
                 moving[i] = False
 
 
+def _direct_walk_args(tracer):
+    """walk_local's Embree arguments for a local tracer (rtcIntersect1's address, the scene
+    handle, positions, triangles, unit face normals), or None to keep the wavefront: when the
+    Embree handles are not confirmed or single rays do not answer exactly as embreex's batches
+    do on a few hundred probe rays through the object's bounding box."""
+    if tracer.static is None or not embree_direct.intersect1_address():
+        return None
+    geom = tracer.geom
+    used = geom.static_positions[np.unique(geom.static_triangles)]
+    lo, hi = used.min(axis=0), used.max(axis=0)
+    rng = np.random.default_rng(0)
+    o = lo + (hi - lo) * rng.random((256, 3))
+    d = rng.normal(size=(256, 3))
+    d /= np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
+    tmax = np.where(np.arange(256) % 2 == 0, np.inf, (hi - lo).max() * rng.random(256))
+    try:
+        if not embree_direct.matches_embreex(tracer.static, o, d, tmax):
+            return None
+    except Exception:  # noqa: BLE001 - any surprise: the wavefront is always right
+        return None
+    return (embree_direct.intersect1_address(), embree_direct.scene_address(tracer.static),
+            geom.static_positions, geom.static_triangles, tracer._static_ng)
+
+
 class SubsurfaceWalker:
-    """Runs the random walks of the paths ``shade`` marked SSS_WALK, as a wavefront: per step
-    one compiled sampling pass, one Embree query per entered object, one compiled update.
+    """Runs the random walks of the paths ``shade`` marked SSS_WALK. On a static object each
+    walk runs whole inside one kernel (``walk_local``) that asks Embree for one ray per step;
+    walks on moving objects (or where Embree's C handles are not confirmed) run as a wavefront:
+    per step one compiled sampling pass, one Embree query per entered object, one compiled
+    update.
 
     Hits are restricted to the entered object as Cycles's ``scene_intersect_local`` does: every
     static object with an SSS material gets its own Embree scene. Walks on moving objects use
@@ -387,6 +470,9 @@ class SubsurfaceWalker:
                 sub = SceneGeometry(origin_shift=geom.origin_shift, static_positions=geom.static_positions,
                                     static_triangles=np.ascontiguousarray(geom.static_triangles[s:e]))
                 self.local[k] = (Tracer(sub), s)
+        # objects whose walks run whole in one kernel, Embree called per step (walk_local)
+        self.direct = {k: args for k, (tracer, s) in self.local.items()
+                       if (args := _direct_walk_args(tracer)) is not None}
         # statistics: walk steps summed over rows, walks, walks out of steps, other deaths
         self.steps_taken = self.walks = self.capped = self.died = 0
 
@@ -435,7 +521,15 @@ class SubsurfaceWalker:
         cos = np.abs(np.einsum("ij,ij->i", ws.d, ws.n_entry))
         eps0 = (OFFSET_ABSOLUTE + OFFSET_RELATIVE * np.abs(ws.o).max(axis=1)) / np.maximum(cos, 1e-3)
         kinds = np.unique(group)
-        single = int(kinds[0]) if len(kinds) == 1 else None  # the usual case: one object
+        for k in kinds:
+            if int(k) in self.direct:  # the usual case: static objects, compiled walks
+                fn, scene, positions, triangles, face_ng = self.direct[int(k)]
+                mine = np.flatnonzero((group == k) & (ws.state == SSS_WALK))
+                self.steps_taken += walk_local(ws, mine, fn, scene, embree_direct.scratch(), positions,
+                                               triangles, face_ng, self.local[int(k)][1], eps0,
+                                               ex_prim, ex_b, ex_p, ex_ng)
+        kinds = np.array([k for k in kinds if int(k) not in self.direct])
+        single = int(kinds[0]) if len(kinds) == 1 else None  # one object left
         for it in range(BSSRDF_MAX_BOUNCES):
             act = np.flatnonzero(ws.state == SSS_WALK)
             if not len(act):
