@@ -340,3 +340,51 @@ def test_emissive_absorbing_medium_integrates_emission_analytically():
     add_mesh(h, a, "slab", *box_mesh(2.0, 1.0), material=0, matrix=translation(0, 0, -0.5))
     expected = np.array([2.0, 2.0 * (1 - math.exp(-1.0)), 2.0 * (1 - math.exp(-3.0)) / 3.0])
     np.testing.assert_allclose(_render(h, a).reshape(-1, 3), np.tile(expected, (64, 1)), rtol=1e-4)
+
+
+def _haze_scene(world_volume, spp=64):
+    """A diffuse floor and ball in a world medium, lit by a sun and a point light."""
+    h = base_header(24, 16, spp, world=(0.2, 0.25, 0.35), volume_bounces=1,
+                    camera={"type": "PERSP", "matrix_world": look_at((0, -5, 1.5), (0, 0.3, 0.6)), "lens": 35.0})
+    h["world"]["volume"] = world_volume
+    h["materials"].append({"name": "grey", "lobes": [{"type": "DIFFUSE", "color": [0.5, 0.5, 0.5]}]})
+    a = {}
+    add_mesh(h, a, "floor", np.array([[-8, -8, 0], [8, -8, 0], [8, 8, 0], [-8, 8, 0]], float),
+             np.array([[0, 1, 2], [0, 2, 3]]), 0)
+    pos, tri, nrm = uv_sphere(0.6, rings=8, segments=16)
+    add_mesh(h, a, "ball", pos + [0.0, 0.5, 0.6], tri, 0, normals=nrm)
+    h["lights"].append({"type": "SUN", "matrix_world": look_at((0, 0, 5), (1, 1, 0)), "color": [1, 1, 1],
+                        "energy": 2.0, "angle": 0.03})
+    h["lights"].append({"type": "POINT", "matrix_world": translation(0, -0.5, 2.0), "color": [1, 1, 1],
+                        "energy": 150.0, "radius": 0.1})
+    return scene_from_dict(h, a)
+
+
+def test_world_medium_hides_the_sun_from_light_selection(monkeypatch):
+    """A world medium with σt > 0 in every channel: nothing at infinity reaches any point
+    (Cycles renders a sun-only haze black), so the sun is left out of light selection — the same
+    image in expectation (means within 4 standard errors per channel), no samples wasted. A
+    medium that leaves one channel clear keeps the sun."""
+    import drt.render as render_mod
+    from drt.volumes import media as media_mod
+
+    haze = {"scatter": [0.06, 0.06, 0.06], "absorption": [0.0, 0.0, 0.0], "anisotropy": 0.5}
+    ctx = prepare(_haze_scene(haze))
+    assert ctx.integrator.lights.n_lights == 1  # the point light only
+    clear_blue = {"scatter": [0.06, 0.06, 0.0], "absorption": [0.0, 0.0, 0.0], "anisotropy": 0.0}
+    assert prepare(_haze_scene(clear_blue)).integrator.lights.n_lights == 2
+
+    def pixel_means(seeds):
+        return np.array([render(_haze_scene(haze), seed=s, threads=1).combined[..., :3].mean(axis=(0, 1))
+                         for s in seeds])
+
+    without_sun = pixel_means(range(4))
+    monkeypatch.setattr(render_mod, "lights_reaching", lambda lights, md: lights)
+    monkeypatch.setattr(render_mod, "world_blocks_infinity", lambda md: False)
+    assert prepare(_haze_scene(haze)).integrator.lights.n_lights == 2
+    with_sun = pixel_means(range(10, 14))
+    assert media_mod.world_blocks_infinity(ctx.integrator.media)
+    se = np.sqrt(without_sun.var(axis=0, ddof=1) / 4 + with_sun.var(axis=0, ddof=1) / 4)
+    diff = np.abs(without_sun.mean(axis=0) - with_sun.mean(axis=0))
+    assert without_sun.mean() > 0.01
+    assert np.all(diff <= 4 * se + 1e-3 * with_sun.mean()), (diff, se)

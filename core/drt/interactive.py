@@ -45,7 +45,7 @@ import numpy as np
 
 from .camera import Camera
 from .geometry import MovingMesh, SceneGeometry, _points_to_world, _transform_normals
-from .volumes.media import media_for_scene
+from .volumes.media import lights_reaching, media_for_scene, world_blocks_infinity
 from .integrator import Integrator
 from .lights import LightSet
 from .materials import MaterialTable
@@ -263,6 +263,8 @@ class LiveScene:
         c = np.asarray(color, dtype=np.float64).reshape(3)
         if not np.all(np.isfinite(c)) or np.any(c < 0):
             raise SceneError("world.color", f"must be finite and >= 0, got {c.tolist()}")
+        if volume != self.world_volume:  # a medium can hide the sun (lights_reaching)
+            self._lights_dirty = True
         self.world_volume = volume  # read when the next context is built (media are per context)
         if not np.array_equal(c, self.world_color):
             self.world_color = c.copy()
@@ -337,9 +339,11 @@ class LiveScene:
                                            material_dicts=mats)
             wprog, wmap = self._world_map if self.world_program is not None else (None, None)
             try:
-                self._light_set = LightSet(self.lights, self.world_color, emissive,
+                blocked = world_blocks_infinity(media)  # as render.prepare
+                self._light_set = LightSet(lights_reaching(self.lights, media), self.world_color, emissive,
                                            origin_shift=geom.origin_shift,
-                                           scene_radius=geom.scene_radius, world_nee=wmap is not None,
+                                           scene_radius=geom.scene_radius,
+                                           world_nee=wmap is not None and not blocked,
                                            world_program=wprog, world_map=wmap)
             except ValueError as e:
                 raise SceneError("lights", str(e)) from None

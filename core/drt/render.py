@@ -35,7 +35,7 @@ from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
 from .scene import Scene, SceneError
 from .trace import Tracer
-from .volumes.media import media_for_scene
+from .volumes.media import lights_reaching, media_for_scene, world_blocks_infinity
 
 BATCH_PATHS = 1 << 16
 MIN_BATCH_PATHS = 1 << 12
@@ -180,8 +180,12 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
     try:
         # a constant-colour world is found by BSDF rays only, as in Cycles (see LightSet); a
         # textured one is importance-sampled (drt.lights.world_map)
-        lights = LightSet(scene.lights, scene.world_color, emissive, origin_shift=geom.origin_shift,
-                          scene_radius=geom.scene_radius, world_nee=world_map is not None,
+        # a world medium that attenuates every channel hides the sun and the world at infinity
+        # (drt.volumes.media.world_blocks_infinity): they are not sampled as lights
+        blocked = world_blocks_infinity(media)
+        lights = LightSet(lights_reaching(scene.lights, media), scene.world_color, emissive,
+                          origin_shift=geom.origin_shift, scene_radius=geom.scene_radius,
+                          world_nee=world_map is not None and not blocked,
                           world_program=world_program, world_map=world_map)
     except ValueError as e:
         raise SceneError("lights", str(e)) from None

@@ -240,3 +240,22 @@ def media_for_scene(materials: list[dict], world_volume: dict | None, geom) -> M
         # the camera stack is computed by the Integrator (it needs the tracer): mark it unknown
         md = md._replace(camera_stack=np.full(STACK_SIZE, -1, np.int64))
     return md
+
+
+def world_blocks_infinity(md: MediumData) -> bool:
+    """Does the world medium attenuate every channel (σt > 0)? Then nothing at infinity — the
+    sun, the world background — reaches any point: a ray toward it crosses an infinite length of
+    that medium, transmittance 0 (Cycles renders the same, black). Light selection then leaves
+    those lights out instead of spending next-event samples on a contribution that is always 0
+    (volume_world: DRT's relMSE was ~2× Cycles's with the sun in the selection, 1.16× without)."""
+    if not md.enabled or md.world_key < 0:
+        return False
+    return bool((md.sigma_t[md.world_key % md.stride] > 0.0).all())
+
+
+def lights_reaching(lights: list[dict], md: MediumData) -> list[dict]:
+    """The light dicts that can deliver anything under ``md``: all of them, but no suns when the
+    world medium blocks infinity (``world_blocks_infinity``)."""
+    if not world_blocks_infinity(md):
+        return lights
+    return [light for light in lights if str(light.get("type", "")).upper() != "SUN"]
