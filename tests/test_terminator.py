@@ -245,3 +245,36 @@ def test_offset_gain_sweep_matches_cycles(shape, sun, tmp_path, monkeypatch):
         means.append((drt.mean(), cyc.mean()))
     drt_gain, cyc_gain = means[0][0] / means[1][0], means[0][1] / means[1][1]
     assert abs(drt_gain / cyc_gain - 1.0) < 0.005, (drt_gain, cyc_gain)
+
+
+def _principled_sheen():
+    """Principled BSDF: grey base (roughness 0.5), Sheen Weight 1 at roughness 0.5, no
+    specular layer (Specular IOR Level 0): the sheen and the diffuse base under it."""
+    mat, nodes, out = C._new_material("Sheen")
+    p = nodes.new("ShaderNodeBsdfPrincipled")
+    mat.node_tree.links.new(p.outputs[0], out.inputs["Surface"])
+    p.inputs["Base Color"].default_value = (0.5, 0.5, 0.5, 1.0)
+    p.inputs["Roughness"].default_value = 0.5
+    p.inputs["Sheen Weight"].default_value = 1.0
+    p.inputs["Sheen Roughness"].default_value = 0.5
+    p.inputs["Specular IOR Level"].default_value = 0.0
+    return mat
+
+
+@pytest.mark.parametrize("shape, sun", [("TORUS", (-80.0, 0.0)), ("SPHERE", (-70.0, 30.0))])
+def test_back_lit_sheen_rims_match_cycles(shape, sun, tmp_path, monkeypatch):
+    """The back-lit rims of a Principled sheen over a diffuse base: Cycles's sheen lobe, like its
+    diffuse one, lights every direction above N' and reads its LTC tables, and the albedo that
+    darkens the base under it, at cos θo clamped to 0 where wo is below N'
+    (materials.table.sheen_facing, layer_factor). Image means within 2.5 % of Cycles, 128 spp
+    (measured −1.7 % and +1.6 %; before, with the sheen on wo's side and its albedo at |cos θo|:
+    −35 % and −16 %)."""
+    monkeypatch.setattr(sys.modules[__name__], "SUN", sun)
+    scene = sphere_scene(0.1, shape=shape)
+    ball = bpy.data.objects["Ball"]
+    ball.data.materials.clear()
+    ball.data.materials.append(_principled_sheen())
+    drt, _ = drt_render(128)
+    cyc = cycles_render(scene, 128, tmp_path / "cycles.exr", monkeypatch)
+    assert cyc.mean() > 1e-4, cyc.mean()
+    assert abs(drt.mean() / cyc.mean() - 1.0) < 0.025, (drt.mean(), cyc.mean())

@@ -657,7 +657,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             if md.emission_layer[mat] >= 0:  # a Principled's emission under its coat / sheen
                 te, be = build_frame(ns)  # the layers' own normals: in ns's frame
                 le = layered_emission(md, mat, le, to_local(wo, te, be, ns), frame_normal(nc, te, be, ns),
-                                      frame_normal(nv, te, be, ns))
+                                      frame_normal(nv, te, be, ns), 1.0 if dot(wo, ng) >= 0.0 else -1.0)
             lpdf = emissive_pdf(ld, prim, prev_p, p, ng, prev_hint)
             w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
             acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))

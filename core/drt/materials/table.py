@@ -252,6 +252,18 @@ def facing_front(wo, front):
     return wo
 
 
+@inline_kernel
+def sheen_facing(wo, front):
+    """``wo`` as the sheen lobe sees it: on N''s side (``facing_front``) and, at a silhouette,
+    tangential. Cycles reads the sheen's LTC tables at cos θo = dot(N', wo), which
+    ``lookup_table_read_2D`` clamps to 0 there, builds the LTC frame toward wo's tangential
+    direction and lights every wi above N'; a z of front·1e-9 does the same here (tables read
+    at 0, side tests on N''s side)."""
+    if wo[2] * front < 0.0:
+        return (wo[0], wo[1], front * 1e-9)
+    return wo
+
+
 @kernel
 def slot_normal(lobe_frame, lobe_coat, m, s, nc_local, nv_local):
     """The unit normal slot s is shaded about, in the hit's local frame (z = the shading
@@ -344,7 +356,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             fc, p = dielectric_spec_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s],
                                          lobe_f0(md, m, s), md.lobe_fresnel[m, s, 3] > 0.0)
             if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
-                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, memo_top, memo_w)
+                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, front, memo_top, memo_w)
                 fc = (fc[0] * uw[0], fc[1] * uw[1], fc[2] * uw[2])
             f0 += md.lobe_color[m, s, 0] * fc[0]
             f1 += md.lobe_color[m, s, 1] * fc[1]
@@ -356,7 +368,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             fc, p = metallic_eval(wo, wi, md.lobe_alpha[m, s], metal_f0(md, m, s), lobe_f0(md, m, s),
                                   md.lobe_fresnel[m, s, 3] > 0.0)
             if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
-                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, memo_top, memo_w)
+                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, front, memo_top, memo_w)
                 fc = (fc[0] * uw[0], fc[1] * uw[1], fc[2] * uw[2])
             f0 += k * fc[0]
             f1 += k * fc[1]
@@ -388,7 +400,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
         elif t == BSDF_REFRACTION:
             v, p = refraction_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
         elif t == BSDF_SHEEN:  # diffuse-class in Cycles: softened like diffuse
-            v, p = sheen_eval(wo, wi, md.lobe_alpha[m, s])
+            v, p = sheen_eval(sheen_facing(wo, front), wi, md.lobe_alpha[m, s])
             v *= g
         elif t == BSDF_VELVET:
             v, p = velvet_eval(wo, wi, md.lobe_alpha[m, s])
@@ -401,7 +413,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
                 f1 += c1 * v
                 f2 += c2 * v
             else:
-                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, memo_top, memo_w)
+                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, front, memo_top, memo_w)
                 f0 += c0 * (v * uw[0])
                 f1 += c1 * (v * uw[1])
                 f2 += c2 * (v * uw[2])
@@ -430,16 +442,16 @@ def metal_f0(md, m, s):
 
 
 @inline_kernel
-def under_weight(md, m, s, wo, nc_local, nv_local):
+def under_weight(md, m, s, wo, nc_local, nv_local, front):
     """Scale (3-tuple) of slot s for this wo: the product over the layers above it (the chain
     md.lobe_layer[m, s], its lobe_layer, ...) of Cycles's closure_layering_weight
     1 − k·max_c albedo_c(wo), and for a tinted coat its absorption mix(1, tint^(1/cos θt), k)
     with θt the view direction refracted into the coat (Cycles's principled_bsdf_emission)."""
-    return chain_weight(md, m, md.lobe_layer[m, s], wo, nc_local, nv_local)
+    return chain_weight(md, m, md.lobe_layer[m, s], wo, nc_local, nv_local, front)
 
 
 @inline_kernel
-def layered_emission(md, m, le, wo, nc_local, nv_local):
+def layered_emission(md, m, le, wo, nc_local, nv_local, front):
     """Emission le (3-tuple) of material m seen from wo (local frame; ``nc_local`` the coat
     normal and ``nv_local`` the valid-reflection normal in it, or NO_BUMP, and then any vector
     whose z is cos θo will do): attenuated by the coat / sheen layers over it (Cycles 5.0 does so for camera and
@@ -447,7 +459,7 @@ def layered_emission(md, m, le, wo, nc_local, nv_local):
     top = md.emission_layer[m]
     if top < 0:
         return le
-    w = chain_weight(md, m, top, wo, nc_local, nv_local)
+    w = chain_weight(md, m, top, wo, nc_local, nv_local, front)
     return (le[0] * w[0], le[1] * w[1], le[2] * w[2])
 
 
@@ -460,13 +472,13 @@ def single_layer_weight(md, m, top, wo):
 
 
 @inline_kernel
-def chain_weight(md, m, top, wo, nc_local, nv_local):
+def chain_weight(md, m, top, wo, nc_local, nv_local, front):
     """Product of the layer weights of the chain starting at slot ``top`` (−1: (1, 1, 1))."""
     w0 = 1.0
     w1 = 1.0
     w2 = 1.0
     while top >= 0:
-        f = layer_factor(md, m, top, wo, nc_local, nv_local)
+        f = layer_factor(md, m, top, wo, nc_local, nv_local, front)
         w0 *= f[0]
         w1 *= f[1]
         w2 *= f[2]
@@ -475,7 +487,7 @@ def chain_weight(md, m, top, wo, nc_local, nv_local):
 
 
 @inline_kernel
-def memo_under_weight(md, m, s, wo, nc_local, nv_local, memo_top, memo_w):
+def memo_under_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w):
     """``under_weight`` of slot s reusing the chain weight of the last layer asked for
     (memo_top, memo_w; −1 and (1, 1, 1) at first): lobes come top layer first, so each layer's
     chain is the one above it, already known, times its own factor. Returns (weight, memo_top,
@@ -485,25 +497,27 @@ def memo_under_weight(md, m, s, wo, nc_local, nv_local, memo_top, memo_w):
         return memo_w, memo_top, memo_w
     up = md.lobe_layer[m, top]
     if up < 0:  # a single layer (the plain Principled's specular layer): its factor
-        w = layer_factor(md, m, top, wo, nc_local, nv_local)
+        w = layer_factor(md, m, top, wo, nc_local, nv_local, front)
         return w, top, w
     if up == memo_top:
-        f = layer_factor(md, m, top, wo, nc_local, nv_local)
+        f = layer_factor(md, m, top, wo, nc_local, nv_local, front)
         w = (memo_w[0] * f[0], memo_w[1] * f[1], memo_w[2] * f[2])
     else:
-        w = chain_weight(md, m, top, wo, nc_local, nv_local)
+        w = chain_weight(md, m, top, wo, nc_local, nv_local, front)
     return w, top, w
 
 
 @inline_kernel
-def layer_factor(md, m, top, wo, nc_local, nv_local):
+def layer_factor(md, m, top, wo, nc_local, nv_local, front):
     """One layer's factor (3-tuple): 1 − k·albedo(wo), × the coat tint's absorption; cos θo
-    taken about the layer's own normal (``slot_cos``), as Cycles's albedo of the closure."""
+    taken about the layer's own normal (``slot_cos``), as Cycles's albedo of the closure. A
+    sheen layer's albedo is read at cos θo clamped to 0 where wo is below N' (``front``, a
+    silhouette), as the sheen lobe itself (``sheen_facing``)."""
     k = md.lobe_coat[m, top, 0]
     cos_o = wo[2] if nc_local[2] >= 1.0 and nv_local[2] >= 1.0 else \
         slot_cos(md.lobe_frame, md.lobe_coat, m, top, wo, nc_local, nv_local)
     if md.lobe_type[m, top] == BSDF_SHEEN:
-        a = sheen_albedo(md.lobe_alpha[m, top], cos_o)
+        a = sheen_albedo(md.lobe_alpha[m, top], cos_o if cos_o * front >= 0.0 else 0.0)
     else:
         a = layer_albedo_max(md.lobe_alpha[m, top], md.lobe_ior[m, top], lobe_f0(md, m, top),
                              md.lobe_fresnel[m, top, 3] > 0.0, cos_o)
@@ -585,6 +599,7 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, fr
         wi = glossy_sample(wo, alpha, u0, u1)
         kind = LOBE_GLOSSY
     elif t == BSDF_SHEEN:  # Cycles labels sheen diffuse (bounce counting)
+        wo = sheen_facing(wo, front)
         wi = sheen_sample(wo, md.lobe_alpha[m, slot], u0, u1)
         kind = LOBE_DIFFUSE
     elif t == BSDF_VELVET:
@@ -611,7 +626,7 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, fr
                                   md.lobe_sss[m, slot, SSS_IOR], wo, u_rest, u0, u1)
         if not ok or p_sel <= 0.0:
             return wi, zero, 0.0, LOBE_NONE, False, False
-        uw = under_weight(md, m, slot, wo_main, nc_local, nv_local) if md.has_layers[m] else (1.0, 1.0, 1.0)
+        uw = under_weight(md, m, slot, wo_main, nc_local, nv_local, front) if md.has_layers[m] else (1.0, 1.0, 1.0)
         weight = (md.lobe_color[m, slot, 0] * (uw[0] / p_sel), md.lobe_color[m, slot, 1] * (uw[1] / p_sel),
                   md.lobe_color[m, slot, 2] * (uw[2] / p_sel))
         return wi, weight, 1.0, LOBE_SUBSURFACE, False, True
@@ -643,7 +658,7 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, fr
             k = md.lobe_fresnel[m, slot, 4] / p_sel
             weight = (k * fc[0], k * fc[1], k * fc[2])
         if md.has_layers[m] and md.lobe_layer[m, slot] >= 0:  # a smooth lobe under a coat / sheen
-            uw = under_weight(md, m, slot, wo_main, nc_local, nv_local)
+            uw = under_weight(md, m, slot, wo_main, nc_local, nv_local, front)
             weight = (weight[0] * uw[0], weight[1] * uw[1], weight[2] * uw[2])
         return wi, weight, pdf, kind, True, True
 
