@@ -35,9 +35,10 @@ Cycles's chain, reproduced here:
    normal, on the outside); no emission there. The entry is not a bounce; the diffuse sample at
    the exit counts one (diffuse) bounce, as Cycles's ``path_state_next`` does.
 
-Random numbers of the walk come from a counter hash of (seed, pixel, sample, bounce, step,
-use): the walk needs up to 256 × 5 numbers, beyond what a stratified sequence helps with
-(Cycles, too, scrambles the walk's stream away from the path's).
+Random numbers of the walk come from the path's own sample sequence (``Sampler``) at
+dimensions of their own (``walk_dim0``, ``walk_pair``): three 2-D samples per step, so each
+step is stratified over the pixel's samples, as in Cycles, whose walk advances its sequence's
+dimension offset per step.
 """
 
 from __future__ import annotations
@@ -53,18 +54,18 @@ from .kernels import inline_kernel, kernel
 from .kernels.vec3 import build_frame, dot, load, normalize, store, to_world
 from .materials.subsurface_lobe import MIN_ALPHA, remap
 from .materials.table import SSS_G, SSS_RADIUS, SSS_WEIGHT
-from .sampling.sequences import hash32
-from .trace import OFFSET_ABSOLUTE, OFFSET_RELATIVE
+from .sampling.sequences import hash32, sample_2d
+from .trace import OFFSET_ABSOLUTE, OFFSET_RELATIVE, static_hit_row
 
 BSSRDF_MAX_BOUNCES = 256
 VOLUME_THROUGHPUT_EPSILON = 1e-6
 SIMILARITY_LEVEL = 9
+_INV_2_32 = 1.0 / 4294967296.0
 
 # walk row states (Paths.sss); EXIT_FLAT: an exit on a moving object, shaded with its
 # geometric normal (docs/subsurface.md)
 SSS_NONE, SSS_WALK, SSS_EXIT, SSS_DEAD, SSS_EXIT_FLAT = 0, 1, 2, 3, 4
 
-_INV_2_32 = 1.0 / 4294967296.0
 
 
 # ----------------------------------------------------------------------------- the walk
@@ -94,30 +95,49 @@ def sss_coefficients(md, m, slot, coef, j):
 #:   o, d (n, 3): current walk point and direction; tmax (n,): length of the next ray;
 #:   thr (n, 3): path throughput; sigma_t, alpha (n, 3); g (n,) anisotropy;
 #:   n_entry, p_entry (n, 3): entry shading normal (outside) and point; step (n,) int64;
-#:   opposite (n,) bool, opp_dist (n,); key (n,) uint-like int64 random stream;
+#:   opposite (n,) bool, opp_dist (n,); pixel, index (n,) int64: the path's pixel and sample
+#:   (the walk's random numbers come from the sampler at them); dim0 (n,) int64: the walk's
+#:   first sample dimension (``walk_dim0``);
 #:   t_sample (n,): sampled free flight; pend (n, 8): per-step terms kept across the ray cast
 #:   (channel pdf r, g, b, forward/backward pdf factors, forward/backward stretching,
 #:   backward fraction); guided_frac (n,): the step's guided fraction; diff_len (n,) Dwivedi
 #:   diffusion length, phase_log (n,); state (n,) int8: SSS_WALK, SSS_EXIT, SSS_DEAD.
 WalkState = namedtuple("WalkState", [
     "o", "d", "tmax", "thr", "sigma_t", "alpha", "g", "n_entry", "p_entry", "step", "opposite",
-    "opp_dist", "key", "t_sample", "pend", "guided_frac", "diff_len", "phase_log", "state"])
+    "opp_dist", "pixel", "index", "dim0", "t_sample", "pend", "guided_frac", "diff_len", "phase_log", "state"])
 
 
-@kernel
-def walk_key(seed_prefix, pixel, index, depth):
-    """The random stream of one walk: a hash of (sampler prefix, pixel, sample, bounce)."""
-    h = hash32((seed_prefix ^ 0x5BD1E995) & 0xFFFFFFFF)
-    h = hash32((h ^ pixel) & 0xFFFFFFFF)
-    h = hash32((h ^ index) & 0xFFFFFFFF)
-    return hash32((h ^ (depth * 0x9E3779B9)) & 0xFFFFFFFF)
+#: sample dimensions of the walks: those of loop pass ``depth`` start at
+#: D_SSS0 + WALK_DIMS·BSSRDF_MAX_BOUNCES·depth (above the volumes' 2^20 + 5·segment), and step s
+#: takes three 2-D samples, + WALK_DIMS·s + (0: (channel, free flight), 1: (guided, backward),
+#: 2: direction)
+D_SSS0 = 1 << 21
+WALK_DIMS = 3
+
+
+def walk_dim0(depth: int) -> int:
+    """First sample dimension of the walks started in loop pass ``depth``."""
+    return D_SSS0 + WALK_DIMS * BSSRDF_MAX_BOUNCES * int(depth)
+
+
+#: walk steps whose numbers come from the sample sequence; later steps hash (stratification
+#: matters most early: a walk's exit depends most on its first flights; the sequence's
+#: scrambling costs ~2x a hash, and walks average ~27 steps)
+STRATIFIED_STEPS = 8
 
 
 @inline_kernel
-def walk_rand(key, step, use):
-    """Uniform [0, 1) for (stream, step, use)."""
-    h = hash32((key ^ hash32((step * 8 + use) & 0xFFFFFFFF)) & 0xFFFFFFFF)
-    return float(h) * _INV_2_32
+def walk_pair(ws, sd, i, step, k):
+    """Walk i's 2-D sample k (0 … WALK_DIMS − 1) of this step: for the first STRATIFIED_STEPS
+    steps the path's own sample sequence (pixel, sample index) at dimension
+    dim0 + WALK_DIMS·step + k, so those steps are stratified over the pixel's samples, as
+    Cycles's walk draws them from its sequence; then a hash of (dimension, pixel, sample)."""
+    dim = ws.dim0[i] + WALK_DIMS * step + k
+    if step < STRATIFIED_STEPS:
+        return sample_2d(sd, ws.pixel[i], ws.index[i], dim)
+    h = hash32((hash32((hash32((sd.prefix ^ dim) & 0xFFFFFFFF) ^ ws.pixel[i]) & 0xFFFFFFFF) ^ ws.index[i])
+               & 0xFFFFFFFF)
+    return float(hash32(h ^ 0x68E31DA4)) * _INV_2_32, float(hash32(h ^ 0xB5297A4D)) * _INV_2_32
 
 
 @inline_kernel
@@ -177,12 +197,11 @@ def _coeffs(ws, i, step):
 
 
 @inline_kernel
-def _sample_row(ws, i):
+def _sample_row(ws, sd, i):
     """Sample channel, direction and free flight of walk i; sets o/d/tmax of the ray to cast
     (tmax: the flight, or on the first step ≥ 10 mean free paths to look for the opposite
     side)."""
     step = ws.step[i]
-    key = ws.key[i]
     st, ss, g, guided_frac = _coeffs(ws, i, step)
     # channel ∝ |throughput · α| (balance-heuristic MIS over channels)
     w0 = abs(ws.thr[i, 0] * ws.alpha[i, 0])
@@ -193,14 +212,13 @@ def _sample_row(ws, i):
         p0, p1, p2 = w0 / total, w1 / total, w2 / total
     else:
         p0 = p1 = p2 = 1.0 / 3.0
-    u = walk_rand(key, step, 0)
+    u, ut = walk_pair(ws, sd, i, step, 0)
     if u < p0:
         sample_st = st[0]
     elif u < p0 + p1:
         sample_st = st[1]
     else:
         sample_st = st[2]
-    ut = walk_rand(key, step, 1)
     fwd_factor = 0.0
     bwd_factor = 0.0
     fwd_stretch = 1.0
@@ -209,7 +227,8 @@ def _sample_row(ws, i):
     if step > 0:
         v = ws.diff_len[i]
         plog = ws.phase_log[i]
-        guided = walk_rand(key, step, 2) < guided_frac
+        u_guided, u_backward = walk_pair(ws, sd, i, step, 1)
+        guided = u_guided < guided_frac
         n = load(ws.n_entry, i)
         backward = False
         if ws.opposite[i]:
@@ -218,9 +237,8 @@ def _sample_row(ws, i):
                   + (ws.o[i, 2] - ws.p_entry[i, 2]) * n[2])
             x = min(max(x, 0.0), od)
             bwd_frac = 1.0 / (1.0 + math.exp(min((od - 2.0 * x) / v, 700.0)))
-            backward = walk_rand(key, step, 3) < bwd_frac
-        us0 = walk_rand(key, step, 4)
-        us1 = walk_rand(key, step, 5)
+            backward = u_backward < bwd_frac
+        us0, us1 = walk_pair(ws, sd, i, step, 2)
         d_old = load(ws.d, i)
         if guided:
             cos_theta = v - (v + 1.0) * math.exp(-us0 * plog)
@@ -265,10 +283,10 @@ def _sample_row(ws, i):
 
 
 @kernel
-def walk_sample(ws, rows):
-    """``_sample_row`` for every walk in ``rows`` (one wavefront step)."""
+def walk_sample(ws, sd, rows):
+    """``_sample_row`` for every walk in ``rows`` (one wavefront step); sd: ``Sampler.data``."""
     for r in range(rows.shape[0]):
-        _sample_row(ws, rows[r])
+        _sample_row(ws, sd, rows[r])
 
 
 @inline_kernel
@@ -354,7 +372,7 @@ def walk_advance(ws, rows, hit_t):
 
 
 @kernel
-def walk_local(ws, rows, fn, scene, words, positions, triangles, face_ng, offset, eps0,
+def walk_local(ws, sd, rows, fn, scene, words, positions, triangles, face_ng, offset, eps0,
                ex_prim, ex_b, ex_p, ex_ng):
     """Every remaining step of the walks in ``rows``, all on one static object whose Embree
     scene (``scene``, its own triangles: prim ids local, ``offset`` added for global ids) this
@@ -368,7 +386,7 @@ def walk_local(ws, rows, fn, scene, words, positions, triangles, face_ng, offset
     for r in range(rows.shape[0]):
         i = rows[r]
         while ws.state[i] == SSS_WALK:
-            _sample_row(ws, i)
+            _sample_row(ws, sd, i)
             d = load(ws.d, i)
             push = 0.0
             tmax = ws.tmax[i]
@@ -383,23 +401,10 @@ def walk_local(ws, rows, fn, scene, words, positions, triangles, face_ng, offset
                 ex_prim[i] = prim + offset
                 ex_b[i, 0] = u
                 ex_b[i, 1] = v
-                a, b, c = triangles[prim, 0], triangles[prim, 1], triangles[prim, 2]
-                for axis in range(3):
-                    v0 = float(positions[a, axis])
-                    ex_p[i, axis] = v0 + u * (float(positions[b, axis]) - v0) + v * (float(positions[c, axis]) - v0)
-                    ex_ng[i, axis] = face_ng[prim, axis]
-                if ex_ng[i, 0] == 0.0 and ex_ng[i, 1] == 0.0 and ex_ng[i, 2] == 0.0:
-                    for axis in range(3):
-                        ex_ng[i, axis] = -d[axis]
+                static_hit_row(positions, triangles, face_ng, prim, u, v, d, ex_p, ex_ng, i)
             _advance_row(ws, i, th)
             steps += 1
     return steps
-
-
-@kernel
-def _walk_keys(prefix, pixel, index, depth, out):
-    for i in range(pixel.shape[0]):
-        out[i] = walk_key(prefix, pixel[i], index[i], depth)
 
 
 @kernel
@@ -460,7 +465,7 @@ class SubsurfaceWalker:
 
         self.tracer = tracer
         self.static_count = geom.static_count
-        self.prefix = int(sampler.data.prefix)
+        self.sd = sampler.data
         sss_mats = np.nonzero(np.any(materials.lobe_type == 4, axis=1))[0]  # BSDF_SUBSURFACE
         ranges = list(getattr(geom, "static_ranges", []) or [])
         self.starts = np.array([s for s, _ in ranges], dtype=np.int64)
@@ -497,14 +502,14 @@ class SubsurfaceWalker:
         if not n:
             return
         coef = paths.sss_coef[rows]
-        key = np.empty(n, np.int64)
-        _walk_keys(self.prefix, np.ascontiguousarray(paths.pixel[rows]), np.ascontiguousarray(paths.index[rows]),
-                   depth_i, key)
         ws = WalkState(
             o=paths.o[rows], d=paths.d[rows], tmax=np.empty(n), thr=paths.throughput[rows],
             sigma_t=np.ascontiguousarray(coef[:, 0:3]), alpha=np.ascontiguousarray(coef[:, 3:6]),
             g=np.ascontiguousarray(coef[:, 9]), n_entry=paths.sss_n[rows], p_entry=paths.sss_p[rows],
-            step=np.zeros(n, np.int64), opposite=np.zeros(n, bool), opp_dist=np.zeros(n), key=key,
+            step=np.zeros(n, np.int64), opposite=np.zeros(n, bool), opp_dist=np.zeros(n),
+            pixel=np.ascontiguousarray(paths.pixel[rows], dtype=np.int64),
+            index=np.ascontiguousarray(paths.index[rows], dtype=np.int64),
+            dim0=np.full(n, walk_dim0(depth_i), np.int64),
             t_sample=np.zeros(n), pend=np.zeros((n, 8)), guided_frac=np.zeros(n), diff_len=np.zeros(n),
             phase_log=np.zeros(n), state=np.zeros(n, np.int8))
         walk_start(ws, n, np.ascontiguousarray(coef[:, 6:9]))
@@ -525,7 +530,7 @@ class SubsurfaceWalker:
             if int(k) in self.direct:  # the usual case: static objects, compiled walks
                 fn, scene, positions, triangles, face_ng = self.direct[int(k)]
                 mine = np.flatnonzero((group == k) & (ws.state == SSS_WALK))
-                self.steps_taken += walk_local(ws, mine, fn, scene, embree_direct.scratch(), positions,
+                self.steps_taken += walk_local(ws, self.sd, mine, fn, scene, embree_direct.scratch(), positions,
                                                triangles, face_ng, self.local[int(k)][1], eps0,
                                                ex_prim, ex_b, ex_p, ex_ng)
         kinds = np.array([k for k in kinds if int(k) not in self.direct])
@@ -535,7 +540,7 @@ class SubsurfaceWalker:
             if not len(act):
                 break
             self.steps_taken += len(act)
-            walk_sample(ws, act)
+            walk_sample(ws, self.sd, act)
             first = it == 0  # every walk takes its first step in the first pass
             hit_t = np.empty(len(act))
             if single is not None:

@@ -30,7 +30,7 @@ import numpy as np
 
 from .embree_mesh import triangle_scene
 from .geometry import SceneGeometry
-from .kernels import kernel
+from .kernels import inline_kernel, kernel
 from .kernels.vec3 import cross, dot, load, store, sub
 from .motion import apply_rows, motion_at
 
@@ -79,17 +79,24 @@ def static_surface(positions, triangles, face_normals, static_count, d, prim, b1
         k = prim[i]
         if k < 0 or k >= static_count:
             continue
-        a = triangles[k, 0]
-        b = triangles[k, 1]
-        c = triangles[k, 2]
-        w1, w2 = b1[i], b2[i]
+        static_hit_row(positions, triangles, face_normals, k, b1[i], b2[i], (d[i, 0], d[i, 1], d[i, 2]), p, ng, i)
+
+
+@inline_kernel
+def static_hit_row(positions, triangles, face_normals, k, w1, w2, d, p, ng, i):
+    """Row i of ``static_surface``: the point at barycentrics (w1, w2) of static triangle k
+    into p[i] and its unit face normal into ng[i] (−d, the ray's 3-tuple direction reversed,
+    for a degenerate triangle)."""
+    a = triangles[k, 0]
+    b = triangles[k, 1]
+    c = triangles[k, 2]
+    for axis in range(3):
+        v0 = float(positions[a, axis])
+        p[i, axis] = v0 + w1 * (float(positions[b, axis]) - v0) + w2 * (float(positions[c, axis]) - v0)
+        ng[i, axis] = face_normals[k, axis]
+    if ng[i, 0] == 0.0 and ng[i, 1] == 0.0 and ng[i, 2] == 0.0:
         for axis in range(3):
-            v0 = float(positions[a, axis])
-            p[i, axis] = v0 + w1 * (float(positions[b, axis]) - v0) + w2 * (float(positions[c, axis]) - v0)
-            ng[i, axis] = face_normals[k, axis]
-        if ng[i, 0] == 0.0 and ng[i, 1] == 0.0 and ng[i, 2] == 0.0:
-            for axis in range(3):
-                ng[i, axis] = -d[i, axis]
+            ng[i, axis] = -d[axis]
 
 
 _NO_TMAX = np.zeros(0)
