@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import os
 
 import numpy as np
 from llvmlite import ir
@@ -49,8 +50,12 @@ _address = None
 
 
 def intersect1_address() -> int:
-    """Address of Embree's ``rtcIntersect1`` (0: not usable here; use embreex's ``run``)."""
+    """Address of Embree's ``rtcIntersect1`` (0: not usable here; use embreex's ``run``).
+    ``DRT_EMBREE_DIRECT=0`` in the environment turns the direct path off (a diagnostic switch:
+    the wavefront gives the same images, only slower)."""
     global _address
+    if os.environ.get("DRT_EMBREE_DIRECT", "1").strip() == "0":
+        return 0
     if _address is None:
         api = embree_mesh._handles()
         fn = getattr(api[0], "rtcIntersect1", None) if api else None
