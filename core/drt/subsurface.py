@@ -35,10 +35,11 @@ Cycles's chain, reproduced here:
    normal, on the outside); no emission there. The entry is not a bounce; the diffuse sample at
    the exit counts one (diffuse) bounce, as Cycles's ``path_state_next`` does.
 
-Random numbers of the walk come from the path's own sample sequence (``Sampler``) at
-dimensions of their own (``walk_dim0``, ``walk_pair``): three 2-D samples per step, so each
-step is stratified over the pixel's samples, as in Cycles, whose walk advances its sequence's
-dimension offset per step.
+Random numbers of the walk: three 2-D samples per step at dimensions of their own
+(``walk_dim0``, ``walk_pair``), for the first STRATIFIED_STEPS steps from the path's own sample
+sequence (``Sampler``), so those steps are stratified over the pixel's samples as in Cycles,
+whose walk advances its sequence's dimension offset per step; later steps hash them
+(``random_2d``).
 """
 
 from __future__ import annotations
@@ -54,13 +55,12 @@ from .kernels import inline_kernel, kernel
 from .kernels.vec3 import build_frame, dot, load, normalize, store, to_world
 from .materials.subsurface_lobe import MIN_ALPHA, remap
 from .materials.table import SSS_G, SSS_RADIUS, SSS_WEIGHT
-from .sampling.sequences import hash32, sample_2d
+from .sampling.sequences import random_2d, sample_2d
 from .trace import OFFSET_ABSOLUTE, OFFSET_RELATIVE, static_hit_row
 
 BSSRDF_MAX_BOUNCES = 256
 VOLUME_THROUGHPUT_EPSILON = 1e-6
 SIMILARITY_LEVEL = 9
-_INV_2_32 = 1.0 / 4294967296.0
 
 # walk row states (Paths.sss); EXIT_FLAT: an exit on a moving object, shaded with its
 # geometric normal (docs/subsurface.md)
@@ -135,9 +135,7 @@ def walk_pair(ws, sd, i, step, k):
     dim = ws.dim0[i] + WALK_DIMS * step + k
     if step < STRATIFIED_STEPS:
         return sample_2d(sd, ws.pixel[i], ws.index[i], dim)
-    h = hash32((hash32((hash32((sd.prefix ^ dim) & 0xFFFFFFFF) ^ ws.pixel[i]) & 0xFFFFFFFF) ^ ws.index[i])
-               & 0xFFFFFFFF)
-    return float(hash32(h ^ 0x68E31DA4)) * _INV_2_32, float(hash32(h ^ 0xB5297A4D)) * _INV_2_32
+    return random_2d(sd, ws.pixel[i], ws.index[i], dim)
 
 
 @inline_kernel

@@ -27,7 +27,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from ..kernels import kernel
+from ..kernels import inline_kernel, kernel
 
 __all__ = ["Sampler", "SamplerData", "SAMPLER_KINDS", "sample_2d", "sample_3d", "sample_5d", "sample_2d_batch",
            "hash_u32", "reverse_bits", "sobol_2d", "nested_uniform_scramble", "permute_index"]
@@ -248,19 +248,25 @@ def permute32(i, n, key):
     raise RuntimeError("permute_index did not converge")  # pragma: no cover
 
 
+@inline_kernel
+def random_2d(sd, pixel, index, dim):
+    """``sample_2d`` of the RANDOM sampler: a hash of (prefix, pixel, dim, index), no
+    stratification; also for callers that want independent numbers at any sampler (the
+    subsurface walk's later steps)."""
+    h = hash32(hash32(hash32(sd.prefix ^ (pixel & 0xFFFFFFFF)) ^ (dim & 0xFFFFFFFF)) ^ (index & 0xFFFFFFFF))
+    return float(hash32(h ^ 0x68E31DA4)) * _INV_2_32, float(hash32(h ^ 0xB5297A4D)) * _INV_2_32
+
+
 @kernel
 def sample_2d(sd, pixel, index, dim):
     """One 2-D sample (u0, u1) in [0, 1)² of (pixel, index, dim) (ints, taken mod 2^32);
     sd = ``Sampler.data``."""
+    if sd.kind == 2:  # RANDOM
+        return random_2d(sd, pixel, index, dim)
     pixel &= 0xFFFFFFFF
     index &= 0xFFFFFFFF
     dim &= 0xFFFFFFFF
     h = hash32(hash32(sd.prefix ^ pixel) ^ dim)
-    if sd.kind == 2:  # RANDOM
-        h = hash32(h ^ index)
-        x = hash32(h ^ 0x68E31DA4)
-        y = hash32(h ^ 0xB5297A4D)
-        return float(x) * _INV_2_32, float(y) * _INV_2_32
     if sd.kind == 1:  # STRATIFIED
         spp = sd.spp
         rnd = index // spp          # which set of spp samples
