@@ -177,3 +177,38 @@ def test_two_copies_of_the_sources_share_one_compiled_cache(tmp_path):
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert str(tmp_path / "parents_choice") in out.stdout.split()[2]
+
+
+_LOAD_THEN_LINK = """
+import numba, numpy as np
+from drt import kernels
+from drt.sampling import pixel_filter as pf
+xs, ys = np.array([0.0, 1.0]), np.array([0.0, 2.0])
+first = pf._interp(0.25, xs, ys)  # loaded from the cache: its linking bitcode is not parsed
+deferred = len(kernels._UNPARSED)
+
+@numba.njit
+def twice(x, xs, ys):  # a new compile that links the loaded kernel in: the bitcode is parsed now
+    return 2.0 * pf._interp(x, xs, ys)
+
+print(sum(pf._interp.stats.cache_hits.values()), deferred, first, twice(0.25, xs, ys), len(kernels._UNPARSED),
+      len(pf._interp.overloads))
+"""
+
+
+def test_a_loaded_kernel_links_into_a_later_compile(tmp_path):
+    """A cached kernel loads without parsing the LLVM bitcode stored for linking it elsewhere
+    (``drt.kernels._defer_linking_bitcode``, ~0.2 s of a warm render's start-up); a kernel
+    compiled afterwards that calls it still links it, and computes the same value."""
+    env = dict(os.environ, DRT_CACHE_DIR=str(tmp_path / "cache"))
+    env.pop("NUMBA_CACHE_DIR", None)
+    out = subprocess.run([sys.executable, "-c", _COMPILE_ONE_KERNEL], env=env, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    out = subprocess.run([sys.executable, "-c", _LOAD_THEN_LINK], env=env, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    hit, deferred, first, twice, left, overloads = out.stdout.split()
+    assert hit == "1" and int(deferred) >= 1 and overloads == "1"  # the loaded one was linked
+    assert float(first) == 0.5 and float(twice) == 1.0
+    assert int(left) < int(deferred)  # the linked library's bitcode was parsed on demand

@@ -211,6 +211,92 @@ def _load_cached_kernels_without_registry_refresh() -> None:
 _load_cached_kernels_without_registry_refresh()
 
 
+#: cached libraries loaded without parsing their linking bitcode yet (``_defer_linking_bitcode``)
+_UNPARSED = None
+
+
+def _defer_linking_bitcode() -> None:
+    """Load a cached kernel's machine code without parsing the LLVM bitcode stored beside it.
+
+    numba caches a kernel as its object code plus the bitcode of its whole module, kept so that a
+    kernel compiled later can link it in; loading parses that bitcode and walks every function
+    and global in it to record their names. For DRT's kernels that was ~0.19 of the ~0.25 s a
+    warm render spends loading the six kernels it calls from Python (`shade`'s module holds
+    every lobe, light and medium inlined; cProfile, Cornell box at 1 spp). A render that only
+    loads cached kernels never links them, so the bitcode is parsed when something first needs
+    it: numba linking the library into a new compile (``_get_module_for_linking``), or asking
+    whether a symbol is defined that the loaded machine code does not answer for. The symbol
+    check for the kernel's own entry points asks the execution engine, which already holds the
+    object code. Private numba API (pinned range in pyproject.toml); if it changes shape,
+    numba's own loader is kept."""
+    import weakref
+
+    from numba.core import codegen
+
+    lib_cls = getattr(codegen, "CPUCodeLibrary", None)
+    engine_cls = getattr(codegen, "JitEngine", None)
+    if lib_cls is None or engine_cls is None or getattr(lib_cls._unserialize, "_drt", False) \
+            or not all(hasattr(lib_cls, a) for a in ("_get_module_for_linking", "_finalize_final_module",
+                                                     "enable_object_caching", "_set_compiled_object")) \
+            or not all(hasattr(engine_cls, a) for a in ("is_symbol_defined", "_load_defined_symbols")):
+        return
+    global _UNPARSED
+    _UNPARSED = weakref.WeakSet()
+    original_unserialize = lib_cls._unserialize.__func__
+    original_linking = lib_cls._get_module_for_linking
+    original_defined = engine_cls.is_symbol_defined
+    ll = codegen.ll
+
+    def parse(lib):
+        bitcode = lib.__dict__.pop("_drt_bitcode", None)
+        if bitcode is not None:
+            _UNPARSED.discard(lib)
+            lib._shared_module = ll.parse_bitcode(bitcode)
+            lib._codegen._engine._load_defined_symbols(lib._shared_module)
+
+    def parse_all():
+        for lib in list(_UNPARSED):
+            parse(lib)
+
+    def _unserialize(cls, codegen_, state):
+        name, kind, data = state
+        if kind != "object":
+            return original_unserialize(cls, codegen_, state)
+        object_code, shared_bitcode = data
+        self = codegen_.create_library(name)
+        self.enable_object_caching()
+        self._set_compiled_object(object_code)
+        self._drt_bitcode = shared_bitcode
+        _UNPARSED.add(self)
+        self._finalize_final_module()
+        return self
+
+    def _get_module_for_linking(self):
+        parse(self)
+        return original_linking(self)
+
+    def is_symbol_defined(self, name):
+        if original_defined(self, name):
+            return True
+        if not _UNPARSED:
+            return False
+        # a function of an already loaded object: the engine knows its address (a name the
+        # engine cannot find may still be a global of an unparsed module: parse them all)
+        if not name.startswith(".") and self._ee.get_function_address(name):
+            self._defined_symbols.add(name)
+            return True
+        parse_all()
+        return original_defined(self, name)
+
+    _unserialize._drt = True
+    lib_cls._unserialize = classmethod(_unserialize)
+    lib_cls._get_module_for_linking = _get_module_for_linking
+    engine_cls.is_symbol_defined = is_symbol_defined
+
+
+_defer_linking_bitcode()
+
+
 def _share_the_cache_between_copies_of_drt() -> None:
     """Let every copy of these sources imported under the same name use one compiled cache: a
     git clone and the pip install (``drt``), each legacy add-on folder or test install of the
