@@ -46,21 +46,29 @@ BUFFER_WORDS = 48
 _INVALID = 0xFFFFFFFF  # RTC_INVALID_GEOMETRY_ID
 _FAR = 3.0e38          # the largest float32 Embree takes as "unbounded" (as trace._rays32)
 
-_address = None
+_addresses: dict = {}
+
+
+def _function_address(name: str) -> int:
+    if os.environ.get("DRT_EMBREE_DIRECT", "1").strip() == "0":
+        return 0
+    if name not in _addresses:
+        api = embree_mesh._handles()
+        fn = getattr(api[0], name, None) if api else None
+        _addresses[name] = int(ctypes.cast(fn, ctypes.c_void_p).value or 0) if fn is not None else 0
+    return _addresses[name]
 
 
 def intersect1_address() -> int:
     """Address of Embree's ``rtcIntersect1`` (0: not usable here; use embreex's ``run``).
     ``DRT_EMBREE_DIRECT=0`` in the environment turns the direct path off (a diagnostic switch:
     the wavefront gives the same images, only slower)."""
-    global _address
-    if os.environ.get("DRT_EMBREE_DIRECT", "1").strip() == "0":
-        return 0
-    if _address is None:
-        api = embree_mesh._handles()
-        fn = getattr(api[0], "rtcIntersect1", None) if api else None
-        _address = int(ctypes.cast(fn, ctypes.c_void_p).value or 0) if fn is not None else 0
-    return _address
+    return _function_address("rtcIntersect1")
+
+
+def occluded1_address() -> int:
+    """Address of Embree's ``rtcOccluded1`` (0: not usable here), as ``intersect1_address``."""
+    return _function_address("rtcOccluded1")
 
 
 def scene_address(scene) -> int:
@@ -78,7 +86,8 @@ def scene_address(scene) -> int:
 
 @intrinsic
 def _call_intersect1(typingctx, fn, scene, rayhit):
-    """fn(scene, rayhit, NULL) for three integers holding C addresses (void return)."""
+    """fn(scene, rayhit, NULL) for three integers holding C addresses (void return): Embree's
+    ``rtcIntersect1`` and ``rtcOccluded1`` both have this signature."""
     sig = types.void(types.intp, types.intp, types.intp)
 
     def codegen(context, builder, signature, args):
@@ -113,11 +122,18 @@ def ray_buffer(words):
 def trace1(fn, scene, words, bits, base, addr, o, d, tmax):
     """Closest hit of the ray o + t·d, t in [0, tmax) (3-tuples, float64; tmax may be inf), as
     Embree answers a float32 ray: (t, prim, u, v), t = inf and prim = −1 on a miss."""
+    return trace1_at(fn, scene, words, bits, base, addr, o, d, tmax, 0.0)
+
+
+@inline_kernel
+def trace1_at(fn, scene, words, bits, base, addr, o, d, tmax, time):
+    """``trace1`` at ``time`` in [0, 1] (Embree's ray time: where a geometry with time steps —
+    a deforming mesh, ``embree_mesh.deforming_scene`` — is seen; others ignore it)."""
     for a in range(3):
         words[base + _ORG + a] = o[a]
         words[base + _DIR + a] = d[a]
     words[base + _TNEAR] = 0.0
-    words[base + _TIME] = 0.0
+    words[base + _TIME] = time
     words[base + _TFAR] = min(tmax, _FAR)
     bits[base + _MASK] = _INVALID
     bits[base + _ID] = 0
@@ -132,6 +148,24 @@ def trace1(fn, scene, words, bits, base, addr, o, d, tmax):
             float(words[base + _V]))
 
 
+@inline_kernel
+def occluded1_at(fn, scene, words, bits, base, addr, o, d, tmax, time):
+    """Is anything hit by the ray o + t·d, t in [0, tmax), at ``time``? ``fn``: the address of
+    ``rtcOccluded1``, which takes the ray part of the same buffer (RTCRay) and sets its tfar to
+    −inf when it finds a hit."""
+    for a in range(3):
+        words[base + _ORG + a] = o[a]
+        words[base + _DIR + a] = d[a]
+    words[base + _TNEAR] = 0.0
+    words[base + _TIME] = time
+    words[base + _TFAR] = min(tmax, _FAR)
+    bits[base + _MASK] = _INVALID
+    bits[base + _ID] = 0
+    bits[base + _FLAGS] = 0
+    _call_intersect1(fn, scene, addr)  # (the same C signature: scene, ray, NULL arguments)
+    return words[base + _TFAR] == -math.inf
+
+
 @kernel
 def trace_rows(fn, scene, words, o, d, tmax, t, prim, u, v):
     """``trace1`` over rows (o, d: (n, 3); tmax: (n,)), into t, prim, u, v (n,): for checks
@@ -140,6 +174,16 @@ def trace_rows(fn, scene, words, o, d, tmax, t, prim, u, v):
     for i in range(o.shape[0]):
         t[i], prim[i], u[i], v[i] = trace1(fn, scene, words, bits, base, addr,
                                            (o[i, 0], o[i, 1], o[i, 2]), (d[i, 0], d[i, 1], d[i, 2]), tmax[i])
+
+
+@kernel
+def trace_rows_at(fn, scene, words, o, d, tmax, time, t, prim, u, v):
+    """``trace_rows`` with a ray time per row (time: (n,), in [0, 1])."""
+    bits, base, addr = ray_buffer(words)
+    for i in range(o.shape[0]):
+        t[i], prim[i], u[i], v[i] = trace1_at(fn, scene, words, bits, base, addr,
+                                              (o[i, 0], o[i, 1], o[i, 2]), (d[i, 0], d[i, 1], d[i, 2]),
+                                              tmax[i], time[i])
 
 
 def matches_embreex(scene, o, d, tmax) -> bool:

@@ -54,6 +54,7 @@ def _library():
                 ("rtcCommitGeometry", None, [vp]),
                 ("rtcAttachGeometry", u, [vp, vp]),
                 ("rtcReleaseGeometry", None, [vp]),
+                ("rtcSetGeometryTimeStepCount", None, [vp, u]),
             ):
                 fn = getattr(lib, name, None)
                 if fn is None:
@@ -135,12 +136,34 @@ def triangle_scene(positions: np.ndarray, triangles: np.ndarray) -> rtcs.EmbreeS
     return scene
 
 
-def _attach_shared(api, scene, device, positions, triangles) -> bool:
+def deforming_scene(positions: np.ndarray, positions_close: np.ndarray, triangles: np.ndarray):
+    """An Embree scene of one triangle mesh whose vertices move linearly from ``positions``
+    (ray time 0) to ``positions_close`` (ray time 1): Embree's motion blur with two time steps,
+    queried by ``drt.embree_direct`` with each ray's shutter fraction as its time (embreex's
+    ``run`` has no ray times). None without the checked handles."""
+    api = _handles()
+    if api is None or not len(triangles):
+        return None
+    device = _rtc.EmbreeDevice()
+    scene = _Scene(device)
+    if not _attach_shared(api, scene, device, positions, triangles, positions_close):
+        return None
+    return scene
+
+
+def _attach_shared(api, scene, device, positions, triangles, positions_close=None) -> bool:
     lib, scene_offset, device_offset = api
     v = len(positions)
-    # Embree loads 16 bytes at a vertex (SSE): the buffer has 4 spare bytes after the last one
-    flat = np.zeros(3 * v + 1, dtype=np.float32)
-    flat[:3 * v] = np.asarray(positions).reshape(-1)
+
+    def vertex_buffer(points):
+        # Embree loads 16 bytes at a vertex (SSE): the buffer has 4 spare bytes after the last one
+        flat = np.zeros(3 * v + 1, dtype=np.float32)
+        flat[:3 * v] = np.asarray(points).reshape(-1)
+        return flat
+
+    steps = [vertex_buffer(positions)]
+    if positions_close is not None:
+        steps.append(vertex_buffer(positions_close))
     index = np.ascontiguousarray(triangles, dtype=np.int32).view(np.uint32)
     scene_handle = ctypes.c_void_p.from_address(id(scene) + scene_offset).value
     device_handle = ctypes.c_void_p.from_address(id(device) + device_offset).value
@@ -148,7 +171,10 @@ def _attach_shared(api, scene, device, positions, triangles) -> bool:
     if not geom:
         lib.rtcGetDeviceError(device_handle)  # clears the error code
         return False
-    lib.rtcSetSharedGeometryBuffer(geom, _BUFFER_TYPE_VERTEX, 0, _FORMAT_FLOAT3, flat.ctypes.data, 0, 12, v)
+    if len(steps) > 1:
+        lib.rtcSetGeometryTimeStepCount(geom, len(steps))
+    for slot, flat in enumerate(steps):
+        lib.rtcSetSharedGeometryBuffer(geom, _BUFFER_TYPE_VERTEX, slot, _FORMAT_FLOAT3, flat.ctypes.data, 0, 12, v)
     lib.rtcSetSharedGeometryBuffer(geom, _BUFFER_TYPE_INDEX, 0, _FORMAT_UINT3, index.ctypes.data, 0, 12, len(index))
     lib.rtcCommitGeometry(geom)
     ok = lib.rtcGetDeviceError(device_handle) == 0
@@ -157,5 +183,5 @@ def _attach_shared(api, scene, device, positions, triangles) -> bool:
         ok = lib.rtcGetDeviceError(device_handle) == 0
     lib.rtcReleaseGeometry(geom)
     if ok:
-        scene.shared_buffers = (flat, index)  # read by Embree until the scene is freed
+        scene.shared_buffers = (*steps, index)  # read by Embree until the scene is freed
     return ok

@@ -5,11 +5,14 @@ array it is given (used as tfar). So:
 
 * self-intersection is avoided by offsetting spawn points along the geometric normal
   (``offset_origin``), by an amount that scales with the point's magnitude;
-* motion blur cannot use Embree's own time: a rigidly moving object gets an Embree scene in its
-  local space and each ray is transformed into it by the object's transform *at that ray's time*
-  (exact, no time slices); deforming meshes are intersected exactly at each ray's time by a
-  compiled ray/triangle test behind one level of cluster boxes (fine for the modest meshes that
-  deform in practice).
+* a rigidly moving object gets an Embree scene in its local space and each ray is transformed
+  into it by the object's transform *at that ray's time* (exact, no time slices). Where Embree's
+  C handles are confirmed (``drt.embree_direct``), one kernel per object culls, transforms and
+  traces each ray itself, and a deforming mesh is an Embree motion-blur scene (two time steps,
+  vertices linear in between, as DRT's model) queried at each ray's time — embreex's batch
+  ``run`` has no ray times. Otherwise rigid objects go through embreex's batches and deforming
+  meshes through a compiled exact ray/triangle test behind one level of cluster boxes (the
+  fallback: linear in the mesh size, fine only for modest meshes).
 
 The moving-object work around Embree (swept-box culling, per-ray transforms, merging hits, the
 deforming-mesh intersector, hit points and normals) is compiled (``@kernel``, docs/kernels.md);
@@ -28,7 +31,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .embree_mesh import triangle_scene
+from . import embree_direct
+from .embree_direct import occluded1_at, ray_buffer, trace1_at
+from .embree_mesh import deforming_scene, triangle_scene
 from .geometry import SceneGeometry
 from .kernels import inline_kernel, kernel
 from .kernels.vec3 import cross, dot, load, store, sub
@@ -322,6 +327,57 @@ def _rigid_merge(md, prim_offset, tau, idx, count, r_t, r_prim, r_u, r_v, t, pri
         _store_motion(md, tau[i], i, linear, translation)
         merged += 1
     return merged
+
+
+@kernel
+def _moving_direct(fn, scene, words, md, box_lo, box_hi, prim_offset, timed, o, d, tau, t, prim,
+                   b1, b2, linear, translation):
+    """Closest hits against one moving object whose Embree scene a kernel may query
+    (``_MovingObject.direct``): each ray that meets the swept box, in the object's space at its
+    own τ, traced here (``embree_direct``; ``timed``: a deforming mesh's scene, seen at time τ),
+    merged into (t, prim, b1, b2) where closer, with the object's local→world map. For a rigid
+    object the same float32 rays and answers as `_rigid_candidates`, embreex and
+    `_rigid_merge`. Returns (rays merged, rays traced)."""
+    bits, base, addr = ray_buffer(words)
+    merged = 0
+    traced = 0
+    for i in range(o.shape[0]):
+        oi = load(o, i)
+        di = load(d, i)
+        if not _in_swept_box(box_lo, box_hi, oi, di, t[i]):
+            continue
+        o_l, d_l = _ray_to_local(md, tau[i], oi, di)
+        tt, k, u, v = trace1_at(fn, scene, words, bits, base, addr, o_l, d_l, t[i], tau[i] if timed else 0.0)
+        traced += 1
+        if k < 0 or not (tt < t[i]):
+            continue
+        t[i] = tt
+        prim[i] = k + prim_offset
+        b1[i] = u
+        b2[i] = v
+        _store_motion(md, tau[i], i, linear, translation)
+        merged += 1
+    return merged, traced
+
+
+@kernel
+def _moving_occluded_direct(fn, scene, words, md, box_lo, box_hi, timed, o, d, tau, tmax, blocked):
+    """``_moving_direct`` for occlusion: marks ``blocked`` the rays not yet blocked that hit the
+    object in (0, tmax) (``fn``: ``rtcOccluded1``). Returns the rays traced."""
+    bits, base, addr = ray_buffer(words)
+    traced = 0
+    for i in range(o.shape[0]):
+        if blocked[i]:
+            continue
+        oi = load(o, i)
+        di = load(d, i)
+        if not _in_swept_box(box_lo, box_hi, oi, di, tmax[i]):
+            continue
+        o_l, d_l = _ray_to_local(md, tau[i], oi, di)
+        traced += 1
+        if occluded1_at(fn, scene, words, bits, base, addr, o_l, d_l, tmax[i], tau[i] if timed else 0.0):
+            blocked[i] = True
+    return traced
 
 
 @kernel
@@ -635,6 +691,66 @@ class _MovingObject:
             self.positions_close = self.deforming.positions_close
         # the culling box; setting it to ±inf disables culling (tests)
         self.box_lo, self.box_hi = _swept_box(mm)
+        # (rtcIntersect1, rtcOccluded1, RTCScene handle, the scene object that owns it, timed)
+        # when kernels may query this object's Embree scene themselves, else None
+        self.direct = _direct_scene(self)
+
+
+#: probe rays a moving object's Embree scene must answer as expected before kernels query it
+DIRECT_PROBE_RAYS = 256
+
+
+#: the R3 low-discrepancy sequence's steps (Roberts): 1/φ3, 1/φ3², 1/φ3³ with φ3³ = φ3 + 1
+_R3 = np.array([1.0 / 1.2207440846057596 ** k for k in (1, 2, 3)])
+
+
+def _probe_rays(positions: np.ndarray, n: int):
+    """n rays (float32-representable) from a Fibonacci sphere around the points' box to points
+    of an R3 sequence inside it, with tmax inf (most meet the mesh), and a time in [0, 1) each.
+    A fixed pattern, no random generator: a render stays a function of its seed alone."""
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    centre, radius = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo)) + 1e-3
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = k * (np.pi * (3.0 - np.sqrt(5.0)))
+    ring = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    o = centre + 2.0 * radius * np.column_stack([ring * np.cos(phi), ring * np.sin(phi), z])
+    target = lo + np.modf(0.5 + k[:, None] * _R3)[0] * (hi - lo)
+    d = target - o
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    tau = np.modf(0.5 + k * 0.6180339887498949)[0]
+    return (o.astype(np.float32).astype(np.float64), d.astype(np.float32).astype(np.float64),
+            np.full(n, np.inf), tau)
+
+
+def _direct_scene(obj):
+    """``_MovingObject.direct`` for obj, after checking its Embree scene on probe rays: a rigid
+    object's scene must answer exactly as embreex's ``run``; a deforming mesh's motion-blur scene
+    as the exact intersector does at random times (same triangle, t within float32 error, on all
+    but rays grazing an edge). None (the batch / exact path) when anything is not as expected."""
+    fn_hit, fn_occluded = embree_direct.intersect1_address(), embree_direct.occluded1_address()
+    if not fn_hit or not fn_occluded or not len(obj.triangles):
+        return None
+    o, d, tmax, tau = _probe_rays(obj.positions, DIRECT_PROBE_RAYS)
+    if obj.deforming is None:
+        if not embree_direct.matches_embreex(obj.scene, o, d, tmax):
+            return None
+        return fn_hit, fn_occluded, embree_direct.scene_address(obj.scene), obj.scene, False
+    scene = deforming_scene(obj.positions, obj.positions_close, obj.triangles)
+    handle = embree_direct.scene_address(scene) if scene is not None else 0
+    if not handle:
+        return None
+    n = len(o)
+    t, prim = np.full(n, np.inf), np.full(n, -1, dtype=np.int64)
+    u, v = np.zeros(n), np.zeros(n)
+    embree_direct.trace_rows_at(fn_hit, handle, embree_direct.scratch(), o, d, tmax, tau, t, prim, u, v)
+    t_ref, prim_ref, *_ = _intersect_deforming(obj.deforming, o, d, tau, tmax)
+    same = prim == prim_ref
+    both = same & (prim >= 0)
+    close = np.all(np.abs(t[both] - t_ref[both]) <= 1e-4 * (1.0 + np.abs(t_ref[both])))
+    if not close or same.mean() < 0.98 or both.sum() < min(16, (prim_ref >= 0).sum()):
+        return None
+    return fn_hit, fn_occluded, handle, scene, True
 
 
 def _swept_box(mm) -> tuple[np.ndarray, np.ndarray]:
@@ -739,7 +855,18 @@ class Tracer:
             linear = np.empty((n, 3, 3))
             translation = np.empty((n, 3))
             local = None
+            words = None
             for obj in self.moving:
+                if obj.direct is not None:
+                    if words is None:
+                        words = embree_direct.scratch()
+                    fn, _, handle, _, timed = obj.direct
+                    m, traced = _moving_direct(fn, handle, words, obj.motion, obj.box_lo, obj.box_hi,
+                                               obj.prim_offset, timed, o, d, tau, t, prim, b1, b2,
+                                               linear, translation)
+                    merged += m
+                    self.rays_traced += traced
+                    continue
                 if obj.deforming is not None:
                     merged += _deforming_intersect(obj.motion, obj.box_lo, obj.box_hi, obj.deforming,
                                                    obj.prim_offset, o, d, tau, t, prim, b1, b2,
@@ -811,7 +938,15 @@ class Tracer:
             tmax = np.minimum(tmax, 3.0e38)
             blocked = np.ascontiguousarray(blocked)
             local = None
+            words = None
             for obj in self.moving:
+                if obj.direct is not None:
+                    if words is None:
+                        words = embree_direct.scratch()
+                    _, fn, handle, _, timed = obj.direct
+                    self.rays_traced += _moving_occluded_direct(fn, handle, words, obj.motion, obj.box_lo,
+                                                                obj.box_hi, timed, o, d, tau, tmax, blocked)
+                    continue
                 if obj.deforming is not None:
                     _deforming_occluded(obj.motion, obj.box_lo, obj.box_hi, obj.deforming, o, d,
                                         tau, tmax, blocked)
