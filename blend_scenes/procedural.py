@@ -133,7 +133,11 @@ def wall_material():
     n = _node(nt, "ShaderNodeTexNoise", {"Vector": tc.outputs["Generated"], "Scale": 4.0, "Detail": 5.0,
                                          "Roughness": 0.5, "Offset": 0.6, "Lacunarity": 2.2},
               noise_type="HETERO_TERRAIN")
-    q = _node(nt, "ShaderNodeVectorMath", {0: tc.outputs["Generated"], 3: 40.0}, operation="SCALE")
+    # 41, not 40: Generated is exactly 0.5 across the flat wall, and 0.5·40 = 20 sits on a cell
+    # boundary, where Cycles's float32 attribute interpolation lands on either side of floor()
+    # from sample to sample (speckles of two cell layers, blended) — rounding noise no renderer
+    # is meant to reproduce, and 46 % of DRT's converged error against Cycles (docs/materials.md)
+    q = _node(nt, "ShaderNodeVectorMath", {0: tc.outputs["Generated"], 3: 41.0}, operation="SCALE")
     fl = _node(nt, "ShaderNodeVectorMath", {0: q.outputs[0]}, operation="FLOOR")
     wn = _node(nt, "ShaderNodeTexWhiteNoise", {"Vector": fl.outputs[0]}, noise_dimensions="3D")
     speck = _node(nt, "ShaderNodeMath", {0: wn.outputs["Value"], 1: 0.9}, operation="GREATER_THAN")
