@@ -256,3 +256,21 @@ def test_deforming_mesh_through_embree_motion_blur_matches_the_exact_intersector
     assert (blocked == b.hit).mean() > 0.995
     # a far larger deforming mesh costs what Embree's hierarchy costs, not a scan of its clusters
     # (the exact path's time grows with the mesh): checked through the answers only here
+
+
+def test_a_failing_probe_leaves_the_object_on_the_batch_path(monkeypatch):
+    """Whatever goes wrong while checking an object's Embree scene for the kernels, the tracer
+    is still built and answers through the batch / exact path."""
+    import drt.trace as trace_mod
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no Embree here")
+
+    monkeypatch.setattr(trace_mod.embree_direct, "matches_embreex", broken)
+    monkeypatch.setattr(trace_mod, "deforming_scene", broken)
+    rng = np.random.default_rng(13)
+    for deforming in (False, True):
+        tr = _spinning_scene(deforming)
+        assert tr.moving[0].direct is None
+        o, d, tau = _random_rays(rng, 2000)
+        assert tr.intersect(o, d, tau=tau).hit.sum() > 50

@@ -728,6 +728,13 @@ def _direct_scene(obj):
     object's scene must answer exactly as embreex's ``run``; a deforming mesh's motion-blur scene
     as the exact intersector does at random times (same triangle, t within float32 error, on all
     but rays grazing an edge). None (the batch / exact path) when anything is not as expected."""
+    try:
+        return _checked_direct_scene(obj)
+    except Exception:  # noqa: BLE001 - any surprise: the batch / exact path is always right
+        return None
+
+
+def _checked_direct_scene(obj):
     fn_hit, fn_occluded = embree_direct.intersect1_address(), embree_direct.occluded1_address()
     if not fn_hit or not fn_occluded or not len(obj.triangles):
         return None
