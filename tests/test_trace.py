@@ -211,7 +211,7 @@ def _without_direct(tr):
 
 
 def test_kernels_trace_rigid_objects_exactly_as_the_batches_do():
-    """A rigidly moving object queried by Embree from inside the kernel (``_moving_direct``)
+    """A rigidly moving object queried by Embree from inside the kernel (``_moving_hits``)
     gives the batch path's answers bit for bit: same float32 rays, same hits, same occlusion."""
     from drt import embree_direct
 

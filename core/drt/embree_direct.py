@@ -126,9 +126,9 @@ def trace1(fn, scene, words, bits, base, addr, o, d, tmax):
 
 
 @inline_kernel
-def trace1_at(fn, scene, words, bits, base, addr, o, d, tmax, time):
-    """``trace1`` at ``time`` in [0, 1] (Embree's ray time: where a geometry with time steps —
-    a deforming mesh, ``embree_mesh.deforming_scene`` — is seen; others ignore it)."""
+def _fill_ray(words, bits, base, o, d, tmax, time):
+    """The ray part of the RTCRayHit in ``words`` (shared with RTCRay): o + t·d for t in
+    [0, tmax), at ``time``, every mask bit, no flags."""
     for a in range(3):
         words[base + _ORG + a] = o[a]
         words[base + _DIR + a] = d[a]
@@ -138,6 +138,13 @@ def trace1_at(fn, scene, words, bits, base, addr, o, d, tmax, time):
     bits[base + _MASK] = _INVALID
     bits[base + _ID] = 0
     bits[base + _FLAGS] = 0
+
+
+@inline_kernel
+def trace1_at(fn, scene, words, bits, base, addr, o, d, tmax, time):
+    """``trace1`` at ``time`` in [0, 1] (Embree's ray time: where a geometry with time steps —
+    a deforming mesh, ``embree_mesh.deforming_scene`` — is seen; others ignore it)."""
+    _fill_ray(words, bits, base, o, d, tmax, time)
     bits[base + _PRIM] = _INVALID
     bits[base + _GEOM] = _INVALID
     bits[base + _INST] = _INVALID
@@ -153,15 +160,7 @@ def occluded1_at(fn, scene, words, bits, base, addr, o, d, tmax, time):
     """Is anything hit by the ray o + t·d, t in [0, tmax), at ``time``? ``fn``: the address of
     ``rtcOccluded1``, which takes the ray part of the same buffer (RTCRay) and sets its tfar to
     −inf when it finds a hit."""
-    for a in range(3):
-        words[base + _ORG + a] = o[a]
-        words[base + _DIR + a] = d[a]
-    words[base + _TNEAR] = 0.0
-    words[base + _TIME] = time
-    words[base + _TFAR] = min(tmax, _FAR)
-    bits[base + _MASK] = _INVALID
-    bits[base + _ID] = 0
-    bits[base + _FLAGS] = 0
+    _fill_ray(words, bits, base, o, d, tmax, time)
     _call_intersect1(fn, scene, addr)  # (the same C signature: scene, ray, NULL arguments)
     return words[base + _TFAR] == -math.inf
 

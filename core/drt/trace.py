@@ -28,6 +28,7 @@ import math
 import time as _time
 from collections import namedtuple
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -284,6 +285,19 @@ def _in_swept_box(box_lo, box_hi, o, d, tmax):
     return near <= far and far >= 0.0 and near <= tmax
 
 
+@inline_kernel
+def _object_ray(md, box_lo, box_hi, o, d, tau, i, tmax):
+    """Ray i (rows of o, d, tau) for one moving object: (meets, o_local, d_local) — whether its
+    segment (0, tmax) meets the object's swept box and, if so, the ray in the object's space at
+    the ray's τ (zeros otherwise)."""
+    oi = load(o, i)
+    di = load(d, i)
+    if not _in_swept_box(box_lo, box_hi, oi, di, tmax):
+        return False, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    o_l, d_l = _ray_to_local(md, tau[i], oi, di)
+    return True, o_l, d_l
+
+
 @kernel
 def _rigid_candidates(md, box_lo, box_hi, o, d, tau, tmax, skip, idx, o_local, d_local, tfar):
     """The rays (rows of o, d, tau, tmax; not those with ``skip[i]`` when skip is non-empty)
@@ -295,11 +309,9 @@ def _rigid_candidates(md, box_lo, box_hi, o, d, tau, tmax, skip, idx, o_local, d
     for i in range(o.shape[0]):
         if check_skip and skip[i]:
             continue
-        oi = load(o, i)
-        di = load(d, i)
-        if not _in_swept_box(box_lo, box_hi, oi, di, tmax[i]):
+        meets, o_l, d_l = _object_ray(md, box_lo, box_hi, o, d, tau, i, tmax[i])
+        if not meets:
             continue
-        o_l, d_l = _ray_to_local(md, tau[i], oi, di)
         idx[count] = i
         for j in range(3):
             o_local[count, j] = o_l[j]
@@ -330,25 +342,27 @@ def _rigid_merge(md, prim_offset, tau, idx, count, r_t, r_prim, r_u, r_v, t, pri
 
 
 @kernel
-def _moving_direct(fn, scene, words, md, box_lo, box_hi, prim_offset, timed, o, d, tau, t, prim,
-                   b1, b2, linear, translation):
-    """Closest hits against one moving object whose Embree scene a kernel may query
-    (``_MovingObject.direct``): each ray that meets the swept box, in the object's space at its
-    own τ, traced here (``embree_direct``; ``timed``: a deforming mesh's scene, seen at time τ),
-    merged into (t, prim, b1, b2) where closer, with the object's local→world map. For a rigid
-    object the same float32 rays and answers as `_rigid_candidates`, embreex and
-    `_rigid_merge`. Returns (rays merged, rays traced)."""
+def _moving_hits(fn, scene, words, timed, dd, md, box_lo, box_hi, prim_offset, o, d, tau, t, prim,
+                 b1, b2, linear, translation):
+    """Closest hits against one moving object, each ray that meets its swept box taken into the
+    object's space at its own τ, merged into (t, prim, b1, b2) where closer, with the object's
+    local→world map. ``fn`` ≠ 0: traced here by Embree (``rtcIntersect1`` on ``scene``, through
+    ``embree_direct``; ``timed``: a deforming mesh's motion-blur scene, seen at time τ) — for a
+    rigid object the same float32 rays and answers as `_rigid_candidates`, embreex and
+    `_rigid_merge`; ``fn`` = 0: the exact intersector of the deforming mesh ``dd``.
+    Returns (rays merged, rays traced by Embree)."""
     bits, base, addr = ray_buffer(words)
     merged = 0
     traced = 0
     for i in range(o.shape[0]):
-        oi = load(o, i)
-        di = load(d, i)
-        if not _in_swept_box(box_lo, box_hi, oi, di, t[i]):
+        meets, o_l, d_l = _object_ray(md, box_lo, box_hi, o, d, tau, i, t[i])
+        if not meets:
             continue
-        o_l, d_l = _ray_to_local(md, tau[i], oi, di)
-        tt, k, u, v = trace1_at(fn, scene, words, bits, base, addr, o_l, d_l, t[i], tau[i] if timed else 0.0)
-        traced += 1
+        if fn != 0:
+            tt, k, u, v = trace1_at(fn, scene, words, bits, base, addr, o_l, d_l, t[i], tau[i] if timed else 0.0)
+            traced += 1
+        else:
+            tt, k, u, v = _deforming_hit(dd, o_l, d_l, tau[i], t[i], False)
         if k < 0 or not (tt < t[i]):
             continue
         t[i] = tt
@@ -361,21 +375,23 @@ def _moving_direct(fn, scene, words, md, box_lo, box_hi, prim_offset, timed, o, 
 
 
 @kernel
-def _moving_occluded_direct(fn, scene, words, md, box_lo, box_hi, timed, o, d, tau, tmax, blocked):
-    """``_moving_direct`` for occlusion: marks ``blocked`` the rays not yet blocked that hit the
-    object in (0, tmax) (``fn``: ``rtcOccluded1``). Returns the rays traced."""
+def _moving_blocked(fn, scene, words, timed, dd, md, box_lo, box_hi, o, d, tau, tmax, blocked):
+    """`_moving_hits` for occlusion: marks ``blocked`` the rays not yet blocked that hit the
+    object in (0, tmax) (``fn`` ≠ 0: ``rtcOccluded1``). Returns the rays traced by Embree."""
     bits, base, addr = ray_buffer(words)
     traced = 0
     for i in range(o.shape[0]):
         if blocked[i]:
             continue
-        oi = load(o, i)
-        di = load(d, i)
-        if not _in_swept_box(box_lo, box_hi, oi, di, tmax[i]):
+        meets, o_l, d_l = _object_ray(md, box_lo, box_hi, o, d, tau, i, tmax[i])
+        if not meets:
             continue
-        o_l, d_l = _ray_to_local(md, tau[i], oi, di)
-        traced += 1
-        if occluded1_at(fn, scene, words, bits, base, addr, o_l, d_l, tmax[i], tau[i] if timed else 0.0):
+        if fn != 0:
+            traced += 1
+            hit = occluded1_at(fn, scene, words, bits, base, addr, o_l, d_l, tmax[i], tau[i] if timed else 0.0)
+        else:
+            hit = _deforming_hit(dd, o_l, d_l, tau[i], tmax[i], True)[1] >= 0
+        if hit:
             blocked[i] = True
     return traced
 
@@ -452,46 +468,6 @@ def _deforming_hit(dd, o, d, tau, tmax, any_hit):
                 if any_hit:
                     return t_best, best, bu, bv
     return t_best, best, bu, bv
-
-
-@kernel
-def _deforming_intersect(md, box_lo, box_hi, dd, prim_offset, o, d, tau, t, prim, b1, b2,
-                         linear, translation):
-    """Closest hits against a deforming (and possibly rigidly moving) mesh, each ray at its
-    own τ, merged into (t, prim, b1, b2) where closer, with the object's local→world map."""
-    merged = 0
-    for i in range(o.shape[0]):
-        oi = load(o, i)
-        di = load(d, i)
-        if not _in_swept_box(box_lo, box_hi, oi, di, t[i]):
-            continue
-        o_l, d_l = _ray_to_local(md, tau[i], oi, di)
-        tt, k, u, v = _deforming_hit(dd, o_l, d_l, tau[i], t[i], False)
-        if k < 0:
-            continue
-        t[i] = tt
-        prim[i] = k + prim_offset
-        b1[i] = u
-        b2[i] = v
-        _store_motion(md, tau[i], i, linear, translation)
-        merged += 1
-    return merged
-
-
-@kernel
-def _deforming_occluded(md, box_lo, box_hi, dd, o, d, tau, tmax, blocked):
-    """Marks ``blocked`` the rays not yet blocked that hit the deforming mesh in (0, tmax)."""
-    for i in range(o.shape[0]):
-        if blocked[i]:
-            continue
-        oi = load(o, i)
-        di = load(d, i)
-        if not _in_swept_box(box_lo, box_hi, oi, di, tmax[i]):
-            continue
-        o_l, d_l = _ray_to_local(md, tau[i], oi, di)
-        _, k, _, _ = _deforming_hit(dd, o_l, d_l, tau[i], tmax[i], True)
-        if k >= 0:
-            blocked[i] = True
 
 
 @kernel
@@ -653,6 +629,14 @@ def deforming_data(mm) -> DeformingData:
     f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)  # noqa: E731
     return DeformingData(positions=pos, positions_close=pos_close, triangles=tri, lo=f64(lo),
                          hi=f64(hi), all_lo=f64(all_lo).reshape(3), all_hi=f64(all_hi).reshape(3))
+
+
+#: `_moving_hits` / `_moving_blocked` arguments of an object without a scene for the kernels:
+#: (no rtcIntersect1, no rtcOccluded1, no scene, no owner, untimed), and the empty
+#: DeformingData passed for rigid objects (one compiled variant serves both)
+_EXACT = (0, 0, 0, None, False)
+_NO_DEFORMING = deforming_data(SimpleNamespace(positions=np.zeros((0, 3)), positions_close=np.zeros((0, 3)),
+                                               triangles=np.zeros((0, 3), dtype=np.int64)))
 
 
 def _intersect_deforming(mm, o, d, tau, tmax):
@@ -862,22 +846,15 @@ class Tracer:
             linear = np.empty((n, 3, 3))
             translation = np.empty((n, 3))
             local = None
-            words = None
+            words = embree_direct.scratch()
             for obj in self.moving:
-                if obj.direct is not None:
-                    if words is None:
-                        words = embree_direct.scratch()
-                    fn, _, handle, _, timed = obj.direct
-                    m, traced = _moving_direct(fn, handle, words, obj.motion, obj.box_lo, obj.box_hi,
-                                               obj.prim_offset, timed, o, d, tau, t, prim, b1, b2,
-                                               linear, translation)
+                if obj.direct is not None or obj.deforming is not None:
+                    fn, _, handle, _, timed = obj.direct or _EXACT
+                    m, traced = _moving_hits(fn, handle, words, timed, obj.deforming or _NO_DEFORMING,
+                                             obj.motion, obj.box_lo, obj.box_hi, obj.prim_offset, o, d,
+                                             tau, t, prim, b1, b2, linear, translation)
                     merged += m
                     self.rays_traced += traced
-                    continue
-                if obj.deforming is not None:
-                    merged += _deforming_intersect(obj.motion, obj.box_lo, obj.box_hi, obj.deforming,
-                                                   obj.prim_offset, o, d, tau, t, prim, b1, b2,
-                                                   linear, translation)
                     continue
                 if local is None:
                     local = self._local_rays(n)
@@ -945,18 +922,13 @@ class Tracer:
             tmax = np.minimum(tmax, 3.0e38)
             blocked = np.ascontiguousarray(blocked)
             local = None
-            words = None
+            words = embree_direct.scratch()
             for obj in self.moving:
-                if obj.direct is not None:
-                    if words is None:
-                        words = embree_direct.scratch()
-                    _, fn, handle, _, timed = obj.direct
-                    self.rays_traced += _moving_occluded_direct(fn, handle, words, obj.motion, obj.box_lo,
-                                                                obj.box_hi, timed, o, d, tau, tmax, blocked)
-                    continue
-                if obj.deforming is not None:
-                    _deforming_occluded(obj.motion, obj.box_lo, obj.box_hi, obj.deforming, o, d,
-                                        tau, tmax, blocked)
+                if obj.direct is not None or obj.deforming is not None:
+                    _, fn, handle, _, timed = obj.direct or _EXACT
+                    self.rays_traced += _moving_blocked(fn, handle, words, timed, obj.deforming or _NO_DEFORMING,
+                                                        obj.motion, obj.box_lo, obj.box_hi, o, d, tau, tmax,
+                                                        blocked)
                     continue
                 if local is None:
                     local = self._local_rays(n)
