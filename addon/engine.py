@@ -134,14 +134,15 @@ class DRTRenderEngine(bpy.types.RenderEngine):
             return
 
         kernels = compat.core_module("kernels")
-        if not kernels.kernels_compiled():  # the first render of an install compiles (~30 s)
+        variant = kernels.scene_kernel_variant(drt_scene)
+        if not kernels.kernels_compiled(variant):  # the first render of an install compiles
             self.report({"INFO"}, f"DRT: {kernels.COMPILING_NOTICE}")
         self.update_stats("", "DRT | Building acceleration structures")
         context = render_mod.prepare(drt_scene)
         for w in getattr(context, "warnings", []):
             self.report({"WARNING"}, f"DRT: {w}")
-        if not kernels.kernels_compiled():
-            self.update_stats("", "DRT | Compiling render kernels (first render only: a few minutes)")
+        if not kernels.kernels_compiled(variant):
+            self.update_stats("", "DRT | Compiling render kernels (first render of this kind of scene: a minute or more)")
         t_render = time.perf_counter()
         last_draw = [0.0]
         crop = border_crop(scene, width, height)

@@ -382,7 +382,7 @@ def status_text(frame, target: int, error: str | None) -> str:
         return f"DRT | Error: {error}"
     if frame is None:
         if not compat.core_module("kernels").kernels_compiled():
-            return "DRT | Compiling render kernels (first render only: a few minutes)"
+            return "DRT | Compiling render kernels (first render of this kind of scene: a minute or more)"
         return "DRT | Preparing"
     if frame.divider > 1:
         return f"DRT | Preview 1/{frame.divider}"

@@ -22,6 +22,10 @@ def test_compiled_marker(monkeypatch, tmp_path):
     assert not kernels.kernels_compiled()
     kernels.mark_kernels_compiled()
     assert kernels.kernels_compiled()
+    # each variant of the stage kernels compiles on its own first use, so has its own mark
+    assert not kernels.kernels_compiled("programs")
+    kernels.mark_kernels_compiled("programs")
+    assert kernels.kernels_compiled("programs") and not kernels.kernels_compiled("media")
     monkeypatch.delenv("NUMBA_CACHE_DIR")
     assert not kernels.kernels_compiled()  # unknown location: every process compiles
 
@@ -212,3 +216,46 @@ def test_a_loaded_kernel_links_into_a_later_compile(tmp_path):
     assert hit == "1" and int(deferred) >= 1 and overloads == "1"  # the loaded one was linked
     assert float(first) == 0.5 and float(twice) == 1.0
     assert int(left) < int(deferred)  # the linked library's bitcode was parsed on demand
+
+
+def test_a_scene_without_media_or_programs_runs_shade_without_their_code():
+    """Model no more than a scene needs, at compile time too: a scene with no participating
+    media and no material or world program hands ``shade`` (and the shadow rays' ``shadow_step``)
+    None for both, so numba compiles a variant that holds neither the media code nor the program
+    interpreter (their branches are resolved away at compile time). That variant renders exactly
+    what the full one renders for the same scene: here a Cornell box with a transparent card
+    (IOR-1 glass), so the shadow rays go through ``shadow_step`` as well."""
+    import numpy as np
+
+    from drt import path_stages
+    from drt.render import prepare, render
+    from drt.scene import scene_from_dict
+    from scene_builders import add_material, add_mesh, cornell_box, quad
+
+    h, a = cornell_box(24, 24, spp=4)
+    card = add_material(h, "Card", [{"type": "GLASS", "color": [0.8, 0.6, 0.4], "ior": 1.0, "roughness": 0.0}])
+    add_mesh(h, a, "card", *quad((0.0, -0.5, 0.9), (0.4, 0, 0), (0, 0, 0.4)), material=card)
+    scene = scene_from_dict(h, a)
+    ctx = prepare(scene)
+    integ = ctx.integrator
+    assert integ.media_arg is None and integ.programs_arg is None
+    assert integ.transparent.any()
+    lean = render(scene, context=ctx, threads=1).combined
+    assert any(str(s).count("none") >= 2 for s in path_stages.shade.signatures)
+    integ.media_arg, integ.programs_arg = integ.media, integ.programs  # the full variant
+    full = render(scene, context=ctx, threads=1).combined
+    assert np.array_equal(lean, full)
+    assert lean[..., :3].mean() > 0.01
+
+
+@pytest.mark.parametrize("name, variant", [("cornell_box", ""), ("textured", "programs"), ("hdri", "programs"),
+                                           ("volume_fog", "media"), ("volume_noise", "media")])
+def test_the_notice_and_the_render_agree_on_a_scenes_kernel_variant(name, variant):
+    """The CLI and the add-on decide from the scene whether its first render will compile
+    (``scene_kernel_variant``); the render marks the variant its ``Integrator`` ran."""
+    from drt.render import prepare
+    from drt.scene_file import load_scene
+
+    scene = load_scene(os.path.join(REPO, "blend_scenes", f"{name}.npz"))
+    assert kernels.scene_kernel_variant(scene) == variant
+    assert prepare(scene).integrator.kernel_variant == variant

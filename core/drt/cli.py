@@ -315,9 +315,9 @@ def cmd_render(args) -> int:
         stop.set()
 
     signal.signal(signal.SIGINT, on_sigint)
-    from .kernels import COMPILING_NOTICE, kernels_compiled
+    from .kernels import COMPILING_NOTICE, kernels_compiled, scene_kernel_variant
 
-    if not kernels_compiled():
+    if not kernels_compiled(scene_kernel_variant(scene)):
         print(f"drt: {COMPILING_NOTICE}", file=sys.stderr, flush=True)
     bar = Progress()
     try:

@@ -162,6 +162,15 @@ class Integrator:
         if media.enabled and media.camera_stack[0] < 0:
             media = media._replace(camera_stack=camera_stack(media, tracer))
         self.media = media
+        # what the kernels get: None without media, so they run (and compile) a variant with
+        # no media code at all (path_stages.shade)
+        self.media_arg = media if media.enabled else None
+        # likewise None for the programs when there is none and no media (the media code
+        # reads them, and a scene with media compiles the full variant anyway)
+        no_programs = len(self.programs.op_start) <= 1
+        self.programs_arg = None if no_programs and not media.enabled else self.programs
+        #: which variant of the kernels this scene runs (drt.kernels.scene_kernel_variant)
+        self.kernel_variant = "media" if media.enabled else ("" if self.programs_arg is None else "programs")
         self.loop_limit = self.max_depth + 1 + (stages.VOLUME_BOUNDS_MAX if media.enabled else 0)
         if self.sss is not None:  # an SSS exit takes a loop pass of its own, no bounce
             self.loop_limit += self.max_depth + 1
@@ -224,9 +233,9 @@ class Integrator:
                 break
             rows = active[:n_active]
             hits = self.tracer.intersect(o[rows], d[rows], shadow.tau[:count][rows], tmax[rows])
-            n_active = shadow_step(self.media, self.surfaces.material, active, n_active, hits.prim, hits.t,
+            n_active = shadow_step(self.media_arg, self.surfaces.material, active, n_active, hits.prim, hits.t,
                                    hits.ng, o, d, tmax, shadow.vstack, trans, blocked,
-                                   self.transparent, md, self.programs, regs, point, hits.b1, hits.b2)
+                                   self.transparent, md, self.programs_arg, regs, point, hits.b1, hits.b2)
         blocked[active[:n_active]] = True  # still crossing boundaries: give up (as Cycles)
         add_transmitted(shadow, count, blocked, trans, radiance)
 
@@ -259,8 +268,8 @@ class Integrator:
             hit_arrays = self._hit_arrays(hits)
             if self.sss is not None:
                 self.sss.patch_hits(paths, live, hit_arrays)
-            live, n_shadow = stages.shade(sd, md, self.programs, regs, point, ld, self.surfaces, self.stage_settings, depth_i, live,
-                                          paths, hit_arrays, out, shadow, vd)
+            live, n_shadow = stages.shade(sd, md, self.programs_arg, regs, point, ld, self.surfaces, self.stage_settings, depth_i, live,
+                                          paths, hit_arrays, out, shadow, self.media_arg)
             if n_shadow and (vd.enabled or self.transparent.shape[0]):
                 self._shadows_through(shadow, n_shadow, out.radiance, md, regs, point)
             elif n_shadow:

@@ -234,8 +234,8 @@ def shading_normal(surf, hits, i, prim, ng):
 def world_emission(ld, pd, regs, point, d, flags, counts, camera):
     """Radiance the world sends along −d: its program's for a textured world (``point`` gets
     the direction's rows and the ray's Light Path rows, as `fill_point` for a hit), else the
-    constant colour."""
-    if ld.world_prog >= 0:
+    constant colour. ``pd`` None: no programs in the scene, so not a textured world."""
+    if pd is not None and ld.world_prog >= 0:
         _put(point, POINT_PATH, (1.0 if camera else 0.0, 1.0 if flags & RAY_DIFFUSE else 0.0,
                                  1.0 if flags & (RAY_GLOSSY | RAY_SINGULAR) else 0.0))
         _put(point, POINT_PATH2, (1.0 if flags & RAY_SINGULAR else 0.0,
@@ -423,8 +423,11 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
     programs (``drt.materials.programs``; no programs: zero-size arrays); when there are any,
     ``md`` must be this thread's own copy of the material data and ``regs`` its register file,
     since a textured material's row is rewritten at each of its hits, and ``point`` its
-    (POINT_ROWS, 3) shading-point array. ``vd``: the scene's media
-    (``drt.volumes.media.MediumData``; disabled: no media, nothing below touches them).
+    (POINT_ROWS, 3) shading-point array. ``pd`` None: a scene without any program and without
+    media, whose variant of ``shade`` holds no interpreter (as ``vd`` below). ``vd``: the scene's media
+    (``drt.volumes.media.MediumData``), or None for a scene without media: every use of ``vd``
+    sits under ``vd is not None``, which numba resolves when it compiles, so that variant of
+    ``shade`` holds none of the media code (half of the cold compile; docs/kernels.md).
 
     Camera rays and sample dimensions go by the path's bounce count, which equals ``depth_i``
     unless a path crossed volume-only boundaries (those segments are not bounces). A textured world
@@ -464,7 +467,9 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         idx = paths.index[i]
 
         # --- the media the ray travels through (drt.volumes.stage)
-        in_medium = vd.enabled and paths.vstack[i, 0] >= 0
+        in_medium = False
+        if vd is not None:
+            in_medium = vd.enabled and paths.vstack[i, 0] >= 0
         t_end = t_geom
         v_mode = 0
         v_sig_t = (0.0, 0.0, 0.0)
@@ -472,7 +477,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         v_g = 0.0
         scattered = False
         thr0 = thr
-        if in_medium:
+        if vd is not None and in_medium:
             length = t_geom  # a miss runs to infinity through the media (Cycles: also past clip_end)
             (v_acc, v_mode, v_sig_t, v_chp, v_g, scattered, t_s, thr, nee_ok, x, v_wi, v_dist, f_nee,
              v_lpdf, v_ph, v_ldelta) = volume_segment(
@@ -503,7 +508,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 light, le, lpdf = shape_emission(ld, k, o, d, t, prev_p, prev_hint)
                 if camera and ld.li[light, I_VISIBLE_CAMERA] == 0:
                     continue
-                if v_mode == MODE_HETERO:
+                if vd is not None and v_mode == MODE_HETERO:
                     tr_k, _ = ratio_tracking(vd, pd, regs, point, paths.vstack, i, o, d, t,
                                              seed_of(pixel, idx, 1000003 + 64 * paths.vseg[i] + k))
                     le = mul(le, tr_k)
@@ -569,7 +574,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
 
         # --- the surface hit: its emission (also for paths stopping here at a bounce limit)
         mat = surf.material[prim]
-        if vd.enabled and vd.pass_through[mat] and not exiting:
+        if vd is not None and vd.enabled and vd.pass_through[mat] and not exiting:
             # a volume-only mesh has no surface: cross it (update the stack), no bounce
             store(out.radiance, slot, add(load(out.radiance, slot), acc))
             if paths.vseg[i] >= VOLUME_BOUNDS_MAX + settings.max_bounces or not any_positive(thr):
@@ -597,7 +602,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             # smooth normal says; the Lambert's only use of wo is that side
             mat = md.sss_exit[0]
             wo = ns if dot(wo, ng) >= 0.0 else neg(ns)
-        elif (pd.prog_of.shape[0] and pd.prog_of[mat] >= 0
+        elif (pd is not None and pd.prog_of.shape[0] and pd.prog_of[mat] >= 0
               and not (paths.terminate[i] and pd.emission_reg[mat] < 0 and not md.has_emission[mat])):
             # a textured material: this hit's parameters (a path ending here reads only the
             # emission, so a material without textured or constant emission skips its program)
@@ -701,7 +706,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 # Cycles evaluates the background for a light sample as an emission ray:
                 # every Light Path flag 0 (this hit's rows in ``point`` are no longer needed)
                 le = world_emission(ld, pd, regs, point, wi, 0, paths.counts[i], False)
-            elif (l_valid and lpdf > 0.0 and strategy == ld.emissive_index and pd.prog_of.shape[0]
+            elif (l_valid and lpdf > 0.0 and strategy == ld.emissive_index and pd is not None and pd.prog_of.shape[0]
                   and pd.emission_reg[surf.material[l_tri]] >= 0):
                 # a textured emitter (drt.lights.textured): its program's emission at the point
                 le = textured_light_radiance(pd, regs, point, surf.material[l_tri], l_tri,
@@ -725,7 +730,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                     shadow.tau[n_shadow] = paths.tau[i]
                     store(shadow.contrib, n_shadow, c)
                     shadow.slot[n_shadow] = slot
-                    if vd.enabled:  # the shadow ray starts in the media on wi's side
+                    if vd is not None and vd.enabled:  # the shadow ray starts in the media on wi's side
                         stack_copy(paths.vstack, i, shadow.vstack, n_shadow)
                         if not same_geo and not (lifted and same_sh):
                             stack_cross(vd, shadow.vstack, n_shadow, prim, mat, wi, ng)
@@ -769,7 +774,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             if paths.tcount[i] + 1 > settings.transparent_bounces:
                 continue
             copy_path(paths, i, j)
-            if vd.enabled and not refl_geo:
+            if vd is not None and vd.enabled and not refl_geo:
                 stack_cross(vd, paths.vstack, j, prim, mat, wi, ng)
             store(paths.o, j, offset_point(p, ng, wi))
             paths.tmax[j] = max(paths.tmax[i] - t_geom, 0.0)
@@ -809,7 +814,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             paths.sss_count[j] = n_sss + (1 if entering else 0)  # the exit vertex takes the next dims
 
         # --- write the continuing path to slot j ≤ i (compaction in place)
-        if vd.enabled:
+        if vd is not None and vd.enabled:
             stack_copy(paths.vstack, i, paths.vstack, j)
             if not refl_geo and not entering:  # transmitted: enters or leaves the material's medium
                 stack_cross(vd, paths.vstack, j, prim, mat, wi, ng)

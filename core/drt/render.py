@@ -424,7 +424,7 @@ def render(
             workers.close()
     stats.cancelled = cancelled
     if stats.samples_done:
-        mark_kernels_compiled()
+        mark_kernels_compiled(ctx.integrator.kernel_variant)
     stats.seconds = time.perf_counter() - t0
     stats.rays, stats.embree_seconds = workers.counters()
     stats.nan_samples = film.nan_samples

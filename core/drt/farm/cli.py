@@ -156,7 +156,7 @@ def _render_local(args, frames, load_frame, write, bar, stop):
     """Frames one after another in this process (no Dask)."""
     import time
 
-    from ..kernels import COMPILING_NOTICE, kernels_compiled
+    from ..kernels import COMPILING_NOTICE, kernels_compiled, scene_kernel_variant
     from ..render import render
 
     t0 = time.perf_counter()
@@ -167,7 +167,7 @@ def _render_local(args, frames, load_frame, write, bar, stop):
             break
         scene = load_frame(frame)
         first = first or scene
-        if not kernels_compiled():
+        if not kernels_compiled(scene_kernel_variant(scene)):
             print(f"drt: {COMPILING_NOTICE}", file=sys.stderr, flush=True)
 
         def tick(fraction, st, i=i):

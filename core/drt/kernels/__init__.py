@@ -347,26 +347,50 @@ def _share_the_cache_between_copies_of_drt() -> None:
 _share_the_cache_between_copies_of_drt()
 
 _READY_MARK = "compiled"
-#: what a user is told before the first render of a version (measured: ~2.5 min of one core on
-#: the 2-vCPU development machine, docs/kernels.md)
+#: what a user is told before the first render of a version (measured 2026-12-03: ~1.2 min of
+#: one core on the 2-vCPU development machine for a plain scene, docs/kernels.md)
 COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this version takes "
-                    "a few minutes longer (once per version and machine); later renders start "
-                    "in about a second")
+                    "a minute or more longer (once per version and machine, and again the first "
+                    "time a scene with textures or volumes renders); later renders start in "
+                    "about a second")
 
 
-def kernels_compiled() -> bool:
-    """Has a render already compiled and cached the kernels of this source state? (False also
-    when the cache location is unknown: then every process compiles.)"""
+#: the variants of the stage kernels a scene compiles (``drt.path_stages.shade``): a scene
+#: without media and programs compiles neither the media code nor the program interpreter
+KERNEL_VARIANTS = ("", "programs", "media")
+
+
+def scene_kernel_variant(scene) -> str:
+    """Which variant of the stage kernels ``scene`` (a ``drt.scene.Scene``) renders with: "media"
+    (participating media: the full kernels), "programs" (material or world programs, no media)
+    or "" (neither). The same choice as the ``Integrator``'s ``kernel_variant``."""
+    mats = getattr(scene, "materials", None) or []
+    if getattr(scene, "world_volume", None) is not None or any(m.get("volume") for m in mats):
+        return "media"
+    if getattr(scene, "world_program", None) is not None or any(m.get("program") for m in mats):
+        return "programs"
+    return ""
+
+
+def _ready_mark(variant: str) -> str:
+    return _READY_MARK + (f"-{variant}" if variant else "")
+
+
+def kernels_compiled(variant: str = "") -> bool:
+    """Has a render already compiled and cached the kernels of this source state, in this
+    ``variant`` (``scene_kernel_variant``; "": the plain scene's)? (False also when the cache
+    location is unknown: then every process compiles.)"""
     path = os.environ.get("NUMBA_CACHE_DIR")
-    return bool(path) and os.path.exists(os.path.join(path, _READY_MARK))
+    return bool(path) and os.path.exists(os.path.join(path, _ready_mark(variant)))
 
 
-def mark_kernels_compiled() -> None:
-    """Record that the render kernels are in the cache (called after a render finished)."""
+def mark_kernels_compiled(variant: str = "") -> None:
+    """Record that the render kernels of ``variant`` are in the cache (called after a render
+    finished)."""
     path = os.environ.get("NUMBA_CACHE_DIR")
-    if path and not os.path.exists(os.path.join(path, _READY_MARK)):
+    if path and not os.path.exists(os.path.join(path, _ready_mark(variant))):
         try:
-            with open(os.path.join(path, _READY_MARK), "w") as f:
+            with open(os.path.join(path, _ready_mark(variant)), "w") as f:
                 f.write(f"numba {numba.__version__}\n")
         except OSError:
             pass

@@ -369,7 +369,8 @@ def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, tra
     multiplies by its transparent colour (a textured one: its program run at the hit, with the
     shading point's Is Shadow Ray set) and the ray moves past it; a pass-through boundary
     updates the stack and moves the ray past it; no hit: done. ``md``/``regs``/``point``: the
-    thread's material workspace. Returns the number of rows still active (compacted to the
+    thread's material workspace; ``vd`` None: the scene has no media (nothing of them is
+    compiled into this variant), as ``pd`` None for a scene without programs. Returns the number of rows still active (compacted to the
     front of ``active``). A stack holding a heterogeneous medium attenuates by ratio tracking
     (drt.volumes.hetero; it writes ``point``'s coordinate rows before the hit fills them)."""
     n_next = 0
@@ -378,7 +379,7 @@ def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, tra
         p = prim[k]
         hit = p >= 0 and t[k] < tmax[s]
         seg = t[k] if hit else tmax[s]
-        if vd.enabled and stack[s, 0] >= 0:
+        if vd is not None and vd.enabled and stack[s, 0] >= 0:
             if vd.hetero and stack_is_hetero(vd, stack, s):
                 oo = load(o, s)
                 tr, _ = ratio_tracking(vd, pd, regs, point, stack, s, oo, load(d, s), seg,
@@ -393,11 +394,11 @@ def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, tra
         mat = material[p]
         dd = load(d, s)
         n = load(ng, k)
-        if not (vd.enabled and vd.pass_through[mat]):
+        if vd is None or not (vd.enabled and vd.pass_through[mat]):
             if not (transparent.shape[0] and transparent[mat]):
                 blocked[s] = True
                 continue
-            if pd.prog_of.shape[0] and pd.prog_of[mat] >= 0:
+            if pd is not None and pd.prog_of.shape[0] and pd.prog_of[mat] >= 0:
                 if pd.reads_point[mat]:
                     fill_shadow_point(point, pd, load(o, s), dd, t[k], n)
                 eval_material(pd, md, regs, mat, p, b1[k], b2[k], point)
@@ -406,7 +407,7 @@ def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, tra
                 trans[s, c] *= tc[c]
         if trans[s, 0] == 0.0 and trans[s, 1] == 0.0 and trans[s, 2] == 0.0:
             continue  # nothing gets through: done (the contribution is 0)
-        if vd.enabled:
+        if vd is not None and vd.enabled:
             stack_cross(vd, stack, s, p, mat, dd, n)
         oo = load(o, s)
         tk = t[k]
