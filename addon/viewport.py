@@ -430,13 +430,23 @@ mats = [{{"name": "m", "lobes": [{{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}}
          "emission": [2, 2, 2]}}]
 eye = np.eye(4).tolist()
 lights = [{{"name": t, "type": t, "matrix_world": eye}} for t in ("SUN", "POINT", "SPOT", "AREA")]
-live = interactive.LiveScene(scene_mod.RenderSettings(width=8, height=8), mats, lights, (0.1, 0.1, 0.1))
-live.set_object("grid", "grid", mesh, np.eye(4))
-live.set_object("tri", "tri", small, np.eye(4))
 m = np.eye(4)
 m[:3, 3] = (0.0, 0.0, 5.0)
-scene, ctx = live.context(scene_mod.CameraSpec(type="PERSP", matrix=m), 8, 8, spp=1)
-render.render(scene, spp=1, context=ctx, threads=1)
+# every variant of the stage kernels (drt.kernels.KERNEL_VARIANTS), so that adding a texture or
+# a volume in the viewport later never compiles inside Blender: plain, a material program, a medium
+fmt = compat.core_module("materials.program_format")
+program = fmt.validate_program({{"registers": 2, "constants": [[0, 0.5, 0.4, 0.3]], "data": [],
+                                "ops": [[fmt.OP_COMBINE, 0, 1, -1, 0, 0, 0, -1, -1, -1, 0]]}}, 0, "warm-up")
+textured = dict(mats[0], program=program, lobes=[dict(mats[0]["lobes"][0], color_reg=1), mats[0]["lobes"][1]])
+fog = dict(mats[0], volume=compat.core_module("volumes.media").validate_medium({{"absorption": [0.1, 0.1, 0.1]}},
+                                                                               "warm-up"))
+for first in (mats[0], textured, fog):
+    live = interactive.LiveScene(scene_mod.RenderSettings(width=8, height=8), [first, mats[1]], lights,
+                                 (0.1, 0.1, 0.1))
+    live.set_object("grid", "grid", mesh, np.eye(4))
+    live.set_object("tri", "tri", small, np.eye(4))
+    scene, ctx = live.context(scene_mod.CameraSpec(type="PERSP", matrix=m), 8, 8, spp=1)
+    render.render(scene, spp=1, context=ctx, threads=1)
 """
 
 _warmup = None  # the warm-up process (one per Blender session)
