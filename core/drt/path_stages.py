@@ -806,7 +806,10 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             # the walk (drt.subsurface, run by the integrator) starts here, just inside
             s_slot, _ = pick_lobe(md, mat, u_lobe)
             sss_coefficients(md, mat, s_slot, paths.sss_coef, j)
-            store(paths.sss_n, j, n_wo)
+            # about Cycles's valid-reflection correction of N (bssrdf->N =
+            # maybe_ensure_valid_specular_reflection(N)): nv, which is ns itself unless a
+            # diffuse lobe beside the SSS one (Subsurface Weight < 1) kept ns uncorrected
+            store(paths.sss_n, j, nv if front > 0.0 else neg(nv))
             store(paths.sss_p, j, p)
             paths.sss_prim[j] = prim
         if sss_on:
