@@ -62,6 +62,9 @@ class ViewportSync:
         self._mesh_reads: dict = {}  # mesh key -> geometry inputs its export carries
         self._lights: list = []
         self._world: dict | None = None
+        # what the session was sent, for the kernel variant it needs (kernel_variant)
+        self._sent_materials: list = []
+        self._sent_world = (None, None)  # (world volume, world program)
         self._settings = None
         self._denoise_config = (False,)  # off until the scene says otherwise
         self._view = None
@@ -158,6 +161,14 @@ class ViewportSync:
             self.exports["materials"] += 1
         self._send_materials(scene)
 
+    def kernel_variant(self) -> str:
+        """The variant of the render kernels the scene sent so far renders with
+        (``drt.kernels.scene_kernel_variant``). Any thread."""
+        from types import SimpleNamespace
+        volume, program = self._sent_world
+        sent = SimpleNamespace(materials=self._sent_materials, world_volume=volume, world_program=program)
+        return compat.core_module("kernels").scene_kernel_variant(sent)
+
     def _send_materials(self, scene) -> None:
         """The material list with its programs, the images and attribute names they read."""
         mats = self._materials
@@ -165,6 +176,7 @@ class ViewportSync:
         if mats.images.images:
             extra["images"] = mats.images.images
         sc = _validated(scene, mats.materials, [], {"color": [0, 0, 0]}, extra, mats.images.arrays)
+        self._sent_materials = sc.materials
         self.session.edit(lambda live, m=sc.materials, i=sc.images, a=sc.attributes:
                           live.set_materials(m, i, a))
 
@@ -249,6 +261,7 @@ class ViewportSync:
         if force or world != self._world:
             self.exports["world"] += 1
             self._world = world
+            self._sent_world = (checked.world_volume, checked.world_program)
             self.session.edit(lambda live, c=checked.world_color, v=checked.world_volume,
                               p=checked.world_program, im=checked.images: live.set_world(c, v, p, im))
         if force or checked.render != self._settings:
@@ -453,22 +466,29 @@ _warmup = None  # the warm-up process (one per Blender session)
 
 
 def kernels_cached() -> bool:
-    """Are the main render kernels of *this copy* of the core in numba's cache? numba keys its
-    cache by source path, so a second copy of the same version (a development checkout and an
-    installed add-on) compiles again although ``kernels_compiled()`` (per version) says done."""
+    """Are all the render kernels of *this copy* of the core compiled: every variant of the stage
+    kernels marked compiled (``drt.kernels.KERNEL_VARIANTS``: plain, textures, volumes) in this
+    copy's cache folder, and numba's index of ``shade`` there? (The folder is keyed by the
+    sources and their import name, so a development checkout and an installed add-on each have
+    their own marks.)"""
     import os
+    kernels = compat.core_module("kernels")
     try:
         stages = compat.core_module("path_stages")
-        return all(os.path.exists(k._cache._cache_file._index_path)  # numba internals
-                   for k in (stages.shade, stages.camera_stage))
-    except Exception:  # noqa: BLE001 -- another numba: fall back to the version marker
-        return compat.core_module("kernels").kernels_compiled()
+        indexed = all(os.path.exists(k._cache._cache_file._index_path)  # numba internals
+                      for k in (stages.shade, stages.camera_stage))
+    except Exception:  # noqa: BLE001 -- another numba: the marks alone
+        indexed = True
+    return indexed and all(kernels.kernels_compiled(v) for v in kernels.KERNEL_VARIANTS)
 
 
-def start_kernel_warmup():
-    """In an interactive Blender whose kernels are not compiled yet, start compiling them in a
-    background Blender; returns a gate for ``ProgressiveSession.gate`` (None: nothing to wait
-    for). Main thread only; the gate itself only polls the process (safe from any thread)."""
+def start_kernel_warmup(variant=None):
+    """In an interactive Blender whose kernels are not all compiled yet, start compiling them in
+    a background Blender; returns a gate for ``ProgressiveSession.gate`` (None: nothing to wait
+    for): open when that process has ended, or as soon as the variant of the kernels the scene
+    needs (``variant()``, e.g. ``ViewportSync.kernel_variant``) is marked compiled — the warm-up
+    compiles the plain variant first. Main thread only; the gate itself only polls the process
+    and the marks (safe from any thread)."""
     import subprocess
     import sys
 
@@ -487,7 +507,10 @@ def start_kernel_warmup():
         except OSError:
             return None
     proc = _warmup
-    return lambda: proc.poll() is not None
+    kernels = compat.core_module("kernels")
+    if variant is None:
+        return lambda: proc.poll() is not None
+    return lambda: proc.poll() is not None or kernels.kernels_compiled(variant())
 
 
 # ---------------------------------------------------------------------------- engine hooks
@@ -505,7 +528,7 @@ def engine_view_update(engine, context, depsgraph) -> None:
         if vp is None:
             from .engine import render_threads
             vp = ViewportSync(threads=render_threads(depsgraph.scene), on_frame=engine.tag_redraw)
-            vp.session.gate = start_kernel_warmup()
+            vp.session.gate = start_kernel_warmup(vp.kernel_variant)
             _sessions[id(engine)] = vp
         vp.sync(depsgraph)
     except Exception as exc:  # noqa: BLE001 -- never a traceback dialog in the viewport
