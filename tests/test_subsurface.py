@@ -365,3 +365,22 @@ def test_the_walk_enters_about_the_valid_reflection_normal(monkeypatch):
     assert len(n_entry) > 8  # about half of the 64 camera paths pick the SSS lobe
     assert np.degrees(np.arccos(expected @ ns)) > 2.0  # the correction matters here (3.2°)
     np.testing.assert_allclose(n_entry, np.tile(expected, (len(n_entry), 1)), atol=1e-6)
+
+
+def test_a_subsurface_render_draws_no_hidden_numpy_randomness(monkeypatch):
+    """A render is a function of its seed alone: the check of an SSS object's Embree scene before
+    its walks run in the kernel (``subsurface._direct_walk_args``) probes with a fixed pattern,
+    not numpy's random generator."""
+    calls = []
+    monkeypatch.setattr(np.random, "default_rng", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(np.random, "random", lambda *a, **k: calls.append(a))
+    h = base_header(8, 8, 4, world=(1.0, 1.0, 1.0),
+                    camera={"type": "PERSP", "matrix_world": look_at((0, -6, 0), (0, 0, 0)), "lens": 120.0})
+    h["version"] = 2
+    add_material(h, "sss", [sss_lobe()])
+    a = {}
+    pos, tri, nrm = uv_sphere(1.0, rings=8, segments=16)
+    add_mesh(h, a, "ball", pos, tri, 0, normals=nrm)
+    img = render(scene_from_dict(h, a), threads=1).combined[..., :3]
+    assert not calls
+    assert img.mean() > 0.3

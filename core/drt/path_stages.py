@@ -705,7 +705,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             if l_valid and lpdf > 0.0 and strategy == ld.world_index and ld.world_prog >= 0:
                 # Cycles evaluates the background for a light sample as an emission ray:
                 # every Light Path flag 0 (this hit's rows in ``point`` are no longer needed)
-                le = world_emission(ld, pd, regs, point, wi, 0, paths.counts[i], False)
+                # (flags as int32, prev_flags' type: one compiled world_emission, not two)
+                le = world_emission(ld, pd, regs, point, wi, np.int32(0), paths.counts[i], False)
             elif (l_valid and lpdf > 0.0 and strategy == ld.emissive_index and pd is not None and pd.prog_of.shape[0]
                   and pd.emission_reg[surf.material[l_tri]] >= 0):
                 # a textured emitter (drt.lights.textured): its program's emission at the point

@@ -56,7 +56,7 @@ from .kernels.vec3 import build_frame, dot, load, normalize, store, to_world
 from .materials.subsurface_lobe import MIN_ALPHA, remap
 from .materials.table import SSS_G, SSS_RADIUS, SSS_WEIGHT
 from .sampling.sequences import random_2d, sample_2d
-from .trace import OFFSET_ABSOLUTE, OFFSET_RELATIVE, static_hit_row
+from .trace import OFFSET_ABSOLUTE, OFFSET_RELATIVE, probe_pattern, static_hit_row
 
 BSSRDF_MAX_BOUNCES = 256
 VOLUME_THROUGHPUT_EPSILON = 1e-6
@@ -431,11 +431,12 @@ def _direct_walk_args(tracer):
     geom = tracer.geom
     used = geom.static_positions[np.unique(geom.static_triangles)]
     lo, hi = used.min(axis=0), used.max(axis=0)
-    rng = np.random.default_rng(0)
-    o = lo + (hi - lo) * rng.random((256, 3))
-    d = rng.normal(size=(256, 3))
-    d /= np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
-    tmax = np.where(np.arange(256) % 2 == 0, np.inf, (hi - lo).max() * rng.random(256))
+    # a fixed pattern (no random generator during a render): R3 points in the box, Fibonacci
+    # directions taken in a scrambled order so that neighbouring origins do not share one
+    inside, sphere = probe_pattern(256)
+    o = lo + (hi - lo) * inside
+    d = sphere[(np.arange(256) * 97) % 256]
+    tmax = np.where(np.arange(256) % 2 == 0, np.inf, (hi - lo).max() * inside[:, 0])
     try:
         if not embree_direct.matches_embreex(tracer.static, o, d, tmax):
             return None

@@ -641,9 +641,10 @@ _NO_DEFORMING = deforming_data(SimpleNamespace(positions=np.zeros((0, 3)), posit
 
 def _intersect_deforming(mm, o, d, tau, tmax):
     """Exact closest hits against a deforming mesh (``mm``: positions, positions_close,
-    triangles) for rays already in its space, each ray seeing the mesh at its own τ. Returns
-    (t, prim, b1, b2): t = tmax and prim = -1 where nothing is hit in (0, tmax)."""
-    dd = deforming_data(mm)
+    triangles, or its ``DeformingData`` already built) for rays already in its space, each ray
+    seeing the mesh at its own τ. Returns (t, prim, b1, b2): t = tmax and prim = -1 where
+    nothing is hit in (0, tmax)."""
+    dd = mm if isinstance(mm, DeformingData) else deforming_data(mm)
     o = np.ascontiguousarray(o, dtype=np.float64).reshape(-1, 3)
     d = np.ascontiguousarray(d, dtype=np.float64).reshape(-1, 3)
     n = len(o)
@@ -688,18 +689,27 @@ DIRECT_PROBE_RAYS = 256
 _R3 = np.array([1.0 / 1.2207440846057596 ** k for k in (1, 2, 3)])
 
 
-def _probe_rays(positions: np.ndarray, n: int):
-    """n rays (float32-representable) from a Fibonacci sphere around the points' box to points
-    of an R3 sequence inside it, with tmax inf (most meet the mesh), and a time in [0, 1) each.
-    A fixed pattern, no random generator: a render stays a function of its seed alone."""
-    lo, hi = positions.min(axis=0), positions.max(axis=0)
-    centre, radius = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo)) + 1e-3
+def probe_pattern(n: int):
+    """A fixed pattern for probe rays, no random generator (a render stays a function of its
+    seed alone): (n, 3) points of the R3 sequence in [0, 1)³ and (n, 3) unit vectors on a
+    Fibonacci sphere."""
     k = np.arange(n) + 0.5
     z = 1.0 - 2.0 * k / n
     phi = k * (np.pi * (3.0 - np.sqrt(5.0)))
     ring = np.sqrt(np.maximum(1.0 - z * z, 0.0))
-    o = centre + 2.0 * radius * np.column_stack([ring * np.cos(phi), ring * np.sin(phi), z])
-    target = lo + np.modf(0.5 + k[:, None] * _R3)[0] * (hi - lo)
+    return np.modf(0.5 + k[:, None] * _R3)[0], np.column_stack([ring * np.cos(phi), ring * np.sin(phi), z])
+
+
+def _probe_rays(positions: np.ndarray, n: int):
+    """n rays (float32-representable) from a Fibonacci sphere around the points' box to points
+    of an R3 sequence inside it, with tmax inf (most meet the mesh), and a time in [0, 1) each
+    (``probe_pattern``)."""
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    centre, radius = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo)) + 1e-3
+    k = np.arange(n) + 0.5
+    inside, sphere = probe_pattern(n)
+    o = centre + 2.0 * radius * sphere
+    target = lo + inside * (hi - lo)
     d = target - o
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     tau = np.modf(0.5 + k * 0.6180339887498949)[0]
