@@ -390,11 +390,13 @@ def draw_frame(engine, scene, tex: FrameTexture, frame, region_width: int, regio
     gpu.state.blend_set("NONE")
 
 
-def status_text(frame, target: int, error: str | None) -> str:
+def status_text(frame, target: int, error: str | None, variant: str = "") -> str:
+    """The viewport header; ``variant``: the kernel variant the scene needs (before its first
+    frame, the header says when those kernels are still compiling)."""
     if error:
         return f"DRT | Error: {error}"
     if frame is None:
-        if not compat.core_module("kernels").kernels_compiled():
+        if not compat.core_module("kernels").kernels_compiled(variant):
             return "DRT | Compiling render kernels (first render of this kind of scene: a minute or more)"
         return "DRT | Preparing"
     if frame.divider > 1:
@@ -555,7 +557,8 @@ def engine_view_draw(engine, context, depsgraph) -> None:
     except Exception as exc:  # noqa: BLE001 -- e.g. a panoramic camera: say so, draw nothing new
         vp.session.error = str(exc) or exc.__class__.__name__
     frame = vp.session.latest()
-    engine.update_stats("", status_text(frame, int(scene.drt.preview_samples), vp.session.error))
+    engine.update_stats("", status_text(frame, int(scene.drt.preview_samples), vp.session.error,
+                                        vp.kernel_variant() if frame is None else ""))
     if frame is None:
         return
     if vp.texture is None:

@@ -660,6 +660,8 @@ def test_viewport_renders_textured_materials_like_the_final_render():
         assert frame is not None, vp.session.error
         floor = next(m for m in vp.session.live.materials if m["name"] == "Floor")
         assert "program" in floor and vp.session.live.images
+        # the kernels its gate waits for and its header names: the textured variant
+        assert vp.kernel_variant() == "programs"
         live = np.asarray(frame.rgba, np.float64)[::-1, :, :3]  # bottom row first → top first
 
         sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = w, h, 100

@@ -371,6 +371,7 @@ def test_blender_transform_edit_sends_a_matrix_only(blender_viewport):
 @blender_only
 def test_blender_material_edit_reexports_only_that_material(blender_viewport):
     vp = blender_viewport
+    assert vp.kernel_variant() == ""  # plain materials, no world program or volume
     exports = dict(vp.exports)
     live = vp.session.live
     builds = live.counters.static_builds
