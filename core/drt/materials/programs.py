@@ -566,13 +566,13 @@ def srgb_to_linear(c):
 
 
 @kernel
-def _texel(pd, img, x, y, c):
-    info = pd.img_info[img]
+def _texel(img_info, img_u8, img_f32, img, x, y, c):
+    info = img_info[img]
     w = info[0]
     k = info[2] + (y * w + x) * 4 + c
     if info[3]:
-        return float(pd.img_f32[k])
-    return pd.img_u8[k] * (1.0 / 255.0)
+        return float(img_f32[k])
+    return img_u8[k] * (1.0 / 255.0)
 
 
 @kernel
@@ -606,12 +606,14 @@ def _bspline(t, k):
 
 
 @kernel
-def image_lookup(pd, img, mode, u, v):
+def image_lookup(img_info, img_u8, img_f32, img, mode, u, v):
     """RGBA of image img at texture coordinate (u, v) (origin bottom-left), Cycles's CPU image
     interpolation: mode = interpolation·8 + extension (Closest 0 / Linear 1 / Cubic 2; REPEAT 0,
     EXTEND 1, CLIP 2, MIRROR 3). CLIP reads texels outside the image as 0 (so Linear fades over
-    half a texel beyond the border, as in Cycles)."""
-    info = pd.img_info[img]
+    half a texel beyond the border, as in Cycles). The image table's three arrays come apart
+    (ProgramData.img_info / img_u8 / img_f32), not the whole ProgramData: numba passes every
+    array of a namedtuple as separate arguments, ~300 words a call for ProgramData."""
+    info = img_info[img]
     w, h = info[0], info[1]
     interp = mode // 8
     ext = mode % 8
@@ -620,8 +622,8 @@ def image_lookup(pd, img, mode, u, v):
         ix = _wrap(int(math.floor(u * w)), w, ext)
         iy = _wrap(int(math.floor(v * h)), h, ext)
         if ix >= 0 and iy >= 0:
-            r, g, b, a = (_texel(pd, img, ix, iy, 0), _texel(pd, img, ix, iy, 1),
-                          _texel(pd, img, ix, iy, 2), _texel(pd, img, ix, iy, 3))
+            r, g, b, a = (_texel(img_info, img_u8, img_f32, img, ix, iy, 0), _texel(img_info, img_u8, img_f32, img, ix, iy, 1),
+                          _texel(img_info, img_u8, img_f32, img, ix, iy, 2), _texel(img_info, img_u8, img_f32, img, ix, iy, 3))
     elif interp == 2:
         # Cycles's bicubic: uniform cubic B-spline weights over 4×4 texels around (u, v)
         tx = u * w - 0.5
@@ -637,10 +639,10 @@ def image_lookup(pd, img, mode, u, v):
                 if ix < 0 or iy < 0:
                     continue
                 wgt = _bspline(tx - fx0, dx) * wy
-                r += wgt * _texel(pd, img, ix, iy, 0)
-                g += wgt * _texel(pd, img, ix, iy, 1)
-                b += wgt * _texel(pd, img, ix, iy, 2)
-                a += wgt * _texel(pd, img, ix, iy, 3)
+                r += wgt * _texel(img_info, img_u8, img_f32, img, ix, iy, 0)
+                g += wgt * _texel(img_info, img_u8, img_f32, img, ix, iy, 1)
+                b += wgt * _texel(img_info, img_u8, img_f32, img, ix, iy, 2)
+                a += wgt * _texel(img_info, img_u8, img_f32, img, ix, iy, 3)
     else:
         tx = u * w - 0.5
         ty = v * h - 0.5
@@ -658,28 +660,29 @@ def image_lookup(pd, img, mode, u, v):
                 if ix < 0 or iy < 0:
                     continue
                 wgt = wx * wy
-                r += wgt * _texel(pd, img, ix, iy, 0)
-                g += wgt * _texel(pd, img, ix, iy, 1)
-                b += wgt * _texel(pd, img, ix, iy, 2)
-                a += wgt * _texel(pd, img, ix, iy, 3)
+                r += wgt * _texel(img_info, img_u8, img_f32, img, ix, iy, 0)
+                g += wgt * _texel(img_info, img_u8, img_f32, img, ix, iy, 1)
+                b += wgt * _texel(img_info, img_u8, img_f32, img, ix, iy, 2)
+                a += wgt * _texel(img_info, img_u8, img_f32, img, ix, iy, 3)
     if info[4]:
         r, g, b = srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b)
     return r, g, b, a
 
 
 @kernel
-def ramp_lookup(pd, off, interpolate, f):
-    """Cycles's ``rgb_ramp_lookup`` on a RAMP_TABLE_SIZE-entry RGBA table at data[off]."""
+def ramp_lookup(data, off, interpolate, f):
+    """Cycles's ``rgb_ramp_lookup`` on a RAMP_TABLE_SIZE-entry RGBA table at data[off]
+    (``ProgramData.data``)."""
     f = min(max(f, 0.0), 1.0) * (RAMP_TABLE_SIZE - 1)
     i = min(max(int(f), 0), RAMP_TABLE_SIZE - 1)
     t = f - i
     k = off + 4 * i
-    r, g, b, a = pd.data[k], pd.data[k + 1], pd.data[k + 2], pd.data[k + 3]
+    r, g, b, a = data[k], data[k + 1], data[k + 2], data[k + 3]
     if interpolate and t > 0.0:
-        r = (1.0 - t) * r + t * pd.data[k + 4]
-        g = (1.0 - t) * g + t * pd.data[k + 5]
-        b = (1.0 - t) * b + t * pd.data[k + 6]
-        a = (1.0 - t) * a + t * pd.data[k + 7]
+        r = (1.0 - t) * r + t * data[k + 4]
+        g = (1.0 - t) * g + t * data[k + 5]
+        b = (1.0 - t) * b + t * data[k + 6]
+        a = (1.0 - t) * a + t * data[k + 7]
     return r, g, b, a
 
 
@@ -1048,13 +1051,13 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
             _set(regs, o0, mapping(mode, _reg(regs, i0), _reg(regs, i1), _reg(regs, i2), _reg(regs, i3)))
         elif op == OP_IMAGE:
             v = _reg(regs, i0)
-            r, g, b, a = image_lookup(pd, param, mode, v[0], v[1])
+            r, g, b, a = image_lookup(pd.img_info, pd.img_u8, pd.img_f32, param, mode, v[0], v[1])
             _set(regs, o0, (r, g, b))
             _set1(regs, o1, a)
         elif op == OP_ENVIRONMENT:
             v = _reg(regs, i0)
             u, vv = direction_to_uv(mode // ENV_PROJECTION_STRIDE, v[0], v[1], v[2])
-            r, g, b, a = image_lookup(pd, param, mode % ENV_PROJECTION_STRIDE, u, vv)
+            r, g, b, a = image_lookup(pd.img_info, pd.img_u8, pd.img_f32, param, mode % ENV_PROJECTION_STRIDE, u, vv)
             _set(regs, o0, (r, g, b))
             _set1(regs, o1, a)
         elif op == OP_CHECKER:
@@ -1068,7 +1071,7 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
             _set1(regs, o0, f)
             _set1(regs, o1, f)
         elif op == OP_RAMP:
-            r, g, b, a = ramp_lookup(pd, param, mode, regs[i0, 0])
+            r, g, b, a = ramp_lookup(pd.data, param, mode, regs[i0, 0])
             _set(regs, o0, (r, g, b))
             _set1(regs, o1, a)
         elif op == OP_MAP_RANGE:
