@@ -790,15 +790,16 @@ def object_to_world_dir(point, v):
 
 
 @kernel
-def tangent_displacement(pd, prim, point, dv, tangent, sign):
+def tangent_displacement(n_static, prim, point, dv, tangent, sign):
     """Vector Displacement's tangent space (Cycles's ``svm_node_vector_displacement``): dv's x,
     y, z along the tangent, the normal and the signed bitangent, all in object space. A static
     hit's tangent is stored in world space (by the normal transform, length kept): it is brought
-    back by Mᵀ; a moving hit's is local already. No tangent (no UV map): the y part only."""
+    back by Mᵀ (``n_static``: the number of static triangles); a moving hit's is local already.
+    No tangent (no UV map): the y part only."""
     n = world_to_object_normal(point, _row(point, POINT_N))
     tl = _len(tangent)
     t = tangent
-    if prim < pd.triangles.shape[0] and tl > 0.0:
+    if prim < n_static and tl > 0.0:
         u = world_to_object_normal(point, tangent)
         t = (u[0] * tl, u[1] * tl, u[2] * tl)
     b = _normalize((n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]))
@@ -818,27 +819,28 @@ def make_orthonormals(n):
 
 
 @kernel
-def bump_step(pd, prim, mode, point, fw):
+def bump_step(positions, triangles, footprint, prim, mode, point, fw):
     """(world offset, barycentric steps db1, db2) of the Bump node's evaluation ``mode`` (1, 2)
     at a hit of static triangle ``prim``, as Cycles's compact ray differentials give it: a step
     of fw × |dP| along ``make_orthonormals(Ng)``'s first (mode 1) or second (mode 2) tangent,
     |dP| the pixel's footprint at the hit's ray length (mean of its right and up extents,
-    ``ProgramData.footprint``). Moving triangles (no vertex positions here) get no step."""
+    ``ProgramData.footprint``; ``positions`` / ``triangles``: its static mesh arrays, passed apart
+    as the image helpers' are). Moving triangles (no vertex positions here) get no step."""
     zero = ((0.0, 0.0, 0.0), 0.0, 0.0)
-    if prim < 0 or prim >= pd.triangles.shape[0] or pd.footprint.shape[0] < 4:
+    if prim < 0 or prim >= triangles.shape[0] or footprint.shape[0] < 4:
         return zero
     t = max(point[POINT_MISC, 1], 0.0)
-    f = pd.footprint
+    f = footprint
     wx = _len((f[0, 0] + t * f[1, 0], f[0, 1] + t * f[1, 1], f[0, 2] + t * f[1, 2]))
     wy = _len((f[2, 0] + t * f[3, 0], f[2, 1] + t * f[3, 1], f[2, 2] + t * f[3, 2]))
     m = fw * 0.5 * (wx + wy)
     ta, tb = make_orthonormals(_row(point, POINT_NG))
     tv = ta if mode == 1 else tb
     step = (tv[0] * m, tv[1] * m, tv[2] * m)
-    tri = pd.triangles[prim]
-    a = pd.positions[tri[0]]
-    b = pd.positions[tri[1]]
-    c = pd.positions[tri[2]]
+    tri = triangles[prim]
+    a = positions[tri[0]]
+    b = positions[tri[1]]
+    c = positions[tri[2]]
     e1 = (float(b[0]) - float(a[0]), float(b[1]) - float(a[1]), float(b[2]) - float(a[2]))
     e2 = (float(c[0]) - float(a[0]), float(c[1]) - float(a[1]), float(c[2]) - float(a[2]))
     g11, g12, g22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
@@ -850,13 +852,13 @@ def bump_step(pd, prim, mode, point, fw):
 
 
 @kernel
-def bump_normal(pd, prim, point, nin, h_c, h_x, h_y, strength, distance, invert, fw):
+def bump_normal(positions, triangles, footprint, prim, point, nin, h_c, h_x, h_y, strength, distance, invert, fw):
     """Cycles's ``svm_node_set_bump``: the normal of the surface displaced by distance × height
     along ``nin`` (world, on the side the ray came from), from the heights at the hit and one
     step (``bump_step``) along each of two tangents; blended toward ``nin`` by strength. With steps of
     fw·dP this is Cycles's formula (its fw·|det|·N − scale·sign(det)·∇h, both sides ÷ fw)."""
-    dx, _, _ = bump_step(pd, prim, 1, point, fw)
-    dy, _, _ = bump_step(pd, prim, 2, point, fw)
+    dx, _, _ = bump_step(positions, triangles, footprint, prim, 1, point, fw)
+    dy, _, _ = bump_step(positions, triangles, footprint, prim, 2, point, fw)
     rx = (dy[1] * nin[2] - dy[2] * nin[1], dy[2] * nin[0] - dy[0] * nin[2], dy[0] * nin[1] - dy[1] * nin[0])
     ry = (nin[1] * dx[2] - nin[2] * dx[1], nin[2] * dx[0] - nin[0] * dx[2], nin[0] * dx[1] - nin[1] * dx[0])
     det = _dot(dx, rx)
@@ -875,12 +877,13 @@ def bump_normal(pd, prim, point, nin, h_c, h_x, h_y, strength, distance, invert,
 
 
 @kernel
-def camera_coords(pd, window, p):
+def camera_coords(camera, window, p):
     """Texture Coordinate's Camera output (camera space, +z forward as Cycles's) or Window
-    output (the image's [0, 1]² with (0, 0) bottom left, z 0) of Blender-world point p."""
-    if pd.camera.shape[0] < 5:
+    output (the image's [0, 1]² with (0, 0) bottom left, z 0) of Blender-world point p
+    (``camera``: ``ProgramData.camera``)."""
+    if camera.shape[0] < 5:
         return (0.0, 0.0, 0.0)
-    c = pd.camera
+    c = camera
     x = c[0, 0] * p[0] + c[0, 1] * p[1] + c[0, 2] * p[2] + c[0, 3]
     y = c[1, 0] * p[0] + c[1, 1] * p[1] + c[1, 2] * p[2] + c[1, 3]
     z = -(c[2, 0] * p[0] + c[2, 1] * p[1] + c[2, 2] * p[2] + c[2, 3])
@@ -1010,7 +1013,7 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
             else:
                 if b1 == b1_hit and b2 == b2_hit:
                     p_hit = _row(point, POINT_P)
-                e, db1, db2 = bump_step(pd, prim, mode, point, regs[i0, 0])
+                e, db1, db2 = bump_step(pd.positions, pd.triangles, pd.footprint, prim, mode, point, regs[i0, 0])
                 b1 = b1_hit + db1
                 b2 = b2_hit + db2
                 _set(point, POINT_P, (p_hit[0] + e[0], p_hit[1] + e[1], p_hit[2] + e[2]))
@@ -1018,10 +1021,10 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
         elif op == OP_BUMP:
             nin = _reg(regs, i5) if i5 >= 0 else _row(point, POINT_N)
             # param = 2 × (filter width register) + invert
-            _set(regs, o0, bump_normal(pd, prim, point, nin, regs[i0, 0], regs[i1, 0], regs[i2, 0],
+            _set(regs, o0, bump_normal(pd.positions, pd.triangles, pd.footprint, prim, point, nin, regs[i0, 0], regs[i1, 0], regs[i2, 0],
                                        regs[i3, 0], regs[i4, 0], param % 2 != 0, regs[param // 2, 0]))
         elif op == OP_CAMERA_COORDS:
-            _set(regs, o0, camera_coords(pd, mode, _row(point, POINT_P)))
+            _set(regs, o0, camera_coords(pd.camera, mode, _row(point, POINT_P)))
         elif op == OP_OBJECT_INFO:
             if prim >= 0 and pd.object_of.shape[0]:
                 info = pd.object_info[pd.object_of[prim]]
@@ -1136,7 +1139,7 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
             sc = regs[i2, 0]
             dv = ((v[0] - mid) * sc, (v[1] - mid) * sc, (v[2] - mid) * sc)
             if mode == 0:  # tangent space: (T, N, B) in object space, then to world
-                dv = tangent_displacement(pd, prim, point, dv, _reg(regs, i3), regs[i4, 0])
+                dv = tangent_displacement(pd.triangles.shape[0], prim, point, dv, _reg(regs, i3), regs[i4, 0])
             _set(regs, o0, object_to_world_dir(point, dv) if mode != 2 else dv)
         elif op == OP_SET_NORMAL:  # the displacement's bump becomes the shading point's N
             nm = _normalize(_reg(regs, i0))
