@@ -1,6 +1,7 @@
 """The compiled-kernel plumbing: where the cache lives, the first-render notice, and that the
 per-source cache key changes with the sources."""
 
+import math
 import os
 import subprocess
 import sys
@@ -259,3 +260,41 @@ def test_the_notice_and_the_render_agree_on_a_scenes_kernel_variant(name, varian
     scene = load_scene(os.path.join(REPO, "blend_scenes", f"{name}.npz"))
     assert kernels.scene_kernel_variant(scene) == variant
     assert prepare(scene).integrator.kernel_variant == variant
+
+
+def test_a_kernel_passes_a_callee_only_the_arrays_it_reads():
+    """numba passes each array of a namedtuple argument as ~7 scalars; a callee taking a scene
+    table of 40 arrays but reading one must not cost a ~280-word call in its caller's machine
+    code (``drt.kernels._internalize_linked_kernels``: the linked copy is private to the
+    caller's module, so LLVM drops the unread arguments or inlines the call). Checked on the
+    caller's optimised LLVM IR: no call left in it passes more than a handful of arguments, and
+    the result is the callee's. (numba's own linking leaves two 284-argument calls here.)"""
+    import re
+    from collections import namedtuple
+
+    import numpy as np
+
+    Table = namedtuple("Table", [f"a{i}" for i in range(40)])
+    table = Table(*(np.full(4, float(i)) for i in range(40)))
+    # a callee too large for LLVM to inline on size alone: 60 branches of transcendental maths
+    source = "def callee(t, i, x):\n    s = t.a7[i % 4]\n" + "".join(
+        f"    if s > {k}.5:\n        s = math.sin(s * x + {k}) + math.sqrt(abs(s) + {k})\n"
+        f"    else:\n        s = math.cos(s - x) * {k + 1}.25\n" for k in range(60)) + "    return s\n"
+    namespace = {"math": math}
+    exec(source, namespace)  # noqa: S102 - generated test code
+    callee = kernels.kernel(namespace["callee"], cache=False)
+
+    @kernels.kernel(cache=False)
+    def caller(t, n):
+        acc = 0.0
+        for i in range(n):
+            acc += callee(t, i, 0.5 * i) + callee(t, i + 1, 0.25 * i)
+        return acc
+
+    expected = sum(namespace["callee"](table, i, 0.5 * i) + namespace["callee"](table, i + 1, 0.25 * i)
+                   for i in range(5))
+    assert caller(table, 5) == pytest.approx(expected, rel=1e-12)
+    ir = next(iter(caller.inspect_llvm().values()))
+    widest = max((line.count(",") + 1 for line in ir.splitlines()
+                  if re.search(r"call [^@]*@\S*6calleeB", line)), default=0)  # (its mangled name)
+    assert widest < 20, f"a call to callee passes {widest} arguments"
