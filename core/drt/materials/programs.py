@@ -1253,12 +1253,3 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
         md.emission[m, 1] = max(regs[e, 1], 0.0)
         md.emission[m, 2] = max(regs[e, 2], 0.0)
         md.has_emission[m] = md.emission[m, 0] > 0.0 or md.emission[m, 1] > 0.0 or md.emission[m, 2] > 0.0
-
-
-@kernel
-def _run_rows(pd, regs, prog, prim, b1, b2, out_reg, out):
-    for i in range(prim.shape[0]):
-        run_program(pd, regs, prog, prim[i], b1[i], b2[i], pd.const_val)
-        out[i, 0] = regs[out_reg, 0]
-        out[i, 1] = regs[out_reg, 1]
-        out[i, 2] = regs[out_reg, 2]
