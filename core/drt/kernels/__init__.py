@@ -297,6 +297,10 @@ def _defer_linking_bitcode() -> None:
 _defer_linking_bitcode()
 
 
+#: qualified names of the functions ``@kernel`` compiled (``_internalize_linked_kernels``)
+_KERNEL_NAMES = set()
+
+
 def _internalize_linked_kernels() -> None:
     """Let LLVM see the kernels a kernel calls as its own private functions.
 
@@ -311,8 +315,10 @@ def _internalize_linked_kernels() -> None:
     callees. Correct for any module: nothing outside it refers to these copies (callers link
     their own), and a module linked later carries its private copies along. Same arithmetic,
     same images (no fast-math; inlining does not reorder floating-point operations); `shade`
-    ~15–30 % cheaper (docs/kernels.md). Private numba API (pinned range in pyproject.toml); if
-    it changes shape, numba's own optimisation is kept."""
+    ~15–30 % cheaper (docs/kernels.md). Only modules of DRT's own kernels (``_KERNEL_NAMES``:
+    numba names a kernel's module by its qualified name) — numba in a shared process (Blender,
+    other add-ons) keeps its own code generation. Private numba API (pinned range in
+    pyproject.toml); if it changes shape, numba's own optimisation is kept."""
     from numba.core import codegen
 
     lib_cls = getattr(codegen, "CPUCodeLibrary", None)
@@ -323,9 +329,10 @@ def _internalize_linked_kernels() -> None:
     weak = codegen.ll.Linkage.linkonce_odr
 
     def _optimize_final_module(self):
-        for fn in self._final_module.functions:
-            if not fn.is_declaration and fn.linkage == weak:
-                fn.linkage = "internal"
+        if self.name in _KERNEL_NAMES:
+            for fn in self._final_module.functions:
+                if not fn.is_declaration and fn.linkage == weak:
+                    fn.linkage = "internal"
         return original(self)
 
     _optimize_final_module._drt = True
@@ -444,6 +451,7 @@ def kernel(fn=None, **overrides):
     cache = opts.pop("cache", False)
 
     def compiled(f):
+        _KERNEL_NAMES.add(f.__qualname__)
         dispatcher = numba.njit(cache=False, **opts)(f)
         if cache and hasattr(dispatcher, "_cache"):
             dispatcher._cache = _CacheOnFirstUse(dispatcher.py_func)
