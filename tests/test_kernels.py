@@ -283,14 +283,15 @@ def test_a_kernel_passes_a_callee_only_the_arrays_it_reads():
         f"    else:\n        s = math.cos(s - x) * {k + 1}.25\n" for k in range(60)) + "    return s\n"
     namespace = {"math": math}
     exec(source, namespace)  # noqa: S102 - generated test code
-    callee = kernels.kernel(namespace["callee"], cache=False)
 
-    @kernels.kernel(cache=False)
-    def caller(t, n):
-        acc = 0.0
-        for i in range(n):
-            acc += callee(t, i, 0.5 * i) + callee(t, i + 1, 0.25 * i)
-        return acc
+    def compiled_pair(name, decorate):
+        """(callee, caller named ``name``) compiled by ``decorate``; the caller calls it twice."""
+        scope = {"callee": decorate(namespace["callee"])}
+        exec(f"def {name}(t, n):\n    acc = 0.0\n    for i in range(n):\n"  # noqa: S102
+             "        acc += callee(t, i, 0.5 * i) + callee(t, i + 1, 0.25 * i)\n    return acc\n", scope)
+        return decorate(scope[name])
+
+    caller = compiled_pair("caller", lambda f: kernels.kernel(f, cache=False))
 
     expected = sum(namespace["callee"](table, i, 0.5 * i) + namespace["callee"](table, i + 1, 0.25 * i)
                    for i in range(5))
@@ -306,14 +307,6 @@ def test_a_kernel_passes_a_callee_only_the_arrays_it_reads():
     # numba code that is not DRT's (another add-on in Blender's process) keeps numba's own linking
     import numba
 
-    plain_callee = numba.njit(cache=False)(namespace["callee"])
-
-    @numba.njit(cache=False)
-    def others(t, n):
-        acc = 0.0
-        for i in range(n):
-            acc += plain_callee(t, i, 0.5 * i) + plain_callee(t, i + 1, 0.25 * i)
-        return acc
-
+    others = compiled_pair("others", numba.njit(cache=False))
     assert others(table, 5) == pytest.approx(expected, rel=1e-12)
     assert widest_call(others) > 200
