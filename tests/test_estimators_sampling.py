@@ -26,9 +26,9 @@ def _recording_render(monkeypatch, header, arrays, spp=4):
 
     original_5d = stages.sample_5d
 
-    def spy_5d(sd, pixel, index, dim, with_time):
-        used.update((int(dim), int(dim) + 1) + ((int(dim) + 2,) if with_time else ()))
-        return original_5d(sd, pixel, index, dim, with_time)
+    def spy_5d(sd, pixel, index, dim, with_lens, with_time):
+        used.update((int(dim),) + ((int(dim) + 1,) if with_lens else ()) + ((int(dim) + 2,) if with_time else ()))
+        return original_5d(sd, pixel, index, dim, with_lens, with_time)
 
     original_3d = stages.sample_3d
 

@@ -128,8 +128,8 @@ def test_first_render_says_it_compiles_and_the_second_starts_warm(tmp_path):
 _COMPILE_ONE_KERNEL = """
 import numpy as np
 from drt.sampling import pixel_filter as pf
-pf._interp(0.5, np.array([0.0, 1.0]), np.array([0.0, 2.0]))
-d = pf._interp
+pf.lerp_table(0.5, np.array([0.0, 2.0]))
+d = pf.lerp_table
 print(sum(d.stats.cache_hits.values()), sum(d.stats.cache_misses.values()), d.stats.cache_path)
 """
 
@@ -188,16 +188,16 @@ _LOAD_THEN_LINK = """
 import numba, numpy as np
 from drt import kernels
 from drt.sampling import pixel_filter as pf
-xs, ys = np.array([0.0, 1.0]), np.array([0.0, 2.0])
-first = pf._interp(0.25, xs, ys)  # loaded from the cache: its linking bitcode is not parsed
+ys = np.array([0.0, 2.0])
+first = pf.lerp_table(0.25, ys)  # loaded from the cache: its linking bitcode is not parsed
 deferred = len(kernels._UNPARSED)
 
 @numba.njit
-def twice(x, xs, ys):  # a new compile that links the loaded kernel in: the bitcode is parsed now
-    return 2.0 * pf._interp(x, xs, ys)
+def twice(x, ys):  # a new compile that links the loaded kernel in: the bitcode is parsed now
+    return 2.0 * pf.lerp_table(x, ys)
 
-print(sum(pf._interp.stats.cache_hits.values()), deferred, first, twice(0.25, xs, ys), len(kernels._UNPARSED),
-      len(pf._interp.overloads))
+print(sum(pf.lerp_table.stats.cache_hits.values()), deferred, first, twice(0.25, ys), len(kernels._UNPARSED),
+      len(pf.lerp_table.overloads))
 """
 
 

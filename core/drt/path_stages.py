@@ -383,7 +383,7 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
         idx = index[i]
         # pixel filter, lens and shutter time from one jointly stratified 5-D sample (D_PIXEL,
         # D_LENS, D_TIME): with depth of field or motion blur the image depends on them together
-        u0, u1, l0, l1, tau = sample_5d(sd, pixel, idx, D_PIXEL, settings.motion)
+        u0, u1, l0, l1, tau = sample_5d(sd, pixel, idx, D_PIXEL, cd.lens_radius > 0, settings.motion)
         dx, dy = filter_sample(fd, u0, u1)
         px = x[i] + 0.5 + dx
         py = (H - 1 - row[i]) + 0.5 + dy  # the camera wants v from the bottom

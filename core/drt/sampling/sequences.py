@@ -313,22 +313,26 @@ def _sobol_shuffled(sd, pixel, index, dim):
 
 
 @kernel
-def sample_5d(sd, pixel, index, dim, with_fifth):
+def sample_5d(sd, pixel, index, dim, with_lens, with_fifth):
     """A 5-D sample (u0 … u4) of (pixel, index) for the dimensions (dim, dim + 1, dim + 2),
     jointly stratified: SOBOL takes the first five Sobol dimensions of one shuffled index (Burley
     2020's padding in higher dimensions; the camera's pixel filter, lens and shutter time, whose
     image depends on all of them together), each Owen-scrambled on its own; (u0, u1) equals
-    ``sample_2d(sd, pixel, index, dim)``. u4 is computed only ``with_fifth`` (else 0).
+    ``sample_2d(sd, pixel, index, dim)``. (u2, u3) are computed only ``with_lens`` and u4 only
+    ``with_fifth`` (else 0: a pinhole camera or a still scene does not pay for them; the values
+    that are computed do not depend on the flags).
     STRATIFIED and RANDOM pad 2-D samples: (dim), (dim + 1), (dim + 2)[0]."""
     if sd.kind != KIND_SOBOL:
         u0, u1 = sample_2d(sd, pixel, index, dim)
-        u2, u3 = sample_2d(sd, pixel, index, dim + 1)
+        u2, u3 = sample_2d(sd, pixel, index, dim + 1) if with_lens else (0.0, 0.0)
         u4 = sample_2d(sd, pixel, index, dim + 2)[0] if with_fifth else 0.0
         return u0, u1, u2, u3, u4
     h, shuffled = _sobol_shuffled(sd, pixel, index, dim)
+    u2 = _owen_u(sobol_fast(2, shuffled), h, _SEED_U2) if with_lens else 0.0
+    u3 = _owen_u(sobol_fast(3, shuffled), h, _SEED_U3) if with_lens else 0.0
     u4 = _owen_u(sobol_fast(4, shuffled), h, _SEED_U4) if with_fifth else 0.0
     return (_owen_u(reverse32(shuffled), h, _SEED_U0), _owen_u(sobol_fast(1, shuffled), h, _SEED_U1),
-            _owen_u(sobol_fast(2, shuffled), h, _SEED_U2), _owen_u(sobol_fast(3, shuffled), h, _SEED_U3), u4)
+            u2, u3, u4)
 
 
 #: offset of the padded dimension that gives STRATIFIED and RANDOM the third value of a
@@ -363,7 +367,7 @@ def _sample_3d_rows(sd, pixel, index, dim, out):
 @kernel
 def _sample_5d_rows(sd, pixel, index, dim, out):
     for k in range(pixel.shape[0]):
-        a, b, c, e, f = sample_5d(sd, pixel[k], index[k], dim, True)
+        a, b, c, e, f = sample_5d(sd, pixel[k], index[k], dim, True, True)
         out[k, 0] = a
         out[k, 1] = b
         out[k, 2] = c
