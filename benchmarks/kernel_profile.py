@@ -14,8 +14,8 @@ prints
 
 - the share of the samples per shared object and per symbol (kernels as ``entry::function``),
 - inside one kernel (``--kernel``, default ``shade``), the hottest 1 KB stretches of its machine
-  code by offset, to read next to ``objdump -d`` of the object file it saves
-  (``bench_out/kernel_profile/<kernel>.o``).
+  code by offset and its hottest instructions (``--instructions``), to read next to
+  ``objdump -d`` of the object file it saves (``bench_out/kernel_profile/<kernel>.o``).
 
 Needs Linux ``perf`` (and permission to profile one's own processes). Asserts nothing.
 """
@@ -113,6 +113,8 @@ def main(argv=None) -> int:
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--top", type=int, default=25)
+    ap.add_argument("--instructions", type=int, default=20,
+                    help="how many of the kernel's hottest instructions to list")
     ap.add_argument("--kernel", default="shade")
     ap.add_argument("--out", default=os.path.join("bench_out", "kernel_profile"))
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
@@ -175,6 +177,12 @@ def main(argv=None) -> int:
                   f"code, {path}); hottest 1 KB stretches by offset:")
             for k, v in stretches.most_common(12):
                 print(f"  {k * 1024:#8x} .. {(k + 1) * 1024:#8x}  {100 * v / max(len(offsets), 1):5.1f} %")
+            # per instruction (samples land on the instruction after a stall, often a load's
+            # first use): the offsets to find in `objdump -d` of the saved object file
+            hot = collections.Counter(offsets).most_common(args.instructions)
+            if hot:
+                print(f"hottest instructions of {args.kernel} (offset: share of its samples):")
+                print("  " + ", ".join(f"{o:#x}: {100 * v / len(offsets):.1f} %" for o, v in hot))
     finally:
         os.remove(map_path)
     return 0
