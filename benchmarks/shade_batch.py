@@ -1,0 +1,88 @@
+"""`shade` alone, on one captured batch: a steadier measure of per-hit work than whole renders.
+
+    python benchmarks/shade_batch.py [SCENE.npz] [--bounce 0] [--resolution 256x256]
+                                     [--repeat 25]
+
+On the shared 2-vCPU machine whole renders of the same code vary by ±15–30 % from run to run,
+which hides a change worth a few percent of `shade`. This script renders SCENE at 1 spp while
+keeping a copy of everything `shade` is handed for one batch at bounce ``--bounce`` (the path
+state, the hits, the outputs, the shadow-ray queue), then calls the compiled `shade` on fresh
+copies of that same input ``--repeat`` times and prints the best time per path. Same input,
+same code path, no Embree, no Python between the calls: run it for the old and the new code
+alternately (``PYTHONPATH=<old checkout>/core``) and compare the best times.
+
+The copies are made just before each call, so the batch's arrays start in the cache as they do
+in a render, where Embree's answers were written just before `shade` reads them. Asserts
+nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from dataclasses import replace
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+
+
+def _fresh(x):
+    """A copy of every array in x (nested namedtuples of arrays kept as such)."""
+    if isinstance(x, np.ndarray):
+        return x.copy()
+    if isinstance(x, tuple) and hasattr(x, "_fields"):
+        return type(x)(*(_fresh(v) for v in x))
+    return x
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("scene", nargs="?", default=os.path.join(REPO, "blend_scenes", "cornell_box.npz"))
+    ap.add_argument("--bounce", type=int, default=0, help="the bounce (shade's depth_i) to capture")
+    ap.add_argument("--resolution", default="256x256")
+    ap.add_argument("--repeat", type=int, default=25)
+    args = ap.parse_args(argv)
+
+    import drt.integrator as integrator
+    from drt.render import prepare, render
+    from drt.scene_file import load_scene
+
+    w, h = (int(v) for v in args.resolution.split("x"))
+    scene = load_scene(args.scene)
+    scene = replace(scene, render=replace(scene.render, width=w, height=h))
+    ctx = prepare(scene)
+    shade = integrator.stages.shade
+    captured = []
+
+    def keep(*a):  # shade's arguments: (..., depth_i at 8, live at 9, ...)
+        if a[8] == args.bounce and not captured:
+            captured.append(tuple(_fresh(x) for x in a))
+        return shade(*a)
+
+    integrator.stages.shade = keep
+    try:
+        render(scene, spp=1, threads=1, context=ctx)
+    finally:
+        integrator.stages.shade = shade
+    if not captured:
+        print(f"no batch reached bounce {args.bounce}", file=sys.stderr)
+        return 1
+    batch = captured[0]
+    live = batch[9]
+    best = float("inf")
+    for _ in range(args.repeat):
+        inputs = tuple(_fresh(x) for x in batch)
+        t0 = time.perf_counter()
+        shade(*inputs)
+        best = min(best, time.perf_counter() - t0)
+    print(f"{os.path.basename(args.scene)} {w}x{h}, bounce {args.bounce}: {live} paths, shade best of "
+          f"{args.repeat}: {best * 1e3:.2f} ms = {best / live * 1e9:.0f} ns a path")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
