@@ -58,6 +58,10 @@ _NO_HINT = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
 @kernel
 def transmittance(sig_t, t):
     """e^(−σt·t) per channel (t may be inf: 0 where σt > 0, 1 where σt = 0)."""
+    if sig_t[0] == sig_t[1] and sig_t[1] == sig_t[2]:
+        # a grey medium (most fog and smoke): one exponential, the same value in every channel
+        e = math.exp(-sig_t[0] * t) if sig_t[0] > 0.0 else 1.0
+        return (e, e, e)
     return (math.exp(-sig_t[0] * t) if sig_t[0] > 0.0 else 1.0,
             math.exp(-sig_t[1] * t) if sig_t[1] > 0.0 else 1.0,
             math.exp(-sig_t[2] * t) if sig_t[2] > 0.0 else 1.0)
@@ -309,8 +313,12 @@ def volume_segment(sd, ld, vd, pd, regs, point, stack, i, o, d, length, thr, ter
         else:
             chn, u2 = pick_channel(chd, u)
             t = exp_sample(u2, sig_t[chn], la)
-        p_dist = (chd[0] * exp_pdf(t, sig_t[0], la) + chd[1] * exp_pdf(t, sig_t[1], la)
-                  + chd[2] * exp_pdf(t, sig_t[2], la))
+        if sig_t[0] == sig_t[1] and sig_t[1] == sig_t[2]:  # grey: one density, same sum
+            e = exp_pdf(t, sig_t[0], la)
+            p_dist = chd[0] * e + chd[1] * e + chd[2] * e
+        else:
+            p_dist = (chd[0] * exp_pdf(t, sig_t[0], la) + chd[1] * exp_pdf(t, sig_t[1], la)
+                      + chd[2] * exp_pdf(t, sig_t[2], la))
         p_equi = equiangular_pdf(t, delta, span_d, th_a, th_b, la) if equi else 0.0
         t_rel = t
         t = ta + t_rel
