@@ -38,7 +38,7 @@ from ..kernels import inline_kernel, kernel
 from .dielectric import IOR_ONE_EPS
 from .dielectric_specular import specular_eta_f0
 from .ggx import ALPHA_SQ_SINGULAR
-from .procedural import procedural_op
+from .procedural import floor64, procedural_op
 from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
                              POINT_OBJECT, POINT_UV, POINT_XFORM, OP_FRESNEL, OP_LAYER_WEIGHT,
                              OP_BUMP, OP_BUMP_OFFSET, OP_CAMERA_COORDS, OP_NORMAL_MAP, OP_OBJECT_INFO, OP_POINT, POINT_P, OP_AVERAGE, OP_BRIGHT_CONTRAST, OP_CHECKER, OP_CLAMP,
@@ -60,7 +60,7 @@ def safe_divide(a, b):
 
 @kernel
 def fract(x):
-    return x - math.floor(x)
+    return x - floor64(x)
 
 
 @kernel
@@ -96,7 +96,7 @@ def safe_modulo(a, b):
 @kernel
 def wrapf(value, vmax, vmin):
     r = vmax - vmin
-    return value - r * math.floor((value - vmin) / r) if r != 0.0 else vmin
+    return value - r * floor64((value - vmin) / r) if r != 0.0 else vmin
 
 
 @kernel
@@ -159,23 +159,23 @@ def math_op(op, a, b, c):
     if op == 18:
         return -smoothmin(-a, -b, c)
     if op == 19:
-        return math.floor(a + 0.5)
+        return floor64(a + 0.5)
     if op == 20:
-        return math.floor(a)
+        return floor64(a)
     if op == 21:
-        return math.ceil(a)
+        return np.ceil(a)
     if op == 22:
-        return math.floor(a) if a >= 0.0 else math.ceil(a)
+        return floor64(a) if a >= 0.0 else np.ceil(a)
     if op == 23:
-        return a - math.floor(a)
+        return a - floor64(a)
     if op == 24:
         return safe_modulo(a, b)
     if op == 25:
-        return a - math.floor(a / b) * b if b != 0.0 else 0.0
+        return a - floor64(a / b) * b if b != 0.0 else 0.0
     if op == 26:
         return wrapf(a, b, c)
     if op == 27:
-        return math.floor(safe_divide(a, b)) * b
+        return floor64(safe_divide(a, b)) * b
     if op == 28:
         return pingpong(a, b)
     if op == 29:
@@ -275,9 +275,9 @@ def vmath_op(op, a, b, c, s):
     if op == 15:
         return (max(a[0], b[0]), max(a[1], b[1]), max(a[2], b[2]))
     if op == 16:
-        return (math.floor(a[0]), math.floor(a[1]), math.floor(a[2]))
+        return (floor64(a[0]), floor64(a[1]), floor64(a[2]))
     if op == 17:
-        return (math.ceil(a[0]), math.ceil(a[1]), math.ceil(a[2]))
+        return (np.ceil(a[0]), np.ceil(a[1]), np.ceil(a[2]))
     if op == 18:
         return (fract(a[0]), fract(a[1]), fract(a[2]))
     if op == 19:
@@ -285,8 +285,8 @@ def vmath_op(op, a, b, c, s):
     if op == 20:
         return (wrapf(a[0], b[0], c[0]), wrapf(a[1], b[1], c[1]), wrapf(a[2], b[2], c[2]))
     if op == 21:
-        return (math.floor(safe_divide(a[0], b[0])) * b[0], math.floor(safe_divide(a[1], b[1])) * b[1],
-                math.floor(safe_divide(a[2], b[2])) * b[2])
+        return (floor64(safe_divide(a[0], b[0])) * b[0], floor64(safe_divide(a[1], b[1])) * b[1],
+                floor64(safe_divide(a[2], b[2])) * b[2])
     if op == 22:
         return (math.sin(a[0]), math.sin(a[1]), math.sin(a[2]))
     if op == 23:
@@ -331,7 +331,7 @@ def hsv_to_rgb(hsv):
     if h == 1.0:
         h = 0.0
     h *= 6.0
-    i = math.floor(h)
+    i = floor64(h)
     f = h - i
     p = v * (1.0 - s)
     q = v * (1.0 - s * f)
@@ -496,9 +496,9 @@ def checker(p):
     x = (p[0] + 0.000001) * 0.999999
     y = (p[1] + 0.000001) * 0.999999
     z = (p[2] + 0.000001) * 0.999999
-    xi = abs(int(math.floor(x)))
-    yi = abs(int(math.floor(y)))
-    zi = abs(int(math.floor(z)))
+    xi = abs(int(floor64(x)))
+    yi = abs(int(floor64(y)))
+    zi = abs(int(floor64(z)))
     return 1.0 if ((xi % 2 == yi % 2) == (zi % 2 == 1)) else 0.0
 
 
@@ -542,7 +542,7 @@ def map_range(mode, clamp, value, fmin, fmax, tmin, tmax, steps):
         f = safe_divide(value - fmin, fmax - fmin)
     elif mode == 1:
         f = safe_divide(value - fmin, fmax - fmin)
-        f = math.floor(f * (steps + 1.0)) / steps if steps > 0.0 else 0.0
+        f = floor64(f * (steps + 1.0)) / steps if steps > 0.0 else 0.0
     elif mode == 2:
         f = 1.0 - smoothstep(fmax, fmin, value) if fmin > fmax else smoothstep(fmin, fmax, value)
     else:
@@ -619,8 +619,8 @@ def image_lookup(img_info, img_u8, img_f32, img, mode, u, v):
     ext = mode % 8
     r = g = b = a = 0.0
     if interp == 0:
-        ix = _wrap(int(math.floor(u * w)), w, ext)
-        iy = _wrap(int(math.floor(v * h)), h, ext)
+        ix = _wrap(int(floor64(u * w)), w, ext)
+        iy = _wrap(int(floor64(v * h)), h, ext)
         if ix >= 0 and iy >= 0:
             r, g, b, a = (_texel(img_info, img_u8, img_f32, img, ix, iy, 0), _texel(img_info, img_u8, img_f32, img, ix, iy, 1),
                           _texel(img_info, img_u8, img_f32, img, ix, iy, 2), _texel(img_info, img_u8, img_f32, img, ix, iy, 3))
@@ -628,8 +628,8 @@ def image_lookup(img_info, img_u8, img_f32, img, mode, u, v):
         # Cycles's bicubic: uniform cubic B-spline weights over 4×4 texels around (u, v)
         tx = u * w - 0.5
         ty = v * h - 0.5
-        fx0 = math.floor(tx)
-        fy0 = math.floor(ty)
+        fx0 = floor64(tx)
+        fy0 = floor64(ty)
         x0, y0 = int(fx0) - 1, int(fy0) - 1
         for dy in range(4):
             wy = _bspline(ty - fy0, dy)
@@ -646,8 +646,8 @@ def image_lookup(img_info, img_u8, img_f32, img, mode, u, v):
     else:
         tx = u * w - 0.5
         ty = v * h - 0.5
-        fx0 = math.floor(tx)
-        fy0 = math.floor(ty)
+        fx0 = floor64(tx)
+        fy0 = floor64(ty)
         fx = tx - fx0
         fy = ty - fy0
         x0, y0 = int(fx0), int(fy0)
