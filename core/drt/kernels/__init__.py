@@ -31,8 +31,10 @@ a namedtuple of numpy arrays built once in Python and passed as the first argume
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
+import threading
 
 
 def cache_dir() -> str:
@@ -446,18 +448,65 @@ KERNEL_OPTIONS = dict(nogil=True, cache=True, error_model="numpy", _nrt=False, f
 
 
 def kernel(fn=None, **overrides):
-    """``numba.njit`` with DRT's options (see the module docstring). Use as ``@kernel``."""
+    """``numba.njit`` with DRT's options (see the module docstring). Use as ``@kernel``.
+
+    Returns a `LazyKernel`: the numba dispatcher is made when the kernel is first called,
+    compiled into a caller or asked about."""
     opts = {**KERNEL_OPTIONS, **overrides}
-    cache = opts.pop("cache", False)
 
     def compiled(f):
         _KERNEL_NAMES.add(f.__qualname__)
-        dispatcher = numba.njit(cache=False, **opts)(f)
-        if cache and hasattr(dispatcher, "_cache"):
-            dispatcher._cache = _CacheOnFirstUse(dispatcher.py_func)
-        return _typed_without_literals(dispatcher)
+        return LazyKernel(f, opts)
 
     return compiled if fn is None else compiled(fn)
+
+
+_DISPATCHER_LOCK = threading.Lock()
+
+
+class LazyKernel:
+    """A kernel whose numba dispatcher is built on first use.
+
+    A warm render calls a few dozen of DRT's ~440 kernels from Python; the rest live only inside
+    their callers' cached machine code and are never looked at. Building a numba dispatcher is
+    ~0.15 ms (it inspects the function's signature and sets up a compiler), ~0.06 s of every
+    process's start-up for all of them (`import drt.render` 0.43 -> 0.37 s, five runs each).
+    numba types a global by asking it for ``_numba_type_``, which (like every attribute this
+    object does not hold) is forwarded to the dispatcher, built then: inside a kernel a
+    `LazyKernel` is typed, called and compiled exactly as the dispatcher it stands for.
+    ``py_func`` is the Python function, available without building anything."""
+
+    def __init__(self, py_func, options):
+        functools.update_wrapper(self, py_func)
+        self.py_func = py_func
+        self._options = dict(options)
+        self._dispatcher = None
+
+    def dispatcher(self):
+        """The numba dispatcher (built once; render threads may ask at the same time)."""
+        d = self._dispatcher
+        if d is None:
+            with _DISPATCHER_LOCK:
+                d = self._dispatcher
+                if d is None:
+                    opts = dict(self._options)
+                    cache = opts.pop("cache", False)
+                    d = numba.njit(cache=False, **opts)(self.py_func)
+                    if cache and hasattr(d, "_cache"):
+                        d._cache = _CacheOnFirstUse(d.py_func)
+                    d = self._dispatcher = _typed_without_literals(d)
+        return d
+
+    def __call__(self, *args, **kwargs):
+        return self.dispatcher()(*args, **kwargs)
+
+    def __getattr__(self, name):
+        if name.startswith("__") or name in ("_dispatcher", "_options"):
+            raise AttributeError(name)
+        return getattr(self.dispatcher(), name)
+
+    def __repr__(self):
+        return f"<DRT kernel {self.__module__}.{self.__qualname__}>"
 
 
 class _CacheOnFirstUse:
