@@ -336,4 +336,3 @@ def test_kernels_are_built_on_first_use():
     assert twice_plus_one(3.0) == 7.0  # typing the callee through the proxy builds it
     assert twice._dispatcher is not None and len(twice.overloads) == 1
     assert twice.__name__ == "twice" and "LazyKernel" not in repr(twice)
-
