@@ -384,41 +384,75 @@ def render(
                     raise _Cancelled from None
         _collect(batch, film, stats, tick, total_paths, workers, t0, to_film)
 
+    # Passes follow each other without a barrier: the next pass's batches are submitted while
+    # the last ones of this pass still run (threads + 1 batches in flight), so no thread idles
+    # at a pass's end. Batches are collected in submission order, so the film adds every
+    # pixel's samples in pass order whatever the timing (same image at any thread count), and
+    # when a pass's last batch is collected the film holds exactly the passes up to it: the
+    # progress callback, the cancel check and adaptive sampling see it then. A pass whose
+    # pixels adaptive sampling chooses from the film waits for the passes before it.
+    state = {"done": done, "stop": False}
+    pending: deque = deque()  # (future, samples per pixel of the pass it ends, or 0)
+
+    def end_of_pass(k: int) -> None:
+        nonlocal xs, ys, cancelled
+        state["done"] += k
+        stats.samples_done = state["done"] - sample_offset
+        if threshold > 0 and stats.samples_done >= min_samples:
+            fx, fy = (xs, ys) if to_film is None else (xs - to_film[1], ys - to_film[2])
+            keep = adaptive_active(film, fx, fy, threshold)
+            xs, ys = xs[keep], ys[keep]
+            stats.active_pixels = int(len(xs))
+            if len(xs) == 0:
+                stats.samples_done = count
+                if progress is not None:
+                    progress(film, count, count)
+                state["stop"] = True
+                return
+        if progress is not None:
+            progress(film, stats.samples_done, count)
+        if cancel is not None and cancel():
+            cancelled = stats.samples_done < count
+            state["stop"] = True
+
+    def finish_one() -> None:
+        future, ends_pass = pending.popleft()
+        collect(future)
+        if ends_pass and not state["stop"]:
+            end_of_pass(ends_pass)
+
     aborted = False
     try:
-        for k in pass_schedule(count):
-            pending = deque()
-            try:
-                for b in batches(done, k):
+        try:
+            first = done  # first sample number of the next pass to submit
+            for k in pass_schedule(count):
+                if threshold > 0 and first - sample_offset >= min_samples:
+                    while pending and not state["stop"]:  # adaptive: this pass's pixels
+                        finish_one()                      # come from the film so far
+                if state["stop"]:
+                    break
+                cut = list(batches(first, k))
+                for j, b in enumerate(cut):
                     if cancel is not None and cancel():
                         raise _Cancelled
-                    pending.append(workers.submit(*b))
-                    while len(pending) >= threads + 1:
-                        collect(pending.popleft())
-                while pending:
-                    collect(pending.popleft())
-            except _Cancelled:
-                cancelled = True
-                aborted = True
-                workers.abort()  # batches in flight are dropped: the film keeps finished ones
-                break
-            done += k
-            stats.samples_done = done - sample_offset
-            if threshold > 0 and stats.samples_done >= min_samples:
-                fx, fy = (xs, ys) if to_film is None else (xs - to_film[1], ys - to_film[2])
-                keep = adaptive_active(film, fx, fy, threshold)
-                xs, ys = xs[keep], ys[keep]
-                stats.active_pixels = int(len(xs))
-                if len(xs) == 0:
-                    stats.samples_done = count
-                    if progress is not None:
-                        progress(film, count, count)
+                    pending.append((workers.submit(*b), k if j == len(cut) - 1 else 0))
+                    while len(pending) >= threads + 1 and not state["stop"]:
+                        finish_one()
+                    if state["stop"]:
+                        break
+                if state["stop"]:
                     break
-            if progress is not None:
-                progress(film, stats.samples_done, count)
-            if cancel is not None and cancel():
-                cancelled = stats.samples_done < count
-                break
+                first += k
+            while pending and not state["stop"]:
+                finish_one()
+        except _Cancelled:  # during a submission or while waiting for a batch
+            cancelled = True
+            state["stop"] = True
+            aborted = True
+        if pending:  # stopped at a pass's end (cancel) with the next pass's batches in flight
+            aborted = True
+        if aborted:
+            workers.abort()  # batches in flight are dropped: the film keeps finished ones
     finally:
         if not aborted:
             workers.close()
