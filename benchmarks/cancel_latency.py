@@ -55,14 +55,14 @@ def main(argv=None):
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.resolution.split("x"))
 
-    from drt.render import BATCH_PATHS, render
+    from drt.render import BATCH_PATHS, BATCH_PATHS_THREADED, render
     from drt.scene import scene_from_dict
     from drt.scene_file import save_scene
     from scene_builders import cornell_box
 
     header, arrays = cornell_box(w, h, 4096)
     scene = scene_from_dict(header, arrays)
-    print(f"scene: Cornell box {w}x{h}, 4096 spp requested; batches of {BATCH_PATHS} paths; {args.threads} workers")
+    print(f"scene: Cornell box {w}x{h}, 4096 spp requested; batches of {BATCH_PATHS if args.threads == 1 else BATCH_PATHS_THREADED} paths; {args.threads} workers")
     baseline = threading.active_count()
     for parallel in ("threads",):
         lat, leftover = [], []

@@ -37,7 +37,11 @@ from .scene import Scene, SceneError
 from .trace import Tracer
 from .volumes.media import lights_reaching, media_for_scene, world_blocks_infinity
 
+#: camera paths per batch: on one thread, 65 536 (fewer batches, less Python per path); on
+#: several, 32 768 — threads share the last-level cache and the tail of a render, and two
+#: threads were 1–12 % faster with it on all ten scenes measured (docs/kernels.md)
 BATCH_PATHS = 1 << 16
+BATCH_PATHS_THREADED = 1 << 15
 MIN_BATCH_PATHS = 1 << 12
 #: how often cancel() is polled while a batch runs: a viewport edit waits at most this long
 #: (plus the batches in flight) before its new image starts; 100 wake-ups/s cost nothing
@@ -315,7 +319,8 @@ def render(
     gives it, so tiles placed side by side are bit-identical to the whole frame (the cluster
     renderer, ``drt.farm``, relies on this).
 
-    max_batch_paths: camera paths per batch (default ``BATCH_PATHS``); the viewport uses
+    max_batch_paths: camera paths per batch (default ``BATCH_PATHS`` on one thread,
+    ``BATCH_PATHS_THREADED`` on more); the viewport uses
     smaller batches so that cancelling (an edit) waits less for the batches in flight.
     """
     t0 = time.perf_counter()
@@ -348,10 +353,10 @@ def render(
         min_samples = max(16, spp // 16)
     npix = len(xs)
     total_paths = max(npix * count, 1)
-    batch_paths = int(max_batch_paths or BATCH_PATHS)
+    batch_paths = int(max_batch_paths or (BATCH_PATHS if threads == 1 else BATCH_PATHS_THREADED))
 
     def batches(first: int, k: int):
-        """(x, row, sample index) arrays of one pass, cut into batches: at most BATCH_PATHS
+        """(x, row, sample index) arrays of one pass, cut into batches: at most batch_paths
         paths, and small enough that every thread gets work in the early, small passes (at
         least two batches per thread, of at least MIN_BATCH_PATHS paths). Each pixel's samples
         of a pass stay in one batch, so the film adds them in the same order whatever the cut:
