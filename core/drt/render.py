@@ -437,6 +437,11 @@ def render(
                 if state["stop"]:
                     break
                 cut = list(batches(first, k))
+                if not cut:  # no pixels (an empty tile): the pass ends once the film is current
+                    while pending and not state["stop"]:
+                        finish_one()
+                    if not state["stop"]:
+                        end_of_pass(k)
                 for j, b in enumerate(cut):
                     if cancel is not None and cancel():
                         raise _Cancelled
