@@ -88,6 +88,22 @@ def test_cancel_between_passes_reports_whole_passes():
     assert np.all(film.sample_count == 2)
 
 
+
+@pytest.mark.parametrize("tile", [None, (10, 10, 10, 20)], ids=["frame", "empty-tile"])
+def test_every_pass_reports_progress_once_in_order_with_the_film_holding_it(tile):
+    """Passes are pipelined (the next one's batches run before this one is collected), yet each
+    pass's progress call comes once, in order, when the film holds exactly the passes so far —
+    also for a tile without pixels, whose passes have no batches."""
+    seen = []
+
+    def progress(film, done, total):
+        seen.append(done)
+        assert np.all(film.sample_count == done)
+
+    film = render(big_scene(32, 24, 16), threads=2, parallel="threads", tile=tile, progress=progress)
+    assert seen == [1, 2, 4, 8, 16]
+    assert film.stats.samples_done == 16 and not film.stats.cancelled
+
 @pytest.mark.parametrize("group", [False, True], ids=["parent", "process-group"])
 def test_cli_sigint_writes_the_partial_image(tmp_path, group):
     """SIGINT to the CLI (group=True: to its whole process group, like Ctrl-C in a terminal)
