@@ -396,13 +396,13 @@ def render(
     # when a pass's last batch is collected the film holds exactly the passes up to it: the
     # progress callback, the cancel check and adaptive sampling see it then. A pass whose
     # pixels adaptive sampling chooses from the film waits for the passes before it.
-    state = {"done": done, "stop": False}
+    stop = False  # cancelled, or adaptive sampling found every pixel converged
     pending: deque = deque()  # (future, samples per pixel of the pass it ends, or 0)
 
     def end_of_pass(k: int) -> None:
-        nonlocal xs, ys, cancelled
-        state["done"] += k
-        stats.samples_done = state["done"] - sample_offset
+        nonlocal xs, ys, cancelled, done, stop
+        done += k
+        stats.samples_done = done - sample_offset
         if threshold > 0 and stats.samples_done >= min_samples:
             fx, fy = (xs, ys) if to_film is None else (xs - to_film[1], ys - to_film[2])
             keep = adaptive_active(film, fx, fy, threshold)
@@ -412,19 +412,24 @@ def render(
                 stats.samples_done = count
                 if progress is not None:
                     progress(film, count, count)
-                state["stop"] = True
+                stop = True
                 return
         if progress is not None:
             progress(film, stats.samples_done, count)
         if cancel is not None and cancel():
             cancelled = stats.samples_done < count
-            state["stop"] = True
+            stop = True
 
     def finish_one() -> None:
         future, ends_pass = pending.popleft()
         collect(future)
-        if ends_pass and not state["stop"]:
+        if ends_pass and not stop:
             end_of_pass(ends_pass)
+
+    def drain() -> None:
+        """Collect every batch in flight (the film then holds every pass submitted so far)."""
+        while pending and not stop:
+            finish_one()
 
     aborted = False
     try:
@@ -432,32 +437,29 @@ def render(
             first = done  # first sample number of the next pass to submit
             for k in pass_schedule(count):
                 if threshold > 0 and first - sample_offset >= min_samples:
-                    while pending and not state["stop"]:  # adaptive: this pass's pixels
-                        finish_one()                      # come from the film so far
-                if state["stop"]:
+                    drain()  # adaptive: this pass's pixels come from the film so far
+                if stop:
                     break
                 cut = list(batches(first, k))
                 if not cut:  # no pixels (an empty tile): the pass ends once the film is current
-                    while pending and not state["stop"]:
-                        finish_one()
-                    if not state["stop"]:
+                    drain()
+                    if not stop:
                         end_of_pass(k)
                 for j, b in enumerate(cut):
                     if cancel is not None and cancel():
                         raise _Cancelled
                     pending.append((workers.submit(*b), k if j == len(cut) - 1 else 0))
-                    while len(pending) >= threads + 1 and not state["stop"]:
+                    while len(pending) >= threads + 1 and not stop:
                         finish_one()
-                    if state["stop"]:
+                    if stop:
                         break
-                if state["stop"]:
+                if stop:
                     break
                 first += k
-            while pending and not state["stop"]:
-                finish_one()
+            drain()
         except _Cancelled:  # during a submission or while waiting for a batch
             cancelled = True
-            state["stop"] = True
+            stop = True
             aborted = True
         if pending:  # stopped at a pass's end (cancel) with the next pass's batches in flight
             aborted = True
