@@ -102,20 +102,44 @@ def _call_intersect1(typingctx, fn, scene, rayhit):
     return sig, codegen
 
 
+@intrinsic
+def _float_bits(typingctx, x):
+    """The 32 bits of float32 x as a uint32 (a register bitcast)."""
+    sig = types.uint32(types.float32)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(32))
+
+    return sig, codegen
+
+
+@intrinsic
+def _bits_float(typingctx, x):
+    """The float32 whose bits are uint32 x (a register bitcast)."""
+    sig = types.float32(types.uint32)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.FloatType())
+
+    return sig, codegen
+
+
 def scratch() -> np.ndarray:
     """A ray's scratch for ``trace1`` (kernels do not allocate): one per kernel call, reused for
-    every ray that call traces (so one per thread)."""
-    return np.zeros(BUFFER_WORDS, np.float32)
+    every ray that call traces (so one per thread). uint32 words: the float fields are written
+    and read as their bits (``_float_bits``), not through a float32 view of the array — numba's
+    ``view`` brings a runtime environment whose loading imports ``numba.np.arrayobj`` (30–55 ms
+    at the start of every process that loads such a kernel from the cache)."""
+    return np.zeros(BUFFER_WORDS, np.uint32)
 
 
 @inline_kernel
 def ray_buffer(words):
-    """The RTCRayHit inside a ``scratch`` array: (the same memory as uint32 words, first word of
-    the 16-byte aligned RTCRayHit, its address)."""
-    bits = words.view(np.uint32)
+    """The RTCRayHit inside a ``scratch`` array: (the same array, first word of the 16-byte
+    aligned RTCRayHit, its address)."""
     addr = words.ctypes.data
     base = ((16 - addr % 16) % 16) // 4
-    return bits, base, addr + 4 * base
+    return words, base, addr + 4 * base
 
 
 @inline_kernel
@@ -126,15 +150,15 @@ def trace1(fn, scene, words, bits, base, addr, o, d, tmax):
 
 
 @inline_kernel
-def _fill_ray(words, bits, base, o, d, tmax, time):
-    """The ray part of the RTCRayHit in ``words`` (shared with RTCRay): o + t·d for t in
+def _fill_ray(bits, base, o, d, tmax, time):
+    """The ray part of the RTCRayHit in ``bits`` (shared with RTCRay): o + t·d for t in
     [0, tmax), at ``time``, every mask bit, no flags."""
     for a in range(3):
-        words[base + _ORG + a] = o[a]
-        words[base + _DIR + a] = d[a]
-    words[base + _TNEAR] = 0.0
-    words[base + _TIME] = time
-    words[base + _TFAR] = min(tmax, _FAR)
+        bits[base + _ORG + a] = _float_bits(np.float32(o[a]))
+        bits[base + _DIR + a] = _float_bits(np.float32(d[a]))
+    bits[base + _TNEAR] = _float_bits(np.float32(0.0))
+    bits[base + _TIME] = _float_bits(np.float32(time))
+    bits[base + _TFAR] = _float_bits(np.float32(min(tmax, _FAR)))
     bits[base + _MASK] = _INVALID
     bits[base + _ID] = 0
     bits[base + _FLAGS] = 0
@@ -143,16 +167,17 @@ def _fill_ray(words, bits, base, o, d, tmax, time):
 @inline_kernel
 def trace1_at(fn, scene, words, bits, base, addr, o, d, tmax, time):
     """``trace1`` at ``time`` in [0, 1] (Embree's ray time: where a geometry with time steps —
-    a deforming mesh, ``embree_mesh.deforming_scene`` — is seen; others ignore it)."""
-    _fill_ray(words, bits, base, o, d, tmax, time)
+    a deforming mesh, ``embree_mesh.deforming_scene`` — is seen; others ignore it). ``words``
+    and ``bits`` are ``ray_buffer``'s (the same uint32 scratch)."""
+    _fill_ray(bits, base, o, d, tmax, time)
     bits[base + _PRIM] = _INVALID
     bits[base + _GEOM] = _INVALID
     bits[base + _INST] = _INVALID
     _call_intersect1(fn, scene, addr)
     if bits[base + _GEOM] == _INVALID:
         return math.inf, -1, 0.0, 0.0
-    return (float(words[base + _TFAR]), int(bits[base + _PRIM]), float(words[base + _U]),
-            float(words[base + _V]))
+    return (float(_bits_float(bits[base + _TFAR])), int(bits[base + _PRIM]),
+            float(_bits_float(bits[base + _U])), float(_bits_float(bits[base + _V])))
 
 
 @inline_kernel
@@ -160,9 +185,9 @@ def occluded1_at(fn, scene, words, bits, base, addr, o, d, tmax, time):
     """Is anything hit by the ray o + t·d, t in [0, tmax), at ``time``? ``fn``: the address of
     ``rtcOccluded1``, which takes the ray part of the same buffer (RTCRay) and sets its tfar to
     −inf when it finds a hit."""
-    _fill_ray(words, bits, base, o, d, tmax, time)
+    _fill_ray(bits, base, o, d, tmax, time)
     _call_intersect1(fn, scene, addr)  # (the same C signature: scene, ray, NULL arguments)
-    return words[base + _TFAR] == -math.inf
+    return _bits_float(bits[base + _TFAR]) == -math.inf
 
 
 @kernel
