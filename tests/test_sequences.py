@@ -306,3 +306,40 @@ def test_sobol_byte_tables_equal_the_bit_loops():
     for d, loop in enumerate(loops, start=1):
         want = [loop(int(i)) for i in idx]
         assert [S.sobol_fast(d, int(i)) for i in idx] == want, d
+
+
+def test_sobol_samples_equal_the_scramble_formula_bit_for_bit():
+    """SOBOL ``sample_2d`` / ``sample_3d`` / ``sample_5d`` equal Burley's construction written out
+    with the plain building blocks — h = hash(hash(prefix ^ pixel) ^ dim), the index shuffled by
+    ``nested_uniform_scramble(index, h)``, Sobol dimension k of it (``sobol_fast``; dimension 0 is
+    the bit reversal), each Owen-scrambled with hash(h ^ seed_k) — exactly, although the kernels
+    keep the shuffled index and the Sobol values bit-reversed (``SOBOL_BYTES_REV``)."""
+    from drt.sampling import sequences as S
+
+    rng = np.random.default_rng(5)
+    n = 400
+    pixel = rng.integers(0, 2**32, n).astype(np.int64)
+    index = np.concatenate([np.arange(200), rng.integers(0, 2**32, n - 200)]).astype(np.int64)
+    dim = rng.integers(0, 2**31, n).astype(np.int64)
+    st = Sampler("SOBOL", seed=1234, spp=64)
+    prefix = np.uint32(st.data.prefix)
+    seeds = [S._SEED_U0, S._SEED_U1, S._SEED_U2, S._SEED_U3, S._SEED_U4]
+    want = np.empty((n, 5))
+    for k in range(n):
+        h = hash_u32(hash_u32(prefix ^ np.uint32(pixel[k])) ^ np.uint32(dim[k]))
+        shuffled = nested_uniform_scramble(np.uint32(index[k]), h)
+        bits = [int(reverse_bits(shuffled))] + [S.sobol_fast(d, int(shuffled)) for d in range(1, 5)]
+        for j in range(5):
+            scrambled = nested_uniform_scramble(np.uint32(bits[j]), hash_u32(h ^ np.uint32(seeds[j])))
+            want[k, j] = float(scrambled) / 2.0**32
+    got5 = np.stack([st.sample_5d(pixel[k:k + 1], index[k:k + 1], int(dim[k]))[0] for k in range(n)])
+    got3 = np.stack([st.sample_3d(pixel[k:k + 1], index[k:k + 1], int(dim[k]))[0] for k in range(n)])
+    got2 = np.stack([st.sample_2d(pixel[k:k + 1], index[k:k + 1], int(dim[k]))[0] for k in range(n)])
+    assert np.array_equal(got5, want)
+    assert np.array_equal(got3, want[:, :3])
+    assert np.array_equal(got2, want[:, :2])
+    # the reversed tables are the plain ones conjugated by the bit reversal
+    r = rng.integers(0, 2**32, 200).astype(np.int64)
+    for d in range(1, 5):
+        assert [S.sobol_rev(d, int(x)) for x in r] == [
+            int(reverse_bits(np.uint32(S.sobol_fast(d, int(reverse_bits(np.uint32(x))))))) for x in r]

@@ -34,7 +34,7 @@ PROJECTION_PERSP, PROJECTION_ORTHO = 0, 1  # CameraData.projection
 CameraData = namedtuple("CameraData", [
     "projection", "width", "height", "plane_w", "plane_h", "shift_x", "shift_y",
     "lens_radius", "focus_distance", "blades", "rotation", "ratio", "clip_start", "clip_end",
-    "matrix", "moving", "motion"])
+    "matrix", "moving", "motion", "forward"])
 CameraData.__doc__ = """The camera for the kernels.  projection: int64 (0 PERSP, 1 ORTHO); width,
 height: float64 image size in pixels; plane_w, plane_h: float64 extent of the image on the plane
 at distance 1 (perspective) or in scene units (ortho); shift_x, shift_y: float64 in the same
@@ -42,7 +42,8 @@ units; lens_radius (float64, 0 = pinhole), focus_distance (float64), blades (int
 polygonal aperture), rotation (float64, radians), ratio (float64): the aperture; clip_start,
 clip_end: float64; matrix: (4, 4) float64 camera → (shifted) world; moving: bool; motion: a
 ``drt.motion.MotionData`` of the (shifted) camera transform over the shutter (identity if not
-moving)."""
+moving); forward: (x, y, z) float64, the unit view axis (−Z of ``matrix``) of a camera that does
+not move."""
 
 
 @kernel
@@ -65,60 +66,56 @@ def camera_ray(cd, px, py, ul0, ul1, tau):
     # every ray of a stage, which LLVM computes once for the loop)
     x = (px * (1.0 / cd.width) - 0.5) * cd.plane_w + cd.shift_x
     y = (py * (1.0 / cd.height) - 0.5) * cd.plane_h + cd.shift_y
+    # In camera space the ray leaves the lens point e (on z = 0) along v, unnormalised, whose z
+    # is −depth for every ray of the camera: 1 without depth of field, the focus distance with
+    # it (v then ends on the focus plane, at the pinhole ray's point there).
     fd = cd.focus_distance
-    if cd.projection == 1:  # ORTHO
-        o = (x, y, 0.0)
-        d = (0.0, 0.0, -1.0)
-        if cd.lens_radius > 0:
-            lx, ly = lens_offset(cd, ul0, ul1)
-            focus = (o[0] + d[0] * fd, o[1] + d[1] * fd, o[2] + d[2] * fd)
-            o = (o[0] + lx, o[1] + ly, o[2] + 0.0)
-            d = (focus[0] - o[0], focus[1] - o[1], focus[2] - o[2])
+    if cd.lens_radius > 0:
+        lx, ly = lens_offset(cd, ul0, ul1)
+        depth = fd
+        if cd.projection == 1:  # ORTHO
+            ex, ey = x + lx, y + ly
+            v = (-lx, -ly, -fd)
+        else:
+            ex, ey = lx, ly
+            v = (x * fd - lx, y * fd - ly, -fd)
     else:
-        d = (x, y, -1.0)
-        o = (0.0, 0.0, 0.0)
-        if cd.lens_radius > 0:
-            lx, ly = lens_offset(cd, ul0, ul1)
-            focus = (d[0] * fd, d[1] * fd, d[2] * fd)  # d.z = −1: the point on the focus plane
-            o = (lx, ly, 0.0)
-            d = (focus[0] - o[0], focus[1] - o[1], focus[2] - o[2])
-    inv_n = 1.0 / math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    d = (d[0] * inv_n, d[1] * inv_n, d[2] * inv_n)
-    # start on the near clip plane, stop at the far one (planes, not spheres, like Cycles)
-    cos_axis = -d[2]
-    if cos_axis > 0:
-        inv_c = 1.0 / max(cos_axis, 1e-12)
-        t_near = (cd.clip_start + o[2]) * inv_c
-        t_far = (cd.clip_end + o[2]) * inv_c
-    else:
-        t_near = 0.0
-        t_far = np.inf
-    eye = o
-    o = (o[0] + d[0] * t_near, o[1] + d[1] * t_near, o[2] + d[2] * t_near)
-    tmax = t_far - t_near
-    if tmax < 0.0:
-        tmax = 0.0
+        depth = 1.0
+        if cd.projection == 1:  # ORTHO
+            ex, ey = x, y
+            v = (0.0, 0.0, -1.0)
+        else:
+            ex, ey = 0.0, 0.0
+            v = (x, y, -1.0)
     if cd.moving:
         r0, r1, r2, t = motion_at(cd.motion, tau)
+        fwd = (-r0[2], -r1[2], -r2[2])
+        inv_fn = 1.0 / math.sqrt(fwd[0] * fwd[0] + fwd[1] * fwd[1] + fwd[2] * fwd[2])
+        fwd = (fwd[0] * inv_fn, fwd[1] * inv_fn, fwd[2] * inv_fn)
     else:
         m = cd.matrix
         r0 = (m[0, 0], m[0, 1], m[0, 2])
         r1 = (m[1, 0], m[1, 1], m[1, 2])
         r2 = (m[2, 0], m[2, 1], m[2, 2])
         t = (m[0, 3], m[1, 3], m[2, 3])
-    ol = apply_rows(r0, r1, r2, o)
-    el = apply_rows(r0, r1, r2, eye)
-    o_w = (ol[0] + t[0], ol[1] + t[1], ol[2] + t[2])
+        fwd = cd.forward
+    el = apply_rows(r0, r1, r2, (ex, ey, 0.0))
     eye_w = (el[0] + t[0], el[1] + t[1], el[2] + t[2])
-    d_w = apply_rows(r0, r1, r2, d)
-    fwd = (-r0[2], -r1[2], -r2[2])
-    inv_fn = 1.0 / math.sqrt(fwd[0] * fwd[0] + fwd[1] * fwd[1] + fwd[2] * fwd[2])
-    fwd = (fwd[0] * inv_fn, fwd[1] * inv_fn, fwd[2] * inv_fn)
-    scale = math.sqrt(d_w[0] * d_w[0] + d_w[1] * d_w[1] + d_w[2] * d_w[2])
-    inv_scale = 1.0 / scale
-    d_w = (d_w[0] * inv_scale, d_w[1] * inv_scale, d_w[2] * inv_scale)
-    # a scaled camera object scales distances too: keep tmax in world units
-    return o_w, d_w, tmax * scale, eye_w, fwd
+    # Everything follows from the world-space v: one square root and one division a ray. The
+    # clip planes z = −clip_start and z = −clip_end (planes, not spheres, like Cycles) lie at
+    # e + v·clip/depth; a scaled camera object scales v and so keeps tmax in world units.
+    vw = apply_rows(r0, r1, r2, v)
+    length = math.sqrt(vw[0] * vw[0] + vw[1] * vw[1] + vw[2] * vw[2])
+    inv_len = 1.0 / length
+    d_w = (vw[0] * inv_len, vw[1] * inv_len, vw[2] * inv_len)
+    if depth > 0.0:
+        near = cd.clip_start / depth
+        o_w = (eye_w[0] + vw[0] * near, eye_w[1] + vw[1] * near, eye_w[2] + vw[2] * near)
+        tmax = max((cd.clip_end - cd.clip_start) / depth, 0.0) * length
+    else:  # a focus distance of 0: v lies in the lens plane, no clip plane ahead
+        o_w = eye_w
+        tmax = np.inf
+    return o_w, d_w, tmax, eye_w, fwd
 
 
 @kernel
@@ -143,6 +140,16 @@ def _f64(a) -> np.ndarray:
     """float64, C-contiguous, writeable: one compiled signature serves every call."""
     a = np.ascontiguousarray(a, dtype=np.float64)
     return a if a.flags.writeable else a.copy()
+
+
+def _view_axis(m: np.ndarray) -> tuple:
+    """The unit view axis, camera −Z, of the camera-to-world matrix m (world frame); (0, 0, −1)
+    for a degenerate matrix."""
+    axis = -np.asarray(m, np.float64)[:3, 2]
+    norm = float(np.linalg.norm(axis))
+    if not (norm > 0.0 and np.isfinite(norm)):
+        return (0.0, 0.0, -1.0)
+    return tuple(float(c) for c in axis / norm)
 
 
 @dataclass
@@ -203,7 +210,8 @@ class Camera:
             blades=int(spec.blades), rotation=float(spec.rotation), ratio=float(spec.ratio),
             clip_start=float(spec.clip_start), clip_end=float(spec.clip_end),
             matrix=_f64(m).copy(), moving=self.motion is not None,
-            motion=self.motion.data if self.motion is not None else static_motion_data())
+            motion=self.motion.data if self.motion is not None else static_motion_data(),
+            forward=_view_axis(m))
 
     def pixel_footprint(self) -> np.ndarray:
         """(4, 3) float64 world vectors [right abs, right rel, up abs, up rel]: one pixel's step

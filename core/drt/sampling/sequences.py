@@ -202,12 +202,46 @@ def _byte_tables():
 SOBOL_BYTES = _byte_tables()
 
 
+def _reversed_byte_tables():
+    """SOBOL_BYTES_REV[d − 1, b, x]: ``reverse32`` of Sobol dimension d of ``reverse32(r)``, for
+    the bits of byte x at byte position b of r. Bit reversal is linear over GF(2) too, so with
+    r the *bit-reversed* index, reverse32(sobol(reverse32(r))) is the XOR of four lookups. The
+    samplers keep the Owen-shuffled index bit-reversed (the form Laine-Karras hashing leaves it
+    in) and need the Sobol value bit-reversed (the form the next Laine-Karras hash takes): the
+    tables give that directly, without the two ``reverse32`` around every lookup (~12 integer
+    operations each; the values are bit-identical, tests/test_sequences.py)."""
+    t = np.zeros((4, 4, 256), np.int64)
+    for d in range(4):
+        for b in range(4):
+            for x in range(256):
+                acc = 0
+                for i in range(8):
+                    if x >> i & 1:
+                        # bit 8b + i of r is bit 31 − 8b − i of the index
+                        k = 31 - 8 * b - i
+                        acc ^= int(SOBOL_BYTES[d, k // 8, 1 << (k % 8)])
+                t[d, b, x] = reverse32.py_func(acc)
+    return t
+
+
+SOBOL_BYTES_REV = _reversed_byte_tables()
+
+
 @kernel
 def sobol_fast(d, index):
     """Sobol dimension d (1–4: ``sobol_dim1`` … ``sobol_dim4``) of a 32-bit index, by table."""
     t = SOBOL_BYTES
     return (t[d - 1, 0, index & 255] ^ t[d - 1, 1, (index >> 8) & 255] ^ t[d - 1, 2, (index >> 16) & 255]
             ^ t[d - 1, 3, (index >> 24) & 255])
+
+
+@kernel
+def sobol_rev(d, r):
+    """``reverse32(sobol_fast(d, reverse32(r)))``: Sobol dimension d, bit-reversed, of the
+    bit-reversed 32-bit index r, by table (``SOBOL_BYTES_REV``)."""
+    t = SOBOL_BYTES_REV
+    return (t[d - 1, 0, r & 255] ^ t[d - 1, 1, (r >> 8) & 255] ^ t[d - 1, 2, (r >> 16) & 255]
+            ^ t[d - 1, 3, (r >> 24) & 255])
 
 
 @kernel
@@ -280,9 +314,9 @@ def sample_2d(sd, pixel, index, dim):
         sy = float(stratum // sd.nx)
         return (min((sx + jx) / sd.nx, _ONE_MINUS_EPS),
                 min((sy + jy) / sd.ny, _ONE_MINUS_EPS))
-    # SOBOL
-    shuffled = nested_uniform_scramble32(index, h)
-    return _owen_u(reverse32(shuffled), h, _SEED_U0), _owen_u(sobol_fast(1, shuffled), h, _SEED_U1)
+    # SOBOL: the shuffled index is kept bit-reversed (see ``_sobol_shuffled``)
+    r = laine_karras32(reverse32(index), h)
+    return _owen_rev(reverse32(r), h, _SEED_U0), _owen_rev(sobol_rev(1, r), h, _SEED_U1)
 
 
 #: seeds of the Owen scramble of each Sobol dimension of a sample (one per dimension, so the
@@ -295,21 +329,24 @@ _SEED_U4 = 0x165667B1
 
 
 @kernel
-def _owen_u(bits, h, seed):
+def _owen_rev(bits_rev, h, seed):
     """One Sobol dimension's 32 bits, Owen-scrambled with the pixel/dimension hash h and the
-    dimension's seed, as a float in [0, 1)."""
-    return float(nested_uniform_scramble32(bits, hash32(h ^ seed))) * _INV_2_32
+    dimension's seed, as a float in [0, 1); given *bit-reversed* (``bits_rev``): the scramble,
+    ``nested_uniform_scramble32``, is reverse32 ∘ Laine-Karras ∘ reverse32, and the samplers
+    hold every value bit-reversed already, so the first reversal is skipped."""
+    return float(reverse32(laine_karras32(bits_rev, hash32(h ^ seed)))) * _INV_2_32
 
 
 @kernel
 def _sobol_shuffled(sd, pixel, index, dim):
-    """(h, shuffled) of a SOBOL sample: the hash of (prefix, pixel, dim) and the sample index
-    Owen-shuffled by it (Burley 2020), from which every Sobol dimension of the sample is read."""
+    """(h, r) of a SOBOL sample: the hash of (prefix, pixel, dim) and the sample index
+    Owen-shuffled by it (Burley 2020), *bit-reversed* (r = reverse32 of the shuffled index:
+    ``sobol_rev`` reads every Sobol dimension of the sample from it)."""
     pixel &= 0xFFFFFFFF
     index &= 0xFFFFFFFF
     dim &= 0xFFFFFFFF
     h = hash32(hash32(sd.prefix ^ pixel) ^ dim)
-    return h, nested_uniform_scramble32(index, h)
+    return h, laine_karras32(reverse32(index), h)
 
 
 @kernel
@@ -327,11 +364,11 @@ def sample_5d(sd, pixel, index, dim, with_lens, with_fifth):
         u2, u3 = sample_2d(sd, pixel, index, dim + 1) if with_lens else (0.0, 0.0)
         u4 = sample_2d(sd, pixel, index, dim + 2)[0] if with_fifth else 0.0
         return u0, u1, u2, u3, u4
-    h, shuffled = _sobol_shuffled(sd, pixel, index, dim)
-    u2 = _owen_u(sobol_fast(2, shuffled), h, _SEED_U2) if with_lens else 0.0
-    u3 = _owen_u(sobol_fast(3, shuffled), h, _SEED_U3) if with_lens else 0.0
-    u4 = _owen_u(sobol_fast(4, shuffled), h, _SEED_U4) if with_fifth else 0.0
-    return (_owen_u(reverse32(shuffled), h, _SEED_U0), _owen_u(sobol_fast(1, shuffled), h, _SEED_U1),
+    h, r = _sobol_shuffled(sd, pixel, index, dim)
+    u2 = _owen_rev(sobol_rev(2, r), h, _SEED_U2) if with_lens else 0.0
+    u3 = _owen_rev(sobol_rev(3, r), h, _SEED_U3) if with_lens else 0.0
+    u4 = _owen_rev(sobol_rev(4, r), h, _SEED_U4) if with_fifth else 0.0
+    return (_owen_rev(reverse32(r), h, _SEED_U0), _owen_rev(sobol_rev(1, r), h, _SEED_U1),
             u2, u3, u4)
 
 
@@ -350,9 +387,9 @@ def sample_3d(sd, pixel, index, dim):
     if sd.kind != KIND_SOBOL:
         u0, u1 = sample_2d(sd, pixel, index, dim)
         return u0, u1, sample_2d(sd, pixel, index, dim + PAD_3D)[0]
-    h, shuffled = _sobol_shuffled(sd, pixel, index, dim)
-    return (_owen_u(reverse32(shuffled), h, _SEED_U0), _owen_u(sobol_fast(1, shuffled), h, _SEED_U1),
-            _owen_u(sobol_fast(2, shuffled), h, _SEED_U2))
+    h, r = _sobol_shuffled(sd, pixel, index, dim)
+    return (_owen_rev(reverse32(r), h, _SEED_U0), _owen_rev(sobol_rev(1, r), h, _SEED_U1),
+            _owen_rev(sobol_rev(2, r), h, _SEED_U2))
 
 
 @kernel
