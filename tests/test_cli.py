@@ -233,3 +233,55 @@ def test_help_speaks_the_users_language(capsys):
             main([command, "--help"])
         text = capsys.readouterr().out
         assert "lecture" not in text and "Pillow" not in text
+
+
+class _Exited(Exception):
+    pass
+
+
+@pytest.mark.parametrize("loaded, fast", [((), True), (("distributed",), False), (("bpy",), False)])
+def test_run_leaves_without_teardown_unless_a_module_needs_it(monkeypatch, capsys, loaded, fast):
+    """``drt.cli.run`` (the ``drt`` / ``python -m drt`` entry) exits with ``main``'s code through
+    ``os._exit`` after flushing its output — skipping the interpreter's slow teardown — but through
+    ``sys.exit`` (exit handlers run) when Dask or Blender was loaded."""
+    import drt.cli as cli
+
+    def fake_main():
+        print("rendered")
+        return 3
+
+    calls = []
+
+    def fake_exit(code):
+        calls.append(code)
+        raise _Exited
+
+    monkeypatch.setattr(cli, "main", fake_main)
+    monkeypatch.setattr(cli.os, "_exit", fake_exit)
+    for name in cli._NEEDS_TEARDOWN:
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    for name in loaded:
+        monkeypatch.setitem(sys.modules, name, object())
+    if fast:
+        with pytest.raises(_Exited):
+            cli.run()
+        assert calls == [3]
+    else:
+        with pytest.raises(SystemExit) as info:
+            cli.run()
+        assert info.value.code == 3 and calls == []
+    assert capsys.readouterr().out == "rendered\n"
+
+
+def test_module_entry_point_writes_its_output_and_exit_code(box_file, tmp_path):
+    """``python -m drt`` leaves at once after the render, with its file complete and its exit
+    code kept (0, then 2 for a missing scene)."""
+    out = tmp_path / "box.exr"
+    done = subprocess.run([sys.executable, "-m", "drt", "render", str(box_file), "-o", str(out), "--spp", "2",
+                           "--threads", "1"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert "rendered 24x16 at 2 spp" in done.stdout
+    assert read_exr(out)[0]["R"].shape == (16, 24)
+    bad = subprocess.run([sys.executable, "-m", "drt", "render", str(tmp_path / "none.npz"), "-o", str(out)],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "not found" in bad.stderr
