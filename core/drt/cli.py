@@ -511,10 +511,10 @@ def run() -> None:
     """The command-line entry point (``drt``, ``python -m drt``): ``main`` and exit with its code.
 
     A finished command has closed its files (outputs are written to a temporary name and renamed
-    into place), so what is left at exit is the interpreter's teardown — mostly numba's and
-    LLVM's objects freed one by one: ~50–70 ms of every render from a shell or a farm script,
-    as much as a small frame's tracing. When no module that needs its exit handlers was loaded
-    (``_NEEDS_TEARDOWN``), the process leaves at once after flushing its output."""
+    into place), so what is left at exit is the interpreter's teardown — mostly the kernel
+    compiler's and LLVM's objects freed one by one: ~50–70 ms of every render from a shell or a
+    farm script, as much as a small frame's tracing. When no module that needs its exit handlers
+    was loaded (``_NEEDS_TEARDOWN``), the process leaves at once after flushing its output."""
     code = main()
     if any(name in sys.modules for name in _NEEDS_TEARDOWN):
         sys.exit(code)
