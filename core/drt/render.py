@@ -512,6 +512,8 @@ def _collect(batch, film, stats, tick, total_paths, workers, t0, to_film=None):
         batch = replace(batch, pixel=(row - fy0) * fw + (col - fx0))
     film.add(batch)
     stats.camera_paths += len(batch.pixel) + batch.nan_count
+    if batch.release is not None:  # the film holds its sums: the arrays can serve a later batch
+        batch.release()
     if tick is not None:
         stats.seconds = time.perf_counter() - t0
         stats.rays, stats.embree_seconds = workers.counters()
