@@ -224,7 +224,7 @@ class Integrator:
                                          eye=np.empty((n, 3)), forward=np.empty((n, 3)))
                 break
             if buffers.alpha.shape[0] >= n:
-                break  # (a smaller one is dropped: batches only grow within a render)
+                break  # (a smaller one is dropped; a new set of this batch's size replaces it)
         return buffers, stages.Outputs(*(a[:n] for a in buffers))
 
     def _workspace(self, n: int) -> tuple[stages.Paths, stages.ShadowRays]:
