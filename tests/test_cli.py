@@ -285,3 +285,27 @@ def test_module_entry_point_writes_its_output_and_exit_code(box_file, tmp_path):
     bad = subprocess.run([sys.executable, "-m", "drt", "render", str(tmp_path / "none.npz"), "-o", str(out)],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "not found" in bad.stderr
+
+
+_BLAS_PROBE = """
+import os, sys
+import drt.cli
+drt.cli._single_threaded_blas()
+import numpy
+threads = [ln.split()[1] for ln in open("/proc/self/status") if ln.startswith("Threads:")]
+print(os.environ.get("OPENBLAS_NUM_THREADS"), threads[0] if threads else "?")
+"""
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="reads the thread count from /proc")
+def test_the_cli_starts_numpy_with_a_single_threaded_blas():
+    """The CLI asks for a one-thread BLAS before numpy starts its pool (the renderer calls no
+    BLAS; OpenBLAS's per-core threads cost every process ~0.1 s of system time), and keeps a
+    size the user set."""
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+    done = subprocess.run([sys.executable, "-c", _BLAS_PROBE], capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["1", "1"]  # the variable, and the process's only thread
+    done = subprocess.run([sys.executable, "-c", _BLAS_PROBE], capture_output=True, text=True,
+                          env={**env, "OPENBLAS_NUM_THREADS": "2"})
+    assert done.stdout.split()[0] == "2"
