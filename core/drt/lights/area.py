@@ -297,20 +297,27 @@ def area_intersect(ld, i, o, d):
     does not exist seen from behind: rays pass through it."""
     normal = load_col3(ld.lf, i, L_NORMAL)
     denom = dot(d, normal)
+    # every shading point tests every shape light this way, so the common misses leave early:
+    # a ray leaving the light's back side (half of all directions), then one behind the origin
+    if not denom < 0.0:
+        return _INF
     center = load_col3(ld.lf, i, L_POS)
     t = dot(sub(center, o), normal) / denom
     if not (math.isfinite(t) and t > T_EPSILON):
-        t = _INF
-    tf = t if math.isfinite(t) else 0.0
-    x = ((o[0] + tf * d[0]) - center[0], (o[1] + tf * d[1]) - center[1],
-         (o[2] + tf * d[2]) - center[2])
-    lx = 2.0 * dot(x, load_col3(ld.lf, i, L_EX)) / ld.lf[i, L_LEN_X]
-    ly = 2.0 * dot(x, load_col3(ld.lf, i, L_EY)) / ld.lf[i, L_LEN_Y]
+        return _INF
+    x = ((o[0] + t * d[0]) - center[0], (o[1] + t * d[1]) - center[1],
+         (o[2] + t * d[2]) - center[2])
+    a = 2.0 * dot(x, load_col3(ld.lf, i, L_EX))
+    b = 2.0 * dot(x, load_col3(ld.lf, i, L_EY))
+    len_x = ld.lf[i, L_LEN_X]
+    len_y = ld.lf[i, L_LEN_Y]
     if (ld.li[i, I_IS_ELLIPSE] != 0):
+        lx = a / len_x
+        ly = b / len_y
         inside = lx * lx + ly * ly <= 1.0
-    else:
-        inside = abs(lx) <= 1.0 and abs(ly) <= 1.0
-    return t if inside and denom < 0.0 else _INF
+    else:  # |a / len| <= 1 without the two divisions
+        inside = abs(a) <= len_x and abs(b) <= len_y and len_x > 0.0 and len_y > 0.0
+    return t if inside else _INF
 
 
 @scalar_kernel
