@@ -380,7 +380,7 @@ def walk_advance(ws, rows, hit_t):
 
 
 @kernel
-def walk_local(ws, sd, rows, fn, scene, words, positions, triangles, face_ng, offset, eps0,
+def walk_local(ws, sd, rows, fn, scene, words, positions, triangles, face_ng, offset, centre, eps0,
                ex_prim, ex_b, ex_p, ex_ng):
     """Every remaining step of the walks in ``rows``, all on one static object whose Embree
     scene (``scene``, its own triangles: prim ids local, ``offset`` added for global ids) this
@@ -388,7 +388,8 @@ def walk_local(ws, sd, rows, fn, scene, words, positions, triangles, face_ng, of
     wavefront (``walk_sample``, one Embree query, ``walk_advance``) without a Python round trip
     per step. The exit vertex of every hit goes to ex_prim/ex_b/ex_p/ex_ng (as
     ``trace.static_surface`` computes hit points); eps0: the first ray's push off the entry
-    point. Returns the number of steps taken."""
+    point; centre (3,): the origin of the object's scene (``_centred_geometry``) in the walk's
+    frame. Returns the number of steps taken."""
     bits, base, addr = ray_buffer(words)
     steps = 0
     for r in range(rows.shape[0]):
@@ -401,7 +402,8 @@ def walk_local(ws, sd, rows, fn, scene, words, positions, triangles, face_ng, of
             if ws.step[i] == 0:
                 push = eps0[i]
                 tmax = max(tmax - push, 0.0)
-            o = (ws.o[i, 0] + push * d[0], ws.o[i, 1] + push * d[1], ws.o[i, 2] + push * d[2])
+            o = (ws.o[i, 0] - centre[0] + push * d[0], ws.o[i, 1] - centre[1] + push * d[1],
+                 ws.o[i, 2] - centre[2] + push * d[2])
             t, prim, u, v = trace1(fn, scene, words, bits, base, addr, o, d, tmax)
             th = math.inf
             if prim >= 0 and (ws.step[i] > 0 or tmax > 0.0):  # (as the wavefront's first-ray rule)
@@ -410,6 +412,8 @@ def walk_local(ws, sd, rows, fn, scene, words, positions, triangles, face_ng, of
                 ex_b[i, 0] = u
                 ex_b[i, 1] = v
                 static_hit_row(positions, triangles, face_ng, prim, u, v, d, ex_p, ex_ng, i)
+                for c in range(3):
+                    ex_p[i, c] += centre[c]
             _advance_row(ws, i, th)
             steps += 1
     return steps
@@ -429,6 +433,30 @@ def _patch_exits(state, live, sss_prim, sss_b, sss_p, sss_n, prim, t, b1, b2, p,
                 ng[i, c] = sss_n[i, c]
             if moving.shape[0]:
                 moving[i] = False
+
+
+def _object_centre(geom, start, end):
+    """The bounding-box centre (float64, the scene's shifted frame) of static triangles
+    [start, end): the origin of that object's walk scene."""
+    used = geom.static_positions[np.unique(geom.static_triangles[start:end])].astype(np.float64)
+    return np.ascontiguousarray(0.5 * (used.min(axis=0) + used.max(axis=0)))
+
+
+def _centred_geometry(geom, start, end, scene_geometry):
+    """The static triangles [start, end) of ``geom`` as a scene of their own, vertices moved by
+    −``_object_centre``. A walk's rays are float32 for Embree: in the render's frame (shifted to
+    the camera) an object 5 m away rounds a ray origin by ~5e-7 m, and a scatter point that close
+    to the surface starts its ray outside — the walk slips out of the object (2.3 % of
+    sss_head's exits came back in from outside, docs/subsurface.md). About the object's own
+    centre the rounding is its size × 6e-8. Triangle indices are the object's own; hits keep
+    the object's triangle numbering (start is added back as before)."""
+    tris = geom.static_triangles[start:end]
+    used, local = np.unique(tris, return_inverse=True)
+    centre = _object_centre(geom, start, end)
+    positions = (geom.static_positions[used].astype(np.float64) - centre).astype(np.float32)
+    return scene_geometry(origin_shift=np.asarray(geom.origin_shift, np.float64) + centre,
+                          static_positions=np.ascontiguousarray(positions),
+                          static_triangles=np.ascontiguousarray(local.reshape(tris.shape).astype(tris.dtype)))
 
 
 def _direct_walk_args(tracer):
@@ -479,11 +507,11 @@ class SubsurfaceWalker:
         ranges = list(getattr(geom, "static_ranges", []) or [])
         self.starts = np.array([s for s, _ in ranges], dtype=np.int64)
         self.local = {}
+        self.centre = {}
         for k, (s, e) in enumerate(ranges):
             if e > s and np.isin(geom.material[s:e], sss_mats).any():
-                sub = SceneGeometry(origin_shift=geom.origin_shift, static_positions=geom.static_positions,
-                                    static_triangles=np.ascontiguousarray(geom.static_triangles[s:e]))
-                self.local[k] = (Tracer(sub), s)
+                self.local[k] = (Tracer(_centred_geometry(geom, s, e, SceneGeometry)), s)
+                self.centre[k] = _object_centre(geom, s, e)
         # objects whose walks run whole in one kernel, Embree called per step (walk_local)
         self.direct = {k: args for k, (tracer, s) in self.local.items()
                        if (args := _direct_walk_args(tracer)) is not None}
@@ -540,7 +568,7 @@ class SubsurfaceWalker:
                 fn, scene, positions, triangles, face_ng = self.direct[int(k)]
                 mine = np.flatnonzero((group == k) & (ws.state == SSS_WALK))
                 self.steps_taken += walk_local(ws, self.sd, mine, fn, scene, embree_direct.scratch(), positions,
-                                               triangles, face_ng, self.local[int(k)][1], eps0,
+                                               triangles, face_ng, self.local[int(k)][1], self.centre[int(k)], eps0,
                                                ex_prim, ex_b, ex_p, ex_ng)
         kinds = np.array([k for k in kinds if int(k) not in self.direct])
         single = int(kinds[0]) if len(kinds) == 1 else None  # one object left
@@ -568,9 +596,11 @@ class SubsurfaceWalker:
                     push = 0.0
                     o = ws.o[r]
                     tmax = ws.tmax[r]
+                centre = 0.0
                 if k >= 0:
                     tracer, offset = self.local[k]
-                    h = tracer.intersect(o, d, None, tmax)
+                    centre = self.centre[k]
+                    h = tracer.intersect(o - centre, d, None, tmax)
                 else:
                     tracer, offset = self.tracer, 0
                     h = tracer.intersect(o, d, tau[r], tmax)
@@ -586,7 +616,7 @@ class SubsurfaceWalker:
                     rh = r[hit]
                     ex_prim[rh] = h.prim[hit] + offset
                     ex_b[rh, 0], ex_b[rh, 1] = h.b1[hit], h.b2[hit]
-                    ex_p[rh] = h.p[hit]
+                    ex_p[rh] = h.p[hit] + centre
                     ex_ng[rh] = h.ng[hit]
             walk_advance(ws, act, hit_t)
         ws.state[ws.state == SSS_WALK] = SSS_DEAD  # (walk_advance already stops at the cap)
