@@ -449,14 +449,16 @@ def _centred_geometry(geom, start, end, scene_geometry):
     to the surface starts its ray outside — the walk slips out of the object (2.3 % of
     sss_head's exits came back in from outside, docs/subsurface.md). About the object's own
     centre the rounding is its size × 6e-8. Triangle indices are the object's own; hits keep
-    the object's triangle numbering (start is added back as before)."""
+    the object's triangle numbering (start is added back as before). Returns (the scene's
+    geometry, the centre)."""
     tris = geom.static_triangles[start:end]
     used, local = np.unique(tris, return_inverse=True)
     centre = _object_centre(geom, start, end)
     positions = (geom.static_positions[used].astype(np.float64) - centre).astype(np.float32)
-    return scene_geometry(origin_shift=np.asarray(geom.origin_shift, np.float64) + centre,
-                          static_positions=np.ascontiguousarray(positions),
-                          static_triangles=np.ascontiguousarray(local.reshape(tris.shape).astype(tris.dtype)))
+    sub = scene_geometry(origin_shift=np.asarray(geom.origin_shift, np.float64) + centre,
+                         static_positions=np.ascontiguousarray(positions),
+                         static_triangles=np.ascontiguousarray(local.reshape(tris.shape).astype(tris.dtype)))
+    return sub, centre
 
 
 def _direct_walk_args(tracer):
@@ -510,8 +512,8 @@ class SubsurfaceWalker:
         self.centre = {}
         for k, (s, e) in enumerate(ranges):
             if e > s and np.isin(geom.material[s:e], sss_mats).any():
-                self.local[k] = (Tracer(_centred_geometry(geom, s, e, SceneGeometry)), s)
-                self.centre[k] = _object_centre(geom, s, e)
+                sub, self.centre[k] = _centred_geometry(geom, s, e, SceneGeometry)
+                self.local[k] = (Tracer(sub), s)
         # objects whose walks run whole in one kernel, Embree called per step (walk_local)
         self.direct = {k: args for k, (tracer, s) in self.local.items()
                        if (args := _direct_walk_args(tracer)) is not None}
