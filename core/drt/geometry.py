@@ -162,8 +162,11 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     def per_tri(mesh, normals_world):
         t = len(mesh.triangles)
         nrm = normals_world if normals_world is not None else np.zeros((t, 3, 3), np.float32)
-        uv = mesh.uvs.astype(np.float32) if mesh.uvs is not None else np.zeros((t, 3, 2), np.float32)
-        return mesh.material_index.astype(np.int32), nrm.astype(np.float32), np.full(t, mesh.normals is not None), uv
+        # no copies of arrays already of the right type: a 1M-triangle mesh's normals and UVs
+        # are 60 MB, and nothing writes into the flattened arrays
+        uv = mesh.uvs.astype(np.float32, copy=False) if mesh.uvs is not None else np.zeros((t, 3, 2), np.float32)
+        return (mesh.material_index.astype(np.int32, copy=False), nrm.astype(np.float32, copy=False),
+                np.full(t, mesh.normals is not None), uv)
 
     for oi, obj in enumerate(scene.objects):
         mesh = scene.meshes[obj.mesh]
@@ -188,7 +191,8 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         world = np.empty((len(mesh.positions), 3), dtype=np.float32)
         _points_to_world(np.ascontiguousarray(mesh.positions), np.ascontiguousarray(m, dtype=np.float64), world, lo, hi)
         static_pos.append(world)
-        static_tri.append((mesh.triangles + v_offset).astype(np.int32))
+        static_tri.append((mesh.triangles + v_offset).astype(np.int32, copy=False) if v_offset
+                          else mesh.triangles.astype(np.int32, copy=False))
         v_offset += len(world)
         ranges.append((t_offset, t_offset + len(mesh.triangles)))
         t_offset += len(mesh.triangles)
@@ -201,10 +205,15 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         term_static.append(np.full(len(mesh.triangles), obj.terminator_geometry if mesh.normals is not None else 0.0,
                                    np.float32))
 
+    def cat(parts, empty):
+        if len(parts) == 1:  # one object: its own array, not a copy
+            return parts[0]
+        return np.concatenate(parts) if parts else empty
+
     geom = SceneGeometry(
         origin_shift=shift,
-        static_positions=np.concatenate(static_pos) if static_pos else np.zeros((0, 3), np.float32),
-        static_triangles=np.concatenate(static_tri) if static_tri else np.zeros((0, 3), np.int32),
+        static_positions=cat(static_pos, np.zeros((0, 3), np.float32)),
+        static_triangles=cat(static_tri, np.zeros((0, 3), np.int32)),
     )
     geom.static_ranges = ranges
     offset = geom.static_count
@@ -212,9 +221,6 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         mm.prim_offset = offset
         offset += len(mm.triangles)
     geom.moving = moving
-
-    def cat(parts, empty):
-        return np.concatenate(parts) if parts else empty
 
     geom.material = cat(mats_static + mats_moving, np.zeros(0, np.int32))
     geom.has_normals = cat(hasn_static + hasn_moving, np.zeros(0, bool))

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from .kernels import inline_kernel
+from .kernels import inline_kernel, kernel
 from .kernels.vec3 import add, dot, neg, normalize, scale, sub
 from .trace import offset_point
 
@@ -64,16 +64,43 @@ def terminator_arrays(geom) -> tuple[np.ndarray, np.ndarray]:
     cut = getattr(geom, "terminator", None)
     if cut is None or geom.normals is None:
         return NO_TERMINATOR
-    cut = np.array(cut, dtype=np.float32)
-    n = geom.normals
-    flat = np.all(n[:, 0] == n[:, 1], axis=1) & np.all(n[:, 0] == n[:, 2], axis=1)
-    cut[flat | ~geom.has_normals] = 0.0
-    if not cut.any():
+    out = np.empty(len(cut), np.float32)
+    if not _smooth_cutoffs(np.asarray(cut, np.float32), geom.normals, geom.has_normals, out):
         return NO_TERMINATOR
     corners = np.zeros((len(cut), 3, 3), np.float32)
-    s = geom.static_count
-    corners[:s] = geom.static_positions[geom.static_triangles]
-    return cut, corners
+    _static_corners(geom.static_positions, geom.static_triangles, corners)  # moving: no offset
+    return out, corners
+
+
+@kernel
+def _smooth_cutoffs(cut, normals, has_normals, out):
+    """out[t] = cut[t] for triangles with distinct smooth corner normals, else 0; True if any
+    is nonzero. One pass: on a 1M-triangle mesh the numpy comparisons took ~0.1 s."""
+    any_cut = False
+    for t in range(cut.shape[0]):
+        c = cut[t]
+        if c != 0.0 and has_normals[t]:
+            flat = True
+            for k in range(3):
+                if normals[t, 0, k] != normals[t, 1, k] or normals[t, 0, k] != normals[t, 2, k]:
+                    flat = False
+            if flat:
+                c = 0.0
+        else:
+            c = 0.0
+        out[t] = c
+        any_cut = any_cut or c != 0.0
+    return any_cut
+
+
+@kernel
+def _static_corners(positions, triangles, corners):
+    """corners[t, c] = positions[triangles[t, c]] for the static triangles."""
+    for t in range(triangles.shape[0]):
+        for c in range(3):
+            v = triangles[t, c]
+            for k in range(3):
+                corners[t, c, k] = positions[v, k]
 
 
 @inline_kernel
