@@ -369,10 +369,10 @@ def test_the_walk_enters_about_the_valid_reflection_normal(monkeypatch):
     entries = []
     walk = SubsurfaceWalker.run
 
-    def spy(self, paths, live, depth_i):
+    def spy(self, paths, live, depth_i, sd):
         if depth_i == 0:  # the camera rays' hits on the plane
             entries.append(paths.sss_n[:live][paths.sss[:live] == SSS_WALK].copy())
-        return walk(self, paths, live, depth_i)
+        return walk(self, paths, live, depth_i, sd)
 
     monkeypatch.setattr(SubsurfaceWalker, "run", spy)
     render(scene_from_dict(h, a), threads=1)
@@ -400,3 +400,27 @@ def test_a_subsurface_render_draws_no_hidden_numpy_randomness(monkeypatch):
     img = render(scene_from_dict(h, a), threads=1).combined[..., :3]
     assert not calls
     assert img.mean() > 0.3
+
+
+def test_a_prepared_context_renders_with_the_seed_it_is_given():
+    """``render(seed=s, context=ctx)`` is the image ``render(seed=s)`` makes: the camera stage,
+    ``shade`` and the subsurface walks all draw from seed s (a prepared context used to keep
+    the seed it was prepared with, and the walker kept the sampler it was built with)."""
+    from drt.render import prepare
+
+    h = base_header(8, 8, 4, world=(1.0, 1.0, 1.0),
+                    camera={"type": "PERSP", "matrix_world": look_at((0, -6, 0), (0, 0, 0)), "lens": 120.0})
+    h["version"] = 2
+    add_material(h, "sss", [sss_lobe(radius=[0.3, 0.2, 0.1])])
+    a = {}
+    pos, tri, nrm = uv_sphere(1.0, rings=12, segments=24)
+    add_mesh(h, a, "ball", pos, tri, 0, normals=nrm)
+    scene = scene_from_dict(h, a)
+    ctx = prepare(scene)
+    for seed in (3, 11):
+        reused = render(scene, seed=seed, threads=1, context=ctx).combined
+        fresh = render(scene, seed=seed, threads=1).combined
+        np.testing.assert_array_equal(reused, fresh)
+    assert not np.array_equal(render(scene, seed=3, threads=1).combined, reused)
+    with pytest.raises(ValueError, match="direct"):
+        render(scene, direct="light", threads=1, context=ctx)

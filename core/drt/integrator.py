@@ -127,7 +127,7 @@ class Integrator:
         if getattr(materials, "has_subsurface", False):
             from .subsurface import SubsurfaceWalker
 
-            self.sss = SubsurfaceWalker(geom, tracer, materials, sampler)
+            self.sss = SubsurfaceWalker(geom, tracer, materials)
         self.stage_settings = stages.StageSettings(
             width=int(settings.width), height=int(settings.height),
             max_bounces=int(settings.max_bounces), diffuse_bounces=int(settings.diffuse_bounces),
@@ -298,7 +298,7 @@ class Integrator:
                                                shadow.tmax[:n_shadow], shadow.tau[:n_shadow])
                 stages.add_unoccluded(shadow, n_shadow, blocked, out.radiance)
             if self.sss is not None and live:
-                self.sss.run(paths, live, depth_i)
+                self.sss.run(paths, live, depth_i, sd)
 
         # a NaN/Inf sample is counted, dropped (it does not enter its pixel's mean) and reported;
         # so is one beyond MAX_SAMPLE_RADIANCE, which would overflow the float32 passes

@@ -210,6 +210,23 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
     return ctx
 
 
+def _use_sampling_arguments(integ: Integrator, seed, sampler, direct, indirect) -> None:
+    """``render(..., context=ctx)`` with a seed or sampler kind: the context renders with them
+    from now on (its sampler is rebuilt, as for another spp) — before, a prepared context
+    silently kept the seed it was prepared with, so seeds 0…7 of one context were one image.
+    The direct and indirect strategies are built into the integrator: naming other ones than
+    the context's is an error, not a silent no-op."""
+    for name, value in (("direct", direct), ("indirect", indirect)):
+        if value is not None and str(value).upper() != getattr(integ, name):
+            raise ValueError(f"{name}={value!r} differs from the prepared context's "
+                             f"{getattr(integ, name).lower()!r}: pass it to prepare() instead")
+    new_seed = integ.s.seed if seed is None else int(seed)
+    kind = integ.sampler.kind if sampler is None else str(sampler).upper()
+    if new_seed != integ.s.seed or kind != integ.sampler.kind:
+        integ.sampler = Sampler(kind, new_seed, integ.sampler.spp)
+        integ.s = replace(integ.s, seed=new_seed, sampler=kind)
+
+
 class _Cancelled(Exception):
     """Internal: the cancel callback said stop."""
 
@@ -326,6 +343,8 @@ def render(
     t0 = time.perf_counter()
     ctx = context or prepare(scene, seed=seed, sampler=sampler, direct=direct, indirect=indirect)
     integ = ctx.integrator
+    if context is not None:
+        _use_sampling_arguments(integ, seed, sampler, direct, indirect)
     spp = int(spp or scene.render.spp)
     if spp < 1:
         raise SceneError("spp", f"must be >= 1, got {spp}")

@@ -498,13 +498,12 @@ class SubsurfaceWalker:
     the whole scene at the path's shutter time (not restricted) and their exits are shaded with
     the geometric normal (docs/subsurface.md)."""
 
-    def __init__(self, geom, tracer, materials, sampler):
+    def __init__(self, geom, tracer, materials):
         from .geometry import SceneGeometry
         from .trace import Tracer
 
         self.tracer = tracer
         self.static_count = geom.static_count
-        self.sd = sampler.data
         sss_mats = np.nonzero(np.any(materials.lobe_type == 4, axis=1))[0]  # BSDF_SUBSURFACE
         ranges = list(getattr(geom, "static_ranges", []) or [])
         self.starts = np.array([s for s, _ in ranges], dtype=np.int64)
@@ -533,9 +532,10 @@ class SubsurfaceWalker:
         obj[prim >= self.static_count] = -1
         return obj
 
-    def run(self, paths, live, depth_i):
+    def run(self, paths, live, depth_i, sd):
         """Walk every row of paths[:live] in state SSS_WALK; leaves them SSS_EXIT (/_FLAT) with
-        the exit vertex in sss_prim/sss_b/sss_p/sss_n, or SSS_DEAD."""
+        the exit vertex in sss_prim/sss_b/sss_p/sss_n, or SSS_DEAD. sd: ``Sampler.data`` of this
+        render (the integrator's current sampler: a render may change its seed or spp)."""
         rows = np.nonzero(paths.sss[:live] == SSS_WALK)[0]
         n = len(rows)
         if not n:
@@ -569,7 +569,7 @@ class SubsurfaceWalker:
             if int(k) in self.direct:  # the usual case: static objects, compiled walks
                 fn, scene, positions, triangles, face_ng = self.direct[int(k)]
                 mine = np.flatnonzero((group == k) & (ws.state == SSS_WALK))
-                self.steps_taken += walk_local(ws, self.sd, mine, fn, scene, embree_direct.scratch(), positions,
+                self.steps_taken += walk_local(ws, sd, mine, fn, scene, embree_direct.scratch(), positions,
                                                triangles, face_ng, self.local[int(k)][1], self.centre[int(k)], eps0,
                                                ex_prim, ex_b, ex_p, ex_ng)
         kinds = np.array([k for k in kinds if int(k) not in self.direct])
@@ -579,7 +579,7 @@ class SubsurfaceWalker:
             if not len(act):
                 break
             self.steps_taken += len(act)
-            walk_sample(ws, self.sd, act)
+            walk_sample(ws, sd, act)
             first = it == 0  # every walk takes its first step in the first pass
             hit_t = np.empty(len(act))
             if single is not None:
