@@ -22,8 +22,8 @@ the lights whose E_j > 0: each keeps a probability ≥ that share / their number
 estimator stays unbiased whatever B_j says (only its variance depends on B_j). Even, not ∝ E_j:
 neither factor knows occlusion, and where the strongest light is hidden (a key light behind the
 subject, lighting only its rim) the weak unoccluded ones must still be found often — a sun
-beside a 400 W area light got ~5 % of the samples at such points and came back ×20 (sss_head's
-fireflies; Cycles's light tree gives it 40–70 % there, docs/lights.md).
+beside a 400 W area light got 3.5–5.5 % of the samples at such points and came back ×20–30
+(sss_head's fireflies; Cycles's light tree gives it 33–70 % there, docs/lights.md).
 
 Directions are world space; ``n`` is the shading normal on wo's side, ``wo`` points from the
 surface toward the viewer (docs/architecture.md).
