@@ -210,20 +210,21 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
     return ctx
 
 
-def _use_sampling_arguments(integ: Integrator, seed, sampler, direct, indirect) -> None:
-    """``render(..., context=ctx)`` with a seed or sampler kind: the context renders with them
-    from now on (its sampler is rebuilt, as for another spp) — before, a prepared context
-    silently kept the seed it was prepared with, so seeds 0…7 of one context were one image.
-    The direct and indirect strategies are built into the integrator: naming other ones than
-    the context's is an error, not a silent no-op."""
+def _use_sampling_arguments(integ: Integrator, spp: int, seed, sampler, direct, indirect) -> None:
+    """The integrator's sampler for this render: ``spp`` (stratified sampling needs the total,
+    whatever range a render covers) and, with a prepared context, the seed and sampler kind
+    ``render()`` names — the context renders with them from now on; before, it silently kept
+    the seed it was prepared with, so seeds 0…7 of one context were one image. The direct and
+    indirect strategies are built into the integrator: naming other ones than the context's is
+    an error, not a silent no-op."""
     for name, value in (("direct", direct), ("indirect", indirect)):
         if value is not None and str(value).upper() != getattr(integ, name):
             raise ValueError(f"{name}={value!r} differs from the prepared context's "
                              f"{getattr(integ, name).lower()!r}: pass it to prepare() instead")
     new_seed = integ.s.seed if seed is None else int(seed)
     kind = integ.sampler.kind if sampler is None else str(sampler).upper()
-    if new_seed != integ.s.seed or kind != integ.sampler.kind:
-        integ.sampler = Sampler(kind, new_seed, integ.sampler.spp)
+    if new_seed != integ.s.seed or kind != integ.sampler.kind or spp != integ.sampler.spp:
+        integ.sampler = Sampler(kind, new_seed, spp)
         integ.s = replace(integ.s, seed=new_seed, sampler=kind)
 
 
@@ -343,16 +344,13 @@ def render(
     t0 = time.perf_counter()
     ctx = context or prepare(scene, seed=seed, sampler=sampler, direct=direct, indirect=indirect)
     integ = ctx.integrator
-    if context is not None:
-        _use_sampling_arguments(integ, seed, sampler, direct, indirect)
     spp = int(spp or scene.render.spp)
     if spp < 1:
         raise SceneError("spp", f"must be >= 1, got {spp}")
     count = spp - sample_offset if sample_count is None else int(sample_count)
     if sample_offset < 0 or count < 0 or sample_offset + count > spp:
         raise SceneError("sample range", f"[{sample_offset}, {sample_offset + count}) is not within [0, {spp})")
-    # stratified sampling needs the total sample count, whatever range this render covers
-    integ.sampler = Sampler(integ.sampler.kind, integ.s.seed, spp) if integ.sampler.spp != spp else integ.sampler
+    _use_sampling_arguments(integ, spp, seed, sampler, direct, indirect)
     threads = max(1, int(threads or os.cpu_count() or 1))
     xs_all, ys_all = _pixel_region(scene, tile)
     xs, ys = xs_all, ys_all
