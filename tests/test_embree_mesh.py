@@ -74,3 +74,36 @@ def test_copying_fallback_when_the_layout_check_fails(monkeypatch):
     ref, _ = _trace(embree_mesh.triangle_scene(pos, tri), o, d)
     got, _ = _trace(scene, o, d)
     assert np.array_equal(got["primID"], ref["primID"]) and (got["primID"] >= 0).any()
+
+
+def test_fast_build_gives_the_same_hits():
+    """Embree's low-quality (Morton) BVH is another tree over the same triangles: the same
+    closest hits, distances and occlusion as the default build."""
+    pos, tri = _sphere()
+    fast, default = embree_mesh.triangle_scene(pos, tri, fast_build=True), embree_mesh.triangle_scene(pos, tri)
+    o, d = _rays(seed=7)
+    (h1, occ1), (h2, occ2) = _trace(fast, o, d), _trace(default, o, d)
+    assert 0.3 < np.mean(h1["primID"] >= 0) < 0.95
+    for key in ("primID", "tfar", "u", "v", "Ng"):
+        assert np.array_equal(h1[key], h2[key]), key
+    assert np.array_equal(occ1, occ2)
+
+
+def test_tracer_builds_fast_only_when_few_samples_reach_each_triangle(monkeypatch):
+    from drt import trace
+    from drt.geometry import SceneGeometry
+
+    pos, tri = _sphere()
+    geom = SceneGeometry(np.zeros(3), pos.astype(np.float32), tri.astype(np.int32))
+    asked = []
+
+    def spy(positions, triangles, fast_build=False):
+        asked.append(fast_build)
+        return embree_mesh.triangle_scene(positions, triangles, fast_build)
+
+    monkeypatch.setattr(trace, "triangle_scene", spy)
+    per_triangle = trace.FAST_BUILD_SAMPLES_PER_TRIANGLE
+    for samples, fast in ((None, False), (per_triangle * len(tri) - 1, True), (per_triangle * len(tri), False)):
+        asked.clear()
+        trace.Tracer(geom, expected_samples=samples)
+        assert asked == [fast], samples

@@ -22,6 +22,7 @@ from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
 # Embree 4 enum values (rtcore_geometry.h, rtcore_buffer.h, rtcore_common.h, rtcore_device.h)
+_BUILD_QUALITY_LOW = 0
 _GEOMETRY_TYPE_TRIANGLE = 0
 _BUFFER_TYPE_INDEX, _BUFFER_TYPE_VERTEX = 0, 1
 _FORMAT_UINT3, _FORMAT_FLOAT3 = 0x5003, 0x9003
@@ -55,6 +56,8 @@ def _library():
                 ("rtcAttachGeometry", u, [vp, vp]),
                 ("rtcReleaseGeometry", None, [vp]),
                 ("rtcSetGeometryTimeStepCount", None, [vp, u]),
+                ("rtcSetGeometryBuildQuality", None, [vp, ctypes.c_int]),
+                ("rtcSetSceneBuildQuality", None, [vp, ctypes.c_int]),
             ):
                 fn = getattr(lib, name, None)
                 if fn is None:
@@ -122,16 +125,23 @@ class _Scene(rtcs.EmbreeScene):
     as long as the scene (a Python subclass: the C layout of its EmbreeScene part is unchanged)."""
 
 
-def triangle_scene(positions: np.ndarray, triangles: np.ndarray) -> rtcs.EmbreeScene:
+def triangle_scene(positions: np.ndarray, triangles: np.ndarray, fast_build: bool = False) -> rtcs.EmbreeScene:
     """An Embree scene (embreex ``EmbreeScene``, for ``run``) of one triangle mesh.
 
     positions: (V, 3) vertex positions, stored as float32; triangles: (T, 3) vertex indices in
     [0, V). Embree reads float32 positions (plus 4 bytes of padding) and int32 indices from
-    arrays kept on the scene; without the checked handles it copies them (``TriangleMesh``)."""
+    arrays kept on the scene; without the checked handles it copies them (``TriangleMesh``).
+
+    fast_build: Embree's low build quality (a Morton-code BVH, what Cycles's viewport uses)
+    instead of its default (binned SAH). On a 1M-triangle mesh it builds in 0.04-0.13 s
+    instead of 0.18-0.28 s on two cores and answers queries ~8 % slower: worth it when the
+    render traces few rays per triangle (``drt.trace.Tracer``'s rule). Hits are the same:
+    only the tree differs, not the ray-triangle test."""
     device = _rtc.EmbreeDevice()
     scene = _Scene(device)  # the scene keeps its device alive
     api = _handles()
-    if api is None or not len(triangles) or not _attach_shared(api, scene, device, positions, triangles):
+    if api is None or not len(triangles) or not _attach_shared(api, scene, device, positions, triangles,
+                                                               fast_build=fast_build):
         TriangleMesh(scene, np.asarray(positions, np.float32), np.asarray(triangles, np.int32))
     return scene
 
@@ -151,7 +161,7 @@ def deforming_scene(positions: np.ndarray, positions_close: np.ndarray, triangle
     return scene
 
 
-def _attach_shared(api, scene, device, positions, triangles, positions_close=None) -> bool:
+def _attach_shared(api, scene, device, positions, triangles, positions_close=None, fast_build=False) -> bool:
     lib, scene_offset, device_offset = api
     v = len(positions)
 
@@ -176,6 +186,9 @@ def _attach_shared(api, scene, device, positions, triangles, positions_close=Non
     for slot, flat in enumerate(steps):
         lib.rtcSetSharedGeometryBuffer(geom, _BUFFER_TYPE_VERTEX, slot, _FORMAT_FLOAT3, flat.ctypes.data, 0, 12, v)
     lib.rtcSetSharedGeometryBuffer(geom, _BUFFER_TYPE_INDEX, 0, _FORMAT_UINT3, index.ctypes.data, 0, 12, len(index))
+    if fast_build:  # the geometry's quality counts only in a scene of low quality (two-level BVH)
+        lib.rtcSetGeometryBuildQuality(geom, _BUILD_QUALITY_LOW)
+        lib.rtcSetSceneBuildQuality(scene_handle, _BUILD_QUALITY_LOW)
     lib.rtcCommitGeometry(geom)
     ok = lib.rtcGetDeviceError(device_handle) == 0
     if ok:

@@ -434,7 +434,8 @@ class LiveScene:
             pos, tri, tables, attrs = self._flatten_static()
             scene = ng = None
             if len(tri):
-                scene = triangle_scene(pos, tri)
+                # Embree's fast build, as Cycles's viewport (Dynamic BVH): an edit waits for it
+                scene = triangle_scene(pos, tri, fast_build=True)
                 ng = _unit_face_normals(pos, tri)
             self._static = (pos, tri, tables, scene, ng, attrs)
             self._static_dirty = False
@@ -450,7 +451,7 @@ class LiveScene:
                 mm = MovingMesh(obj.name, 0, np.ascontiguousarray(obj.mesh.positions, np.float64), None,
                                 np.ascontiguousarray(obj.mesh.triangles, np.int64),
                                 RigidMotion(self._shifted(obj.matrix), self._shifted(obj.matrix)))
-                mo = _MovingObject(mm)
+                mo = _MovingObject(mm, fast_build=True)
                 # the local bounding radius, kept so that a move need not visit the vertices
                 mo.local_radius = float(np.sqrt((mm.positions ** 2).sum(axis=1).max()))
                 self._instances[key] = (mo, mm)

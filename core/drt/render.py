@@ -156,9 +156,12 @@ def world_setup(wp: dict, pd):
 
 
 def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None,
-            direct: str | None = None, indirect: str | None = None) -> RenderContext:
+            direct: str | None = None, indirect: str | None = None,
+            samples: int | None = None) -> RenderContext:
     """Build the tracer, material table, lights and camera for ``scene``. Arguments that are
-    not None override the scene's render settings."""
+    not None override the scene's render settings. ``samples``: the camera samples the
+    renders will trace (default: the frame's pixels × the scene's spp), a hint for the BVH
+    build (``Tracer``): any number renders the same image."""
     t0 = time.perf_counter()
     overrides = {k: v for k, v in (("seed", seed), ("sampler", sampler), ("direct", direct), ("indirect", indirect)) if v is not None}
     settings = replace(scene.render, **overrides)
@@ -193,7 +196,10 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
                           world_program=world_program, world_map=world_map)
     except ValueError as e:
         raise SceneError("lights", str(e)) from None
-    tracer = Tracer(geom)
+    if samples is None:
+        x0, y0, x1, y1 = pixel_bounds(scene)
+        samples = (x1 - x0) * (y1 - y0) * settings.spp
+    tracer = Tracer(geom, expected_samples=samples)
     integ = Integrator(
         settings, geom, tracer, materials, lights, camera,
         Sampler(settings.sampler, settings.seed, settings.spp),
@@ -342,17 +348,18 @@ def render(
     smaller batches so that cancelling (an edit) waits less for the batches in flight.
     """
     t0 = time.perf_counter()
-    ctx = context or prepare(scene, seed=seed, sampler=sampler, direct=direct, indirect=indirect)
-    integ = ctx.integrator
     spp = int(spp or scene.render.spp)
     if spp < 1:
         raise SceneError("spp", f"must be >= 1, got {spp}")
     count = spp - sample_offset if sample_count is None else int(sample_count)
     if sample_offset < 0 or count < 0 or sample_offset + count > spp:
         raise SceneError("sample range", f"[{sample_offset}, {sample_offset + count}) is not within [0, {spp})")
+    xs_all, ys_all = _pixel_region(scene, tile)
+    ctx = context or prepare(scene, seed=seed, sampler=sampler, direct=direct, indirect=indirect,
+                             samples=len(xs_all) * count)
+    integ = ctx.integrator
     _use_sampling_arguments(integ, spp, seed, sampler, direct, indirect)
     threads = max(1, int(threads or os.cpu_count() or 1))
-    xs_all, ys_all = _pixel_region(scene, tile)
     xs, ys = xs_all, ys_all
     if tile is None:
         film = Film(scene.render.width, scene.render.height)

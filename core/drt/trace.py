@@ -660,7 +660,7 @@ class _MovingObject:
     """One moving object for the tracer: its swept box, its motion for the kernels, and either
     an Embree scene of its local triangles (rigid) or its ``DeformingData``."""
 
-    def __init__(self, mm):
+    def __init__(self, mm, fast_build: bool = False):
         self.mesh = mm
         self.prim_offset = int(mm.prim_offset)
         self.motion = mm.motion.data
@@ -669,7 +669,7 @@ class _MovingObject:
         self.scene = None
         self.deforming = None
         if mm.positions_close is None:
-            self.scene = triangle_scene(mm.positions, mm.triangles)
+            self.scene = triangle_scene(mm.positions, mm.triangles, fast_build)
             self.positions_close = self.positions
         else:
             self.deforming = deforming_data(mm)
@@ -783,6 +783,14 @@ def _column(a, n: int) -> np.ndarray:
     return a if a.flags.c_contiguous and a.flags.writeable else a.copy()
 
 
+#: below this many camera samples per triangle a mesh gets Embree's fast BVH build. Measured on
+#: the 1M-triangle large_mesh, best of two, two threads (render wall time incl. the build, fast
+#: against default): 0.26 M samples 0.17-0.19 / 0.36 s, 1 M 0.60-0.65 / 0.68-0.96 s, 4 M
+#: 1.51-1.62 / 1.54-1.62 s, 16 M 5.09-5.22 / 4.99-5.15 s: even at about four samples a
+#: triangle, slower queries outweigh the quicker build past that
+FAST_BUILD_SAMPLES_PER_TRIANGLE = 2
+
+
 class Tracer:
     """Closest-hit and occlusion queries for batches of rays.
 
@@ -791,14 +799,23 @@ class Tracer:
     Thread-safe: the render loop calls it from several worker threads at once (Embree and the
     kernels release the GIL; every query allocates its own scratch arrays). ``embree_seconds``
     accumulates time spent inside Embree calls.
+
+    expected_samples: camera samples the renders will trace (pixels × spp), or None (unknown).
+    A mesh with more than ``1 / FAST_BUILD_SAMPLES_PER_TRIANGLE`` triangles per sample gets
+    Embree's fast, lower-quality BVH (``embree_mesh.triangle_scene``): with so few rays per
+    triangle the build, not the queries, is the cost.
     """
 
-    def __init__(self, geom: SceneGeometry):
+    def __init__(self, geom: SceneGeometry, expected_samples: int | None = None):
         self.geom = geom
         self.static = None
+
+        def fast(triangles: int) -> bool:
+            return expected_samples is not None and expected_samples < FAST_BUILD_SAMPLES_PER_TRIANGLE * triangles
+
         if geom.static_count:
-            self.static = triangle_scene(geom.static_positions, geom.static_triangles)
-        self.moving = [_MovingObject(mm) for mm in geom.moving]
+            self.static = triangle_scene(geom.static_positions, geom.static_triangles, fast(geom.static_count))
+        self.moving = [_MovingObject(mm, fast(len(mm.triangles))) for mm in geom.moving]
         self._static_ng = _unit_face_normals(geom.static_positions, geom.static_triangles) \
             if geom.static_count else None
         self.embree_seconds = 0.0
