@@ -784,10 +784,10 @@ def _column(a, n: int) -> np.ndarray:
 
 
 #: below this many camera samples per triangle a mesh gets Embree's fast BVH build. Measured on
-#: the 1M-triangle large_mesh, best of two, two threads (render wall time incl. the build, fast
+#: the 1M-triangle large_mesh, two runs each, two threads (render wall time incl. the build, fast
 #: against default): 0.26 M samples 0.17-0.19 / 0.36 s, 1 M 0.60-0.65 / 0.68-0.96 s, 4 M
-#: 1.51-1.62 / 1.54-1.62 s, 16 M 5.09-5.22 / 4.99-5.15 s: even at about four samples a
-#: triangle, slower queries outweigh the quicker build past that
+#: 1.51-1.62 / 1.54-1.62 s, 16 M 5.09-5.22 / 4.99-5.15 s. The two break even at about four
+#: samples a triangle; past that the slower queries cost more than the quicker build saves
 FAST_BUILD_SAMPLES_PER_TRIANGLE = 2
 
 
