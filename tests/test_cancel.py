@@ -72,6 +72,44 @@ def test_cancel_callback_stops_keeps_the_partial_image_and_threads(delay):
     assert wait_for_threads(baseline) == baseline, [t.name for t in threading.enumerate()]
 
 
+def test_a_cancel_does_not_wait_for_a_batch_that_is_compiling(monkeypatch):
+    """The first batch of a fresh install compiles the kernels for a minute or more; a cancel
+    then returns within ABORT_WAIT_SECONDS (+ a poll), leaving that batch to end on its own
+    thread (its code lands in the cache), and the next render waits for it before starting
+    (it would wait for the compilation anyway; the viewport's edits must not race it)."""
+    import drt.render as R
+    from drt.integrator import Integrator
+
+    scene = big_scene(32, 24, 64)
+    render(scene, threads=1, spp=1)  # warm: the slow batch below is the only slow thing
+    release = threading.Event()
+    real = Integrator.render_batch
+
+    def stuck_once(self, *args):
+        if not release.is_set():
+            release.wait(HANG)  # stands for a batch compiling the kernels
+        return real(self, *args)
+
+    monkeypatch.setattr(Integrator, "render_batch", stuck_once)
+    t0 = time.perf_counter()
+    film = render(scene, threads=2, cancel=CancelAfter(0.2))
+    took = time.perf_counter() - t0
+    assert film.stats.cancelled and film.stats.samples_done == 0
+    assert took < 0.2 + R.ABORT_WAIT_SECONDS + 1.0, took
+    assert R.abandoned_batches() >= 1
+    # a render cancelled while it waits for them returns at once, without starting
+    film = render(scene, threads=2, cancel=lambda: True)
+    assert film.stats.cancelled and film.stats.samples_done == 0 and film.meta["sample_count"] == 0
+    assert R.abandoned_batches() >= 1
+    # one that is not cancelled starts once they have ended, and renders the frame
+    threading.Timer(0.3, release.set).start()
+    t1 = time.perf_counter()
+    film = render(scene, threads=2, spp=2)
+    assert time.perf_counter() - t1 >= 0.25
+    assert R.abandoned_batches() == 0
+    assert film.stats.samples_done == 2 and np.all(film.sample_count == 2)
+
+
 def test_cancel_between_passes_reports_whole_passes():
     """A cancel polled after pass k: samples_done counts complete passes only and every pixel
     has exactly that many samples (nothing half-added)."""

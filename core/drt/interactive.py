@@ -50,7 +50,7 @@ from .integrator import Integrator
 from .lights import LightSet
 from .materials import MaterialTable
 from .motion import RigidMotion
-from .render import RenderContext, _emissive_triangles, render, textured_emission_in
+from .render import RenderContext, _emissive_triangles, render, settle_abandoned_batches, textured_emission_in
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
 from .scene import MAX_TRANSFORM_ENTRY, CameraSpec, MeshData, RenderSettings, Scene, SceneError
@@ -750,6 +750,10 @@ class ProgressiveSession:
                 with self._cond:  # not yet (e.g. kernels compiling elsewhere): stoppable wait
                     self._cond.wait(0.1)
                 continue
+            # a cancelled render may have left a batch running (compiling the kernels); the
+            # edits below change scene data it reads
+            if not settle_abandoned_batches(lambda: self._stopped):
+                return
             with self._cond:
                 if self._stopped:
                     return

@@ -14,10 +14,12 @@ merge into the full image (``merge_films``).
 from __future__ import annotations
 
 import os
+import threading
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
+from concurrent.futures import wait as futures_wait
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
@@ -46,6 +48,10 @@ MIN_BATCH_PATHS = 1 << 12
 #: how often cancel() is polled while a batch runs: a viewport edit waits at most this long
 #: (plus the batches in flight) before its new image starts; 100 wake-ups/s cost nothing
 CANCEL_POLL_SECONDS = 0.01
+#: how long a cancelled render waits for its batches already running before it leaves them to
+#: finish on their own: a batch takes well under this, but the first batch of a fresh install
+#: compiles the kernels (a minute or more), and a cancel must not wait for that
+ABORT_WAIT_SECONDS = 0.5
 
 
 #: bytes per pixel a render holds at its peak: the film's float64 accumulators (RGBA, luminance²,
@@ -238,6 +244,32 @@ class _Cancelled(Exception):
     """Internal: the cancel callback said stop."""
 
 
+#: batches that cancelled renders left running (``_ThreadWorkers.abort``), until they end
+_ABANDONED: list = []
+_ABANDONED_LOCK = threading.Lock()
+
+
+def abandoned_batches() -> int:
+    """How many batches of cancelled renders are still running (compiling, usually)."""
+    with _ABANDONED_LOCK:
+        _ABANDONED[:] = [f for f in _ABANDONED if not f.done()]
+        return len(_ABANDONED)
+
+
+def settle_abandoned_batches(cancel: Callable[[], bool] | None = None) -> bool:
+    """Wait until the batches that cancelled renders left running have ended. Code that changes
+    scene data a context shares with earlier renders (the viewport's edits) calls this first, and
+    so does every render, whose first kernel call would wait for their compilation anyway.
+    Returns False when ``cancel()`` turned True first."""
+    while abandoned_batches():
+        with _ABANDONED_LOCK:
+            running = list(_ABANDONED)
+        futures_wait(running, timeout=CANCEL_POLL_SECONDS)
+        if cancel is not None and cancel():
+            return False
+    return True
+
+
 class _ThreadWorkers:
     """Batches on threads sharing one context (used inside Blender and for small jobs)."""
 
@@ -246,14 +278,28 @@ class _ThreadWorkers:
         self.pool = ThreadPoolExecutor(max_workers=threads)
         self.rays0 = ctx.tracer.rays_traced
         self.emb0 = ctx.tracer.embree_seconds
+        self.in_flight: list = []
 
     def submit(self, x, row, idx):
-        return self.pool.submit(self.ctx.integrator.render_batch, x, row, idx)
+        future = self.pool.submit(self.ctx.integrator.render_batch, x, row, idx)
+        self.in_flight = [f for f in self.in_flight if not f.done()]
+        self.in_flight.append(future)
+        return future
 
     def abort(self):
-        """Stop now (cancel): queued batches are dropped; a running one finishes (< 1 s), so
-        no thread outlives the render."""
-        self.pool.shutdown(wait=True, cancel_futures=True)
+        """Stop now (cancel): queued batches are dropped; running ones get ABORT_WAIT_SECONDS to
+        finish (a batch normally takes far less), and one still running then — compiling the
+        kernels on a first render — is left to finish on its own thread: its compiled code
+        lands in the cache, its samples are dropped (``settle_abandoned_batches``)."""
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        running = [f for f in self.in_flight if not f.done()]
+        if running:
+            futures_wait(running, timeout=ABORT_WAIT_SECONDS)
+        left = [f for f in running if not f.done()]
+        if left:
+            with _ABANDONED_LOCK:
+                _ABANDONED.extend(left)
+        self.in_flight = []
 
     def counters(self) -> tuple[int, float]:
         return self.ctx.tracer.rays_traced - self.rays0, self.ctx.tracer.embree_seconds - self.emb0
@@ -283,6 +329,19 @@ def _pixel_region(scene: Scene, tile: tuple[int, int, int, int] | None = None) -
         x0, y0, x1, y1 = max(x0, tile[0]), max(y0, tile[1]), min(x1, tile[2]), min(y1, tile[3])
     xs, ys = np.meshgrid(np.arange(x0, max(x0, x1)), np.arange(y0, max(y0, y1)))
     return xs.reshape(-1).astype(np.int64), ys.reshape(-1).astype(np.int64)
+
+
+def _film_for(scene: Scene, xs: np.ndarray, ys: np.ndarray, tile) -> tuple[Film, tuple | None]:
+    """The film a render of pixels (xs, ys) fills: the frame's, or with ``tile`` one of just
+    the tile (a 4K frame's full film is ~0.8 GB per task), and the (frame width, x0, y0, tile
+    width) that maps frame pixels into it (None: the whole frame)."""
+    if tile is None:
+        return Film(scene.render.width, scene.render.height), None
+    fx0, fy0 = (int(xs.min()), int(ys.min())) if len(xs) else (tile[0], tile[1])
+    fx1, fy1 = (int(xs.max()) + 1, int(ys.max()) + 1) if len(xs) else (tile[0], tile[1])
+    film = Film(fx1 - fx0, fy1 - fy0)
+    film.meta["tile"] = [fx0, fy0, fx1, fy1]
+    return film, (scene.render.width, fx0, fy0, fx1 - fx0)
 
 
 def pass_schedule(count: int) -> list[int]:
@@ -355,21 +414,22 @@ def render(
     if sample_offset < 0 or count < 0 or sample_offset + count > spp:
         raise SceneError("sample range", f"[{sample_offset}, {sample_offset + count}) is not within [0, {spp})")
     xs_all, ys_all = _pixel_region(scene, tile)
+    threads = max(1, int(threads or os.cpu_count() or 1))
+    if not settle_abandoned_batches(cancel):  # cancelled while an earlier render's batch compiled
+        film, _ = _film_for(scene, xs_all, ys_all, tile)
+        film.stats = RenderStats(samples_total=count, threads=threads, cancelled=True,
+                                 seconds=time.perf_counter() - t0)
+        film.meta.update({"version": __version__, "seed": scene.render.seed if seed is None else seed,
+                          "sampler": sampler or scene.render.sampler, "spp": spp,
+                          "sample_offset": sample_offset, "sample_count": 0,
+                          "width": scene.render.width, "height": scene.render.height})
+        return film
     ctx = context or prepare(scene, seed=seed, sampler=sampler, direct=direct, indirect=indirect,
                              samples=len(xs_all) * count)
     integ = ctx.integrator
     _use_sampling_arguments(integ, spp, seed, sampler, direct, indirect)
-    threads = max(1, int(threads or os.cpu_count() or 1))
     xs, ys = xs_all, ys_all
-    if tile is None:
-        film = Film(scene.render.width, scene.render.height)
-        to_film = None
-    else:  # a film of the tile only: a 4K frame's full film is ~0.8 GB per task
-        fx0, fy0 = (int(xs.min()), int(ys.min())) if len(xs) else (tile[0], tile[1])
-        fx1, fy1 = (int(xs.max()) + 1, int(ys.max()) + 1) if len(xs) else (tile[0], tile[1])
-        film = Film(fx1 - fx0, fy1 - fy0)
-        film.meta["tile"] = [fx0, fy0, fx1, fy1]
-        to_film = (scene.render.width, fx0, fy0, fx1 - fx0)
+    film, to_film = _film_for(scene, xs, ys, tile)
     stats = RenderStats(samples_total=count, threads=threads)
     threshold = scene.render.adaptive_threshold if adaptive_threshold is None else float(adaptive_threshold)
     min_samples = scene.render.adaptive_min_samples if adaptive_min_samples is None else int(adaptive_min_samples)
