@@ -30,7 +30,8 @@ from .camera import Camera
 from .film import Film, luminance
 from .geometry import build_geometry
 from .integrator import Integrator
-from .kernels import mark_kernels_compiled
+from .kernels import mark_kernels_compiled, scene_kernel_variant
+from .kernels.compile_plan import precompile
 from .lights import EmissiveTriangles, LightSet
 from .materials import MaterialTable
 from .sampling.pixel_filter import PixelFilter
@@ -415,7 +416,9 @@ def render(
         raise SceneError("sample range", f"[{sample_offset}, {sample_offset + count}) is not within [0, {spp})")
     xs_all, ys_all = _pixel_region(scene, tile)
     threads = max(1, int(threads or os.cpu_count() or 1))
-    if not settle_abandoned_batches(cancel):  # cancelled while an earlier render's batch compiled
+    # the first render of a kind of scene compiles the kernels, on every core (compile_plan);
+    # a cancel meanwhile (or while an earlier render's batch still compiles) returns at once
+    if not (settle_abandoned_batches(cancel) and precompile(scene_kernel_variant(scene), cancel)):
         film, _ = _film_for(scene, xs_all, ys_all, tile)
         film.stats = RenderStats(samples_total=count, threads=threads, cancelled=True,
                                  seconds=time.perf_counter() - t0)
