@@ -51,6 +51,24 @@ def test_plan_classes_map_to_this_copys_package(monkeypatch):
     assert vec3.dot is not fake.dot
 
 
+def test_a_helper_imports_the_core_without_the_addon_package_above_it(tmp_path, monkeypatch):
+    """Inside Blender the core is ``<addon>.drt`` and the add-on's __init__ imports bpy, which
+    a helper (a plain Python) has not: the helper stands in empty packages above the core."""
+    addon = tmp_path / "fakeaddon"
+    addon.mkdir()
+    (addon / "__init__.py").write_text("raise ImportError('no bpy in a helper')\n")
+    (addon / "drt").symlink_to(os.path.dirname(os.path.dirname(CP.__file__)))
+    stub = types.ModuleType("fakeaddon")
+    stub.__path__ = [str(addon)]
+    monkeypatch.setitem(sys.modules, "fakeaddon", stub)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    cmd = CP._helper_command(sys.executable, "no-such-variant", 0, 1, package="fakeaddon.drt")
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "DRT_SET_NUMBA_CACHE_DIR")}
+    env["DRT_CACHE_DIR"] = str(tmp_path / "cache")
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+
+
 def test_a_cancel_stops_the_helpers(monkeypatch):
     started = []
     real_popen = subprocess.Popen

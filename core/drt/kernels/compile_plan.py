@@ -110,12 +110,30 @@ def compile_part(variant: str, part: int, parts: int, plan: dict | None = None) 
     return done
 
 
+# A helper: the caller's import path; the packages above the core (the Blender add-on's, whose
+# __init__ imports bpy) as empty stand-ins, so that importing the core runs only the core.
 _CHILD = (
-    "import importlib, json, sys\n"
-    "paths, package, variant, part, parts = json.loads(sys.argv[1])\n"
+    "import importlib, json, sys, types\n"
+    "paths, parents, package, variant, part, parts = json.loads(sys.argv[1])\n"
     "sys.path[:0] = paths\n"
+    "for name, path in parents:\n"
+    "    stub = sys.modules[name] = types.ModuleType(name)\n"
+    "    stub.__path__ = path\n"
     "importlib.import_module(package + '.kernels.compile_plan').compile_part(variant, part, parts)\n"
 )
+
+
+def _helper_command(python: str, variant: str, part: int, parts: int, package: str = PACKAGE) -> list:
+    """The command line of helper ``part`` of ``parts``."""
+    names = package.split(".")
+    parents = []
+    for i in range(1, len(names)):
+        name = ".".join(names[:i])
+        path = getattr(sys.modules.get(name), "__path__", None)
+        if path is not None:
+            parents.append((name, list(path)))
+    paths = [p for p in sys.path if isinstance(p, str)]
+    return [python, "-c", _CHILD, json.dumps([paths, parents, package, variant, part, parts])]
 
 
 def _python() -> str | None:
@@ -142,32 +160,34 @@ def precompile(variant: str, cancel=None) -> bool:
     if (kernels_compiled(variant) or not os.environ.get("NUMBA_CACHE_DIR")
             or os.environ.get(NO_PRECOMPILE_ENV)):
         return True
-    with _RUN_LOCK:
+    while not _RUN_LOCK.acquire(timeout=POLL_SECONDS):  # another render's helpers are at work
+        if cancel is not None and cancel():
+            return False
+    helpers = []
+    try:
         if kernels_compiled(variant):
             return True
         plan = load_plan()
         parts, python = helper_count(), _python()
         if not plan or variant not in plan or parts == 0 or python is None:
             return True
-        paths = [p for p in sys.path if isinstance(p, str)]
-        helpers = []
-        try:
-            for part in range(parts):
-                arg = json.dumps([paths, PACKAGE, variant, part, parts])
-                helpers.append(subprocess.Popen([python, "-c", _CHILD, arg], stdin=subprocess.DEVNULL,
-                                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-            while any(h.poll() is None for h in helpers):
-                if cancel is not None and cancel():
-                    return False
-                time.sleep(POLL_SECONDS)
-        except OSError:  # could not start a helper: the render compiles by itself
-            return True
-        finally:
-            for h in helpers:
-                if h.poll() is None:
-                    h.kill()
-                    h.wait()
-    return True
+        for part in range(parts):
+            helpers.append(subprocess.Popen(_helper_command(python, variant, part, parts),
+                                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                            stderr=subprocess.DEVNULL))
+        while any(h.poll() is None for h in helpers):
+            if cancel is not None and cancel():
+                return False
+            time.sleep(POLL_SECONDS)
+        return True
+    except OSError:  # could not start a helper: the render compiles by itself
+        return True
+    finally:
+        for h in helpers:
+            if h.poll() is None:
+                h.kill()
+                h.wait()
+        _RUN_LOCK.release()
 
 
 # --------------------------------------------------------------------------- making the plan
