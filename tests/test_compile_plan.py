@@ -1,4 +1,4 @@
-"""The kernel compile plan (drt.kernels.compile_plan): helper processes compile a first render's
+"""The kernel compile plan (drt.compile_plan): helper processes compile a first render's
 kernels on every core. The plan is shipped data; these tests keep it in step with the kernels
 and check that a cancel stops the helpers."""
 
@@ -13,12 +13,12 @@ import types
 import pytest
 
 import drt.kernels as K
-from drt.kernels import compile_plan as CP
+from drt import compile_plan as CP
 
 
 def test_the_shipped_plan_loads_and_every_entry_is_a_kernel():
     """Fails when a kernel the plan names was renamed or removed (or the pinned numba changed)
-    without regenerating the plan: ``python -m drt.kernels.compile_plan``."""
+    without regenerating the plan: ``python -m drt.compile_plan``."""
     plan = CP.load_plan()
     assert plan is not None, "compile_plan.pkl missing or unreadable: regenerate it"
     assert set(plan) == set(K.KERNEL_VARIANTS)
@@ -57,7 +57,7 @@ def test_a_helper_imports_the_core_without_the_addon_package_above_it(tmp_path, 
     addon = tmp_path / "fakeaddon"
     addon.mkdir()
     (addon / "__init__.py").write_text("raise ImportError('no bpy in a helper')\n")
-    (addon / "drt").symlink_to(os.path.dirname(os.path.dirname(CP.__file__)))
+    (addon / "drt").symlink_to(os.path.dirname(CP.__file__))
     stub = types.ModuleType("fakeaddon")
     stub.__path__ = [str(addon)]
     monkeypatch.setitem(sys.modules, "fakeaddon", stub)
@@ -106,7 +106,7 @@ def test_after_precompiling_a_first_render_compiles_next_to_nothing(tmp_path):
     scenes = os.path.join(os.path.dirname(__file__), "..", "blend_scenes")
     code = f"""
 import sys, time
-from drt.kernels import compile_plan as CP
+from drt import compile_plan as CP
 from drt.kernels import LazyKernel
 from drt.loaders import load_scene
 from drt import render as R

@@ -31,7 +31,7 @@ from .film import Film, luminance
 from .geometry import build_geometry
 from .integrator import Integrator
 from .kernels import mark_kernels_compiled, scene_kernel_variant
-from .kernels.compile_plan import precompile
+from .compile_plan import precompile
 from .lights import EmissiveTriangles, LightSet
 from .materials import MaterialTable
 from .sampling.pixel_filter import PixelFilter

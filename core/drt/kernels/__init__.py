@@ -55,7 +55,7 @@ def cache_dir() -> str:
 
 #: top-level modules of ``drt`` that hold no kernel code and that no kernel module imports, so
 #: editing them does not invalidate the compiled-kernel cache (checked by tests/test_kernels.py)
-FRONT_END_MODULES = frozenset({"__main__", "bench", "cli", "denoise", "estimators", "exr",
+FRONT_END_MODULES = frozenset({"__main__", "bench", "cli", "compile_plan", "denoise", "estimators", "exr",
                                "interactive", "loaders", "integrator", "preview", "render",
                                "scene_file", "frames",
                                "farm", "farm._remote", "farm.cli", "farm.client", "farm.plan",
@@ -109,6 +109,12 @@ def _numba_version() -> str:
         import numba
 
         return numba.__version__
+
+
+def compiler_version() -> str:
+    """The kernel compiler's minor version ("0.68"): what compiled code and its recorded argument
+    types are tied to (numba's own cache index holds the full version)."""
+    return _numba_version().rsplit(".", 1)[0]
 
 
 STALE_CACHE_DAYS = 14

@@ -1,30 +1,31 @@
 """Compiling the kernels on every core: a shipped plan of what a render compiles.
 
-numba compiles one function at a time under a process-wide lock, so the first render of an
-install compiled its ~220 kernels (the plain variant; ~400 with textures or media) on one core:
-~55 s on the 2-vCPU development machine. Most of them are callees of `shade` that numba would
-compile anyway when it types `shade`; compiled first, each lands in the on-disk cache, where
-`shade`'s compilation finds it. This module ships the list of every kernel a render of each
-variant compiles, with the argument types (numba signatures) it compiles them for, in the order
-numba finished them (callees first): ``compile_plan.pkl`` beside this file. On a first render
-(`drt.render.render`, before the scene is prepared) `precompile` starts one helper process per
-core, each compiling every k-th entry into the shared cache, and waits for them; the render
-then loads what they compiled and compiles only what the plan lacks.
+The kernel compiler works on one function at a time under a process-wide lock, so the first
+render of an install compiled its ~220 kernels (the plain variant; ~400 with textures or media)
+on one core: ~55 s on the 2-vCPU development machine. Most of them are callees of `shade` that
+the compiler would compile anyway when it types `shade`; compiled first, each lands in the
+on-disk cache, where `shade`'s compilation finds it. ``compile_plan.pkl`` beside this file lists
+every kernel the render of one shipped scene per variant compiles, with the argument types
+(compiler signatures) it compiles them for, in the order the compiler finished them (callees
+first). On a first render (`drt.render.render`, before the scene is prepared) `precompile`
+starts one helper process per core, each compiling every k-th entry into the shared cache, and
+waits for them; the render then loads what they compiled and compiles only what the plan lacks
+(feature kernels outside `shade`: the subsurface walk, moving objects, transparent shadows).
 
-Measured (Cornell box, empty cache, 2 vCPUs): 53 s serial; helpers 26 s + the render's own
-compile 12 s (mostly `shade`, whose inlined body LLVM optimises as one function).
+Measured (first render into an empty cache, whole process, 2 vCPUs): Cornell box 53.6 → 40.6 s,
+textured 128.2 → 72.4 s; the render's own part after the helpers is mostly `shade`, whose body
+with every callee inlined LLVM optimises as one function (docs/kernels.md).
 
-The plan is data, regenerated with ``python -m drt.kernels.compile_plan`` after kernel
-signatures change (it renders the shipped scenes of each variant into empty caches, ~6 min).
-A stale plan is harmless: an entry that no longer resolves or types is skipped, a missing one is
-compiled by the render as before. The pickled numba types name DRT's classes (namedtuple
-records) under the import name ``drt``; `load_plan` maps them to this copy's package name (the
-Blender add-on imports the core as ``drt_blender.drt`` or ``bl_ext.<repo>.drt_blender.drt``).
+The plan is data, regenerated with ``python -m drt.compile_plan`` after kernel signatures change
+(~5 min). A stale plan is harmless: an entry that no longer resolves or types is skipped, a
+missing one is compiled by the render as before. The pickled signature types name DRT's classes
+(namedtuple records) under the import name ``drt``; `load_plan` maps them to this copy's package
+name (the Blender add-on imports the core as ``drt_blender.drt`` or
+``bl_ext.<repo>.drt_blender.drt``).
 """
 
 from __future__ import annotations
 
-import importlib
 import json
 import os
 import pickle
@@ -38,16 +39,16 @@ PLAN_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "compile_pl
 
 #: the package this copy of the core is imported as ("drt", or the add-on's "….drt"); from the
 #: module spec, which keeps the name when this file runs as ``python -m``
-PACKAGE = (__spec__.name if __spec__ is not None else __name__).rsplit(".kernels", 1)[0]
+PACKAGE = (__spec__.name if __spec__ is not None else __name__).rsplit(".compile_plan", 1)[0]
 
-#: at most this many helper processes (each holds a numba compiler, ~0.3–0.5 GB at its peak)
+#: at most this many helper processes (each holds a compiler, ~0.3–0.5 GB at its peak)
 MAX_HELPERS = 8
 
 #: how often `precompile` polls its helpers and the cancel callback, seconds
 POLL_SECONDS = 0.05
 
-#: set (to anything) to compile in the render's own process, one kernel at a time, as numba
-#: does by itself (recording a plan needs that: kernels loaded from the cache do not tell which
+#: set (to anything) to compile in the render's own process, one kernel at a time, as the
+#: compiler does by itself (recording a plan needs that: kernels loaded from the cache do not tell which
 #: callees they hold)
 NO_PRECOMPILE_ENV = "DRT_NO_PRECOMPILE"
 
@@ -64,28 +65,26 @@ class _PackageUnpickler(pickle.Unpickler):
 
 
 def load_plan(path: str = PLAN_FILE) -> dict | None:
-    """{variant: [(module relative to the package, attribute, [numba signature, ...]), ...]}, or
-    None when there is no plan or it does not load (another numba, a renamed record type)."""
-    import numba
+    """{variant: [(module relative to the package, attribute, [signature, ...]), ...]}, or None
+    when there is no plan or it does not load (another compiler version, a renamed record type)."""
+    from .kernels import compiler_version
 
     try:
         with open(path, "rb") as f:
             plan = _PackageUnpickler(f).load()
     except Exception:  # noqa: BLE001 -- a plan that does not load only costs the speed-up
         return None
-    if not isinstance(plan, dict) or plan.get("numba") != numba.__version__.rsplit(".", 1)[0]:
+    if not isinstance(plan, dict) or plan.get("compiler") != compiler_version():
         return None
     return plan.get("variants")
 
 
 def _resolve(module: str, attr: str):
     """The kernel ``attr`` of ``PACKAGE.module``, or None."""
-    from . import LazyKernel
+    from . import render  # noqa: F401 -- imports every module that holds a planned kernel
+    from .kernels import LazyKernel
 
-    try:
-        obj = getattr(importlib.import_module(f"{PACKAGE}.{module}"), attr)
-    except (ImportError, AttributeError):
-        return None
+    obj = getattr(sys.modules.get(f"{PACKAGE}.{module}"), attr, None)
     return obj if isinstance(obj, LazyKernel) else None
 
 
@@ -119,7 +118,7 @@ _CHILD = (
     "for name, path in parents:\n"
     "    stub = sys.modules[name] = types.ModuleType(name)\n"
     "    stub.__path__ = path\n"
-    "importlib.import_module(package + '.kernels.compile_plan').compile_part(variant, part, parts)\n"
+    "importlib.import_module(package + '.compile_plan').compile_part(variant, part, parts)\n"
 )
 
 
@@ -155,7 +154,7 @@ def precompile(variant: str, cancel=None) -> bool:
     (``drt.kernels.kernels_compiled(variant)`` false), by helper processes into the shared cache.
     Does nothing when they are compiled, there is no plan, one core, or no Python to run helpers
     with. Returns False when ``cancel()`` turned True meanwhile (the helpers are stopped)."""
-    from . import kernels_compiled
+    from .kernels import kernels_compiled
 
     if (kernels_compiled(variant) or not os.environ.get("NUMBA_CACHE_DIR")
             or os.environ.get(NO_PRECOMPILE_ENV)):
@@ -208,10 +207,11 @@ PLAN_SCENES = {
 def record_variant(variant: str, scenes: list[str]) -> list:
     """Render ``scenes`` (paths of .npz files) small into the current, empty NUMBA_CACHE_DIR and
     return this variant's plan entries: every DRT kernel compiled, with its signatures, in the
-    order numba finished them (by their cache index files' times: callees before callers)."""
-    from . import LazyKernel
-    from .. import render as render_mod
-    from ..loaders import load_scene
+    order the compiler finished them (by their cache index files' times: callees before
+    callers)."""
+    from . import render as render_mod
+    from .kernels import LazyKernel
+    from .loaders import load_scene
 
     for path in scenes:
         scene = load_scene(path)
@@ -243,7 +243,7 @@ def _main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description="Write the kernel compile plan (compile_plan.pkl) from "
                                              "small renders of the shipped scenes into empty caches.")
-    ap.add_argument("--scenes", default=os.path.join(os.path.dirname(__file__), "..", "..", "..", "blend_scenes"))
+    ap.add_argument("--scenes", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "blend_scenes"))
     ap.add_argument("--out", default=PLAN_FILE)
     ap.add_argument("--record", nargs=2, metavar=("VARIANT", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -253,7 +253,7 @@ def _main(argv=None) -> int:
         with open(args.record[1], "wb") as f:
             pickle.dump(record_variant(variant, scenes), f)
         return 0
-    import numba
+    from .kernels import compiler_version
 
     variants = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -266,14 +266,14 @@ def _main(argv=None) -> int:
             env["NUMBA_CACHE_DIR"] = cache
             env[NO_PRECOMPILE_ENV] = "1"
             t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-m", f"{PACKAGE}.kernels.compile_plan", "--scenes", args.scenes,
+            subprocess.run([sys.executable, "-m", f"{PACKAGE}.compile_plan", "--scenes", args.scenes,
                             "--record", label, out], env=env, check=True)
             with open(out, "rb") as f:
                 variants[variant] = pickle.load(f)
             shutil.rmtree(cache, ignore_errors=True)
             print(f"{label}: {len(variants[variant])} kernels, "
                   f"{sum(len(s) for _, _, s in variants[variant])} signatures, {time.perf_counter() - t0:.0f} s")
-    plan = {"numba": numba.__version__.rsplit(".", 1)[0], "variants": variants}
+    plan = {"compiler": compiler_version(), "variants": variants}
     with open(args.out, "wb") as f:
         pickle.dump(plan, f, protocol=4)
     print(f"wrote {args.out}")
