@@ -87,6 +87,11 @@ def test_a_cancel_stops_the_helpers(monkeypatch):
     assert CP.precompile("", cancel=lambda: time.perf_counter() - t0 > 0.3) is False
     assert time.perf_counter() - t0 < 3.0
     assert len(started) == 2 and all(p.poll() is not None for p in started)
+    # helpers that ran to the end are not started again in this process
+    monkeypatch.setattr(CP, "_CHILD", "pass")
+    monkeypatch.setattr(CP, "_PRECOMPILED", set())
+    assert CP.precompile("") is True and len(started) == 4
+    assert CP.precompile("") is True and len(started) == 4
 
 
 def test_nothing_starts_when_the_kernels_are_compiled_or_precompiling_is_off(monkeypatch):

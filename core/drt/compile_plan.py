@@ -48,11 +48,15 @@ MAX_HELPERS = 8
 POLL_SECONDS = 0.05
 
 #: set (to anything) to compile in the render's own process, one kernel at a time, as the
-#: compiler does by itself (recording a plan needs that: kernels loaded from the cache do not tell which
-#: callees they hold)
+#: compiler does by itself (recording a plan needs that: kernels loaded from the cache do not
+#: tell which callees they hold)
 NO_PRECOMPILE_ENV = "DRT_NO_PRECOMPILE"
 
 _RUN_LOCK = threading.Lock()  # one precompile at a time in a process (render threads, farm tasks)
+#: variants whose helpers ran to the end in this process: a render marks its variant compiled
+#: only when it finishes, and renders cancelled before that (viewport edits during a first use)
+#: must not start helpers again, each loading a few hundred cached kernels for nothing
+_PRECOMPILED: set = set()
 
 
 class _PackageUnpickler(pickle.Unpickler):
@@ -156,7 +160,7 @@ def precompile(variant: str, cancel=None) -> bool:
     with. Returns False when ``cancel()`` turned True meanwhile (the helpers are stopped)."""
     from .kernels import kernels_compiled
 
-    if (kernels_compiled(variant) or not os.environ.get("NUMBA_CACHE_DIR")
+    if (variant in _PRECOMPILED or kernels_compiled(variant) or not os.environ.get("NUMBA_CACHE_DIR")
             or os.environ.get(NO_PRECOMPILE_ENV)):
         return True
     while not _RUN_LOCK.acquire(timeout=POLL_SECONDS):  # another render's helpers are at work
@@ -178,6 +182,7 @@ def precompile(variant: str, cancel=None) -> bool:
             if cancel is not None and cancel():
                 return False
             time.sleep(POLL_SECONDS)
+        _PRECOMPILED.add(variant)
         return True
     except OSError:  # could not start a helper: the render compiles by itself
         return True
