@@ -300,6 +300,8 @@ class _ThreadWorkers:
         if left:
             with _ABANDONED_LOCK:
                 _ABANDONED.extend(left)
+        else:  # every batch ended: join the idle threads, so none outlives the render
+            self.pool.shutdown(wait=True)
         self.in_flight = []
 
     def counters(self) -> tuple[int, float]:
