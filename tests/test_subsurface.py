@@ -346,12 +346,15 @@ def test_sss_in_a_fog_world_renders():
     assert 0.05 < foggy < clear
 
 
-def test_the_walk_enters_about_the_valid_reflection_normal(monkeypatch):
-    """Cycles enters a BSSRDF about ``maybe_ensure_valid_specular_reflection(N)`` (svm closure:
-    ``bssrdf->N``), also when a diffuse lobe beside it (Principled Subsurface Weight < 1) is
-    shaded about the uncorrected N. A grazing orthographic view (11° above a plane) of smooth
-    normals leaning away from the viewer, so that the reflection about them points below the
-    surface: every walk starts about the corrected normal, which differs from ns by 3.2°."""
+def test_the_walk_enters_about_the_valid_reflection_normal_and_guides_about_the_shading_normal(monkeypatch):
+    """Cycles's ``subsurface_bounce`` refracts into a BSSRDF about ``bssrdf->N``
+    (``maybe_ensure_valid_specular_reflection(N)``), also when a diffuse lobe beside it
+    (Principled Subsurface Weight < 1) is shaded about the uncorrected N, and then guides the
+    walk about ``sd->N``, the uncorrected shading normal (``subsurface.N = sd->N``). A grazing
+    orthographic view (11° above a plane) of smooth normals leaning away from the viewer, so
+    that the reflection about them points below the surface (the correction turns N by 3.2°);
+    a nearly smooth entry (roughness 0.001), so the entry direction is the refraction of the
+    view about the corrected normal."""
     from drt.path_stages import valid_specular_normal
     from drt.subsurface import SSS_WALK, SubsurfaceWalker
 
@@ -360,27 +363,36 @@ def test_the_walk_enters_about_the_valid_reflection_normal(monkeypatch):
                     camera={"type": "ORTHO", "matrix_world": look_at(tuple(-5.0 * d), (0, 0, 0)), "ortho_scale": 0.5})
     h["version"] = 2
     add_material(h, "half", [{"type": "DIFFUSE", "color": [0.4, 0.4, 0.4]},
-                             sss_lobe(color=[0.4, 0.4, 0.4], weight=0.5)])
+                             sss_lobe(color=[0.4, 0.4, 0.4], weight=0.5, roughness=0.001, ior=1.4)])
     ns = np.array([0.0, 0.15, 1.0]) / math.hypot(0.15, 1.0)
     pos = np.array([[-5.0, -5.0, 0.0], [5.0, -5.0, 0.0], [5.0, 5.0, 0.0], [-5.0, 5.0, 0.0]])
     tri = np.array([[0, 1, 2], [0, 2, 3]])
     a = {}
     add_mesh(h, a, "plane", pos, tri, 0, normals=np.tile(ns, (2, 3, 1)).astype(np.float32))
-    entries = []
+    guides, entries = [], []
     walk = SubsurfaceWalker.run
 
     def spy(self, paths, live, depth_i, sd):
         if depth_i == 0:  # the camera rays' hits on the plane
-            entries.append(paths.sss_n[:live][paths.sss[:live] == SSS_WALK].copy())
+            rows = paths.sss[:live] == SSS_WALK
+            guides.append(paths.sss_n[:live][rows].copy())
+            entries.append(paths.d[:live][rows].copy())
         return walk(self, paths, live, depth_i, sd)
 
     monkeypatch.setattr(SubsurfaceWalker, "run", spy)
     render(scene_from_dict(h, a), threads=1)
-    n_entry = np.concatenate(entries)
-    expected = np.array(valid_specular_normal((0.0, 0.0, 1.0), tuple(-d), tuple(ns)))
-    assert len(n_entry) > 8  # about half of the 64 camera paths pick the SSS lobe
-    assert np.degrees(np.arccos(expected @ ns)) > 2.0  # the correction matters here (3.2°)
-    np.testing.assert_allclose(n_entry, np.tile(expected, (len(n_entry), 1)), atol=1e-6)
+    guide, wi = np.concatenate(guides), np.concatenate(entries)
+    corrected = np.array(valid_specular_normal((0.0, 0.0, 1.0), tuple(-d), tuple(ns)))
+    assert len(wi) > 8  # about half of the 64 camera paths pick the SSS lobe
+    assert np.degrees(np.arccos(corrected @ ns)) > 2.0  # the correction matters here (3.2°)
+
+    def refracted(n, eta=1.0 / 1.4):
+        cos_i = float(-d @ n)
+        return eta * d + (eta * cos_i - math.sqrt(1.0 - eta * eta * (1.0 - cos_i * cos_i))) * n
+
+    np.testing.assert_allclose(wi, np.tile(refracted(corrected), (len(wi), 1)), atol=5e-3)
+    assert np.degrees(np.arccos(refracted(corrected) @ refracted(ns))) > 1.0  # ns would fail
+    np.testing.assert_allclose(guide, np.tile(ns, (len(guide), 1)), atol=1e-6)
 
 
 def test_a_subsurface_render_draws_no_hidden_numpy_randomness(monkeypatch):

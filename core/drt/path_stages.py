@@ -807,10 +807,10 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             # the walk (drt.subsurface, run by the integrator) starts here, just inside
             s_slot, _ = pick_lobe(md, mat, u_lobe)
             sss_coefficients(md, mat, s_slot, paths.sss_coef, j)
-            # about Cycles's valid-reflection correction of N (bssrdf->N =
-            # maybe_ensure_valid_specular_reflection(N)): nv, which is ns itself unless a
-            # diffuse lobe beside the SSS one (Subsurface Weight < 1) kept ns uncorrected
-            store(paths.sss_n, j, nv if front > 0.0 else neg(nv))
+            # the walk guides about Cycles's sd->N (subsurface_bounce: subsurface.N = sd->N):
+            # the interpolated normal on wo's geometric side, without the valid-reflection
+            # correction that turned the entry direction (bssrdf->N) and without a normal map
+            store(paths.sss_n, j, ns_unmapped if front > 0.0 else neg(ns_unmapped))
             store(paths.sss_p, j, p)
             paths.sss_prim[j] = prim
         if sss_on:

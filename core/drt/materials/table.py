@@ -197,7 +197,7 @@ FRAME_VALID = 3
 FRAMES = {"COAT": FRAME_COAT, "SHEEN": FRAME_SHEEN}
 #: lobe types Cycles shades about the valid-reflection normal
 VALID_FRAME_TYPES = (BSDF_GLOSSY, BSDF_GLASS, BSDF_DIELECTRIC_SPECULAR, BSDF_METALLIC, BSDF_TRANSLUCENT,
-                     BSDF_REFRACTION)
+                     BSDF_REFRACTION, BSDF_SUBSURFACE)
 
 
 @kernel
@@ -626,6 +626,8 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, fr
                                   md.lobe_sss[m, slot, SSS_IOR], wo, u_rest, u0, u1)
         if not ok or p_sel <= 0.0:
             return wi, zero, 0.0, LOBE_NONE, False, False
+        if framed:  # beside a diffuse lobe: entered about the valid-reflection normal (bssrdf->N)
+            wi = to_world(wi, tx, bx, n_slot)
         uw = under_weight(md, m, slot, wo_main, nc_local, nv_local, front) if md.has_layers[m] else (1.0, 1.0, 1.0)
         weight = (md.lobe_color[m, slot, 0] * (uw[0] / p_sel), md.lobe_color[m, slot, 1] * (uw[1] / p_sel),
                   md.lobe_color[m, slot, 2] * (uw[2] / p_sel))
