@@ -21,15 +21,42 @@ def test_the_shipped_plan_loads_and_every_entry_is_a_kernel():
     without regenerating the plan: ``python -m drt.compile_plan``."""
     plan = CP.load_plan()
     assert plan is not None, "compile_plan.pkl missing or unreadable: regenerate it"
-    assert set(plan) == set(K.KERNEL_VARIANTS)
+    features = {k for k in plan if k.startswith(CP.FEATURE_PREFIX)}
+    assert set(plan) - features == set(K.KERNEL_VARIANTS)
+    assert features == {CP.FEATURE_PREFIX + f for f in CP.PLAN_FEATURES}
     for variant, entries in plan.items():
         names = {attr for _, attr, _ in entries}
-        assert {"shade", "camera_stage"} <= names, variant
+        if variant not in features:
+            assert {"shade", "camera_stage"} <= names, variant
         missing = [(m, a) for m, a, _ in entries if CP._resolve(m, a) is None]
         assert not missing, f"{variant or 'plain'}: {missing[:5]}"
         assert all(len(sigs) >= 1 for _, _, sigs in entries)
     # the media variant holds the whole shade, so it needs more kernels than the plain one
     assert len(plan["media"]) > len(plan[""]) > 100
+    # a feature holds what the plain plan lacks: the walk for subsurface scattering, and no
+    # signature twice
+    assert "walk_local" in {attr for _, attr, _ in plan[CP.FEATURE_PREFIX + "sss"]}
+    plain = {(m, a, s) for m, a, sigs in plan[""] for s in sigs}
+    for feature in features:
+        assert not plain & {(m, a, s) for m, a, sigs in plan[feature] for s in sigs}, feature
+
+
+def test_a_scene_s_features_are_what_it_compiles_beyond_its_variant():
+    from drt.scene_file import load_scene
+
+    scenes = os.path.join(os.path.dirname(__file__), "..", "blend_scenes")
+    expected = {"cornell_box": (), "sss_head": ("sss",), "motion_blur": ("motion",), "volume_fog": ()}
+    for name, features in expected.items():
+        assert CP.scene_features(load_scene(os.path.join(scenes, f"{name}.npz"))) == features, name
+
+
+def test_plan_entries_are_the_variant_s_then_each_feature_s():
+    plan = {"": [("a", "f", [1])], "media": [("a", "g", [2])], "+sss": [("b", "w", [3])]}
+    assert CP.plan_entries(plan, "") == [("a", "f", [1])]
+    assert CP.plan_entries(plan, "", ("sss",)) == [("a", "f", [1]), ("b", "w", [3])]
+    assert CP.plan_entries(plan, "media", ("sss", "motion")) == [("a", "g", [2]), ("b", "w", [3])]
+    assert CP.plan_entries(None, "", ("sss",)) == []
+    assert CP._beyond([("a", "f", [1, 2]), ("b", "w", [3])], [("a", "f", [1])]) == [("a", "f", [2]), ("b", "w", [3])]
 
 
 def test_plan_classes_map_to_this_copys_package(monkeypatch):
@@ -94,6 +121,39 @@ def test_a_cancel_stops_the_helpers(monkeypatch):
     assert CP.precompile("") is True and len(started) == 4
 
 
+def test_a_feature_compiles_alone_when_its_variant_is_compiled(monkeypatch):
+    """A subsurface scene after a plain one: the helpers compile the walk's plan only, once per
+    process, and not at all after a render marked the feature compiled."""
+    import json
+
+    started = []
+    real_popen = subprocess.Popen
+
+    def popen(cmd, *args, **kwargs):
+        started.append(json.loads(cmd[-1]))
+        return real_popen([sys.executable, "-c", "pass"], *args, **kwargs)
+
+    marks = {""}  # the plain variant is compiled; no feature is
+    monkeypatch.setattr(CP, "load_plan", lambda: {"": [("m", "k", [1])], "+sss": [("m", "walk", [2])],
+                                                  "+motion": [("m", "moving", [3])]})
+    monkeypatch.setattr(K, "kernels_compiled", lambda variant="": variant in marks)
+    monkeypatch.setattr(K, "mark_kernels_compiled", lambda variant="": marks.add(variant))
+    monkeypatch.setattr(CP, "_PRECOMPILED", set())
+    monkeypatch.setattr(CP, "helper_count", lambda: 2)
+    monkeypatch.setattr(CP.subprocess, "Popen", popen)
+    monkeypatch.delenv(CP.NO_PRECOMPILE_ENV, raising=False)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", os.environ.get("NUMBA_CACHE_DIR") or "/nonexistent")
+    assert CP.precompile("", features=("sss",)) is True
+    # [paths, parents, package, variant, part, parts, features]: no variant, the feature alone
+    assert [(a[3], a[4], a[5], a[6]) for a in started] == [(None, 0, 2, ["sss"]), (None, 1, 2, ["sss"])]
+    assert CP.precompile("", features=("sss",)) is True and len(started) == 2  # once a process
+    monkeypatch.setattr(CP, "_PRECOMPILED", set())
+    CP.mark_features_compiled(["sss"])
+    assert CP.precompile("", features=("sss",)) is True and len(started) == 2  # marked compiled
+    assert CP.precompile("", features=("sss", "motion")) is True
+    assert [a[6] for a in started[2:]] == [["motion"], ["motion"]]
+
+
 def test_nothing_starts_when_the_kernels_are_compiled_or_precompiling_is_off(monkeypatch):
     monkeypatch.setattr(CP.subprocess, "Popen", lambda *a, **k: pytest.fail("started a helper"))
     monkeypatch.setattr(K, "kernels_compiled", lambda variant="": True)
@@ -105,9 +165,11 @@ def test_nothing_starts_when_the_kernels_are_compiled_or_precompiling_is_off(mon
 
 @pytest.mark.slow
 @pytest.mark.skipif(CP.helper_count() == 0, reason="one core: no helper processes")
-def test_after_precompiling_a_first_render_compiles_next_to_nothing(tmp_path):
-    """Into an empty cache: the helpers compile the plain variant's plan, then the render finds
-    (nearly) every kernel it calls in the cache. Without the helpers it compiles ~220."""
+@pytest.mark.parametrize("scene, features", [("cornell_box", ()), ("sss_head", ("sss",))])
+def test_after_precompiling_a_first_render_compiles_next_to_nothing(tmp_path, scene, features):
+    """Into an empty cache: the helpers compile the plain variant's plan (and the subsurface
+    walk's, for a scene with subsurface scattering), then the render finds (nearly) every
+    kernel it calls in the cache. Without the helpers it compiles ~220."""
     scenes = os.path.join(os.path.dirname(__file__), "..", "blend_scenes")
     code = f"""
 import sys, time
@@ -116,9 +178,9 @@ from drt.kernels import LazyKernel
 from drt.loaders import load_scene
 from drt import render as R
 t0 = time.perf_counter()
-assert CP.precompile("") is True
+assert CP.precompile("", features={features!r}) is True
 t1 = time.perf_counter()
-R.render(load_scene({os.path.join(scenes, 'cornell_box.npz')!r}), spp=1, threads=1)
+R.render(load_scene({os.path.join(scenes, scene + '.npz')!r}), spp=1, threads=1)
 t2 = time.perf_counter()
 misses = 0
 for name, mod in list(sys.modules.items()):

@@ -9,8 +9,10 @@ every kernel the render of one shipped scene per variant compiles, with the argu
 (compiler signatures) it compiles them for, in the order the compiler finished them (callees
 first). On a first render (`drt.render.render`, before the scene is prepared) `precompile`
 starts one helper process per core, each compiling every k-th entry into the shared cache, and
-waits for them; the render then loads what they compiled and compiles only what the plan lacks
-(feature kernels outside `shade`: the subsurface walk, moving objects, transparent shadows).
+waits for them; the render then loads what they compiled and compiles only what the plan lacks.
+Kernels outside `shade` that only some scenes need are planned per feature (``PLAN_FEATURES``:
+the subsurface walk, moving objects) and compiled by the helpers when the scene uses them
+(`scene_features`); others (transparent shadows) the render compiles itself.
 
 Measured (first render into an empty cache, whole process, 2 vCPUs): Cornell box 53.6 → 40.6 s,
 textured 128.2 → 72.4 s, volume_fog 166.6 → 124.1 s; the render's own part after the helpers is mostly `shade`, whose body
@@ -53,9 +55,10 @@ POLL_SECONDS = 0.05
 NO_PRECOMPILE_ENV = "DRT_NO_PRECOMPILE"
 
 _RUN_LOCK = threading.Lock()  # one precompile at a time in a process (render threads, farm tasks)
-#: variants whose helpers ran to the end in this process: a render marks its variant compiled
-#: only when it finishes, and renders cancelled before that (viewport edits during a first use)
-#: must not start helpers again, each loading a few hundred cached kernels for nothing
+#: variants (and FEATURE_PREFIX + feature) whose helpers ran to the end in this process: a render
+#: marks its variant compiled only when it finishes, and renders cancelled before that (viewport
+#: edits during a first use) must not start helpers again, each loading a few hundred cached
+#: kernels for nothing
 _PRECOMPILED: set = set()
 
 
@@ -92,13 +95,42 @@ def _resolve(module: str, attr: str):
     return obj if isinstance(obj, LazyKernel) else None
 
 
-def compile_part(variant: str, part: int, parts: int, plan: dict | None = None) -> int:
-    """Compile every ``parts``-th entry of ``variant``'s plan from ``part`` on into the cache
-    (what a helper process runs). Entries that do not resolve or compile are skipped. Returns the
-    number of signatures compiled (or loaded from the cache)."""
+def plan_entries(plan: dict | None, variant: str | None, features=()) -> list:
+    """The entries a render of ``variant`` with ``features`` compiles: the variant's (none for
+    None), then each feature's (stored under ``FEATURE_PREFIX + feature``)."""
+    plan = plan or {}
+    entries = list(plan.get(variant, ()))
+    for feature in features:
+        entries += plan.get(FEATURE_PREFIX + feature, ())
+    return entries
+
+
+def scene_features(scene) -> tuple:
+    """The kernel features ``scene`` (a ``drt.scene.Scene``) uses beyond its variant's plan
+    (``PLAN_FEATURES``): "sss" when a material has a SUBSURFACE lobe, "motion" when the camera
+    or an object moves or a mesh deforms. A wrong guess costs only helper time."""
+    features = []
+    mats = getattr(scene, "materials", None) or []
+    if any(isinstance(lobe, dict) and lobe.get("type") == "SUBSURFACE"
+           for m in mats if isinstance(m, dict) for lobe in (m.get("lobes") or ())):
+        features.append("sss")
+    camera = getattr(scene, "camera", None)
+    moving = getattr(camera, "motion", None) is not None
+    moving = moving or any(getattr(o, "motion", None) is not None for o in getattr(scene, "objects", None) or ())
+    moving = moving or any(getattr(m, "positions_close", None) is not None for m in getattr(scene, "meshes", None) or ())
+    if moving:
+        features.append("motion")
+    return tuple(features)
+
+
+def compile_part(variant: str | None, part: int, parts: int, plan: dict | None = None, features=()) -> int:
+    """Compile every ``parts``-th entry of the plan of ``variant`` and ``features``
+    (`plan_entries`) from ``part`` on into the cache (what a helper process runs). Entries that
+    do not resolve or compile are skipped. Returns the number of signatures compiled (or loaded
+    from the cache)."""
     plan = load_plan() if plan is None else plan
     done = 0
-    for k, (module, attr, sigs) in enumerate((plan or {}).get(variant, ())):
+    for k, (module, attr, sigs) in enumerate(plan_entries(plan, variant, features)):
         if k % parts != part:
             continue
         kern = _resolve(module, attr)
@@ -117,16 +149,17 @@ def compile_part(variant: str, part: int, parts: int, plan: dict | None = None) 
 # __init__ imports bpy) as empty stand-ins, so that importing the core runs only the core.
 _CHILD = (
     "import importlib, json, sys, types\n"
-    "paths, parents, package, variant, part, parts = json.loads(sys.argv[1])\n"
+    "paths, parents, package, variant, part, parts, features = json.loads(sys.argv[1])\n"
     "sys.path[:0] = paths\n"
     "for name, path in parents:\n"
     "    stub = sys.modules[name] = types.ModuleType(name)\n"
     "    stub.__path__ = path\n"
-    "importlib.import_module(package + '.compile_plan').compile_part(variant, part, parts)\n"
+    "importlib.import_module(package + '.compile_plan').compile_part(variant, part, parts, None, features)\n"
 )
 
 
-def _helper_command(python: str, variant: str, part: int, parts: int, package: str = PACKAGE) -> list:
+def _helper_command(python: str, variant: str, part: int, parts: int, package: str = PACKAGE,
+                    features=()) -> list:
     """The command line of helper ``part`` of ``parts``."""
     names = package.split(".")
     parents = []
@@ -136,7 +169,7 @@ def _helper_command(python: str, variant: str, part: int, parts: int, package: s
         if path is not None:
             parents.append((name, list(path)))
     paths = [p for p in sys.path if isinstance(p, str)]
-    return [python, "-c", _CHILD, json.dumps([paths, parents, package, variant, part, parts])]
+    return [python, "-c", _CHILD, json.dumps([paths, parents, package, variant, part, parts, list(features)])]
 
 
 def _python() -> str | None:
@@ -153,36 +186,58 @@ def helper_count() -> int:
     return 0 if n < 2 else min(n, MAX_HELPERS)
 
 
-def precompile(variant: str, cancel=None) -> bool:
+def _feature_mark(feature: str) -> str:
+    """The ``drt.kernels.kernels_compiled`` name of a feature's ready mark."""
+    return f"feature-{feature}"
+
+
+def mark_features_compiled(features) -> None:
+    """Record that a render compiled and cached these features' kernels (as
+    ``drt.kernels.mark_kernels_compiled`` does for a variant)."""
+    from .kernels import mark_kernels_compiled
+
+    for feature in features:
+        mark_kernels_compiled(_feature_mark(feature))
+
+
+def precompile(variant: str, cancel=None, features=()) -> bool:
     """Compile ``variant``'s kernels on every core before a render that would compile them
-    (``drt.kernels.kernels_compiled(variant)`` false), by helper processes into the shared cache.
-    Does nothing when they are compiled, there is no plan, one core, or no Python to run helpers
-    with. Returns False when ``cancel()`` turned True meanwhile (the helpers are stopped)."""
+    (``drt.kernels.kernels_compiled(variant)`` false), by helper processes into the shared cache;
+    and the kernels of the scene's ``features`` (`scene_features`: the subsurface walk, moving
+    objects) that no render has compiled yet (`mark_features_compiled`), alone when the variant
+    is compiled. Does nothing when all are compiled, there is no plan, one core, or no Python to
+    run helpers with. Returns False when ``cancel()`` turned True meanwhile (the helpers are
+    stopped)."""
     from .kernels import kernels_compiled
 
-    if (variant in _PRECOMPILED or kernels_compiled(variant) or not os.environ.get("NUMBA_CACHE_DIR")
-            or os.environ.get(NO_PRECOMPILE_ENV)):
+    def todo():
+        """(the variant, or None when it needs nothing; the features that need compiling)"""
+        v = None if variant in _PRECOMPILED or kernels_compiled(variant) else variant
+        fs = tuple(f for f in features if FEATURE_PREFIX + f not in _PRECOMPILED
+                   and not kernels_compiled(_feature_mark(f)))
+        return v, fs
+
+    if not os.environ.get("NUMBA_CACHE_DIR") or os.environ.get(NO_PRECOMPILE_ENV) or todo() == (None, ()):
         return True
     while not _RUN_LOCK.acquire(timeout=POLL_SECONDS):  # another render's helpers are at work
         if cancel is not None and cancel():
             return False
     helpers = []
     try:
-        if kernels_compiled(variant):
-            return True
+        need_variant, need_features = todo()
         plan = load_plan()
         parts, python = helper_count(), _python()
-        if not plan or variant not in plan or parts == 0 or python is None:
+        if not plan_entries(plan, need_variant, need_features) or parts == 0 or python is None:
             return True
         for part in range(parts):
-            helpers.append(subprocess.Popen(_helper_command(python, variant, part, parts),
+            helpers.append(subprocess.Popen(_helper_command(python, need_variant, part, parts, features=need_features),
                                             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                             stderr=subprocess.DEVNULL))
         while any(h.poll() is None for h in helpers):
             if cancel is not None and cancel():
                 return False
             time.sleep(POLL_SECONDS)
-        _PRECOMPILED.add(variant)
+        _PRECOMPILED.update([FEATURE_PREFIX + f for f in need_features] + ([] if need_variant is None else [variant]))
         return True
     except OSError:  # could not start a helper: the render compiles by itself
         return True
@@ -198,15 +253,36 @@ def precompile(variant: str, cancel=None) -> bool:
 
 #: the shipped scenes each variant's plan is recorded from (blend_scenes/<name>.npz): one plain
 #: scene per variant, so that the plan holds what every render of the variant compiles.
-#: Feature kernels outside `shade` (the subsurface walk, moving objects, transparent shadows)
-#: are left out: recorded from all shipped scenes the plain plan held 382 kernels against the
-#: Cornell box's 214, and helpers compiling 80 % more than a plain render needs gained nothing
-#: on two cores. A scene with such features compiles them in its own process, as before.
+#: Feature kernels outside `shade` are planned apart (``PLAN_FEATURES``): recorded from all
+#: shipped scenes the plain plan held 382 kernels against the Cornell box's 214, and helpers
+#: compiling 80 % more than a plain render needs gained nothing on two cores.
 PLAN_SCENES = {
     "": ("cornell_box",),
     "programs": ("textured",),
     "media": ("volume_fog",),
 }
+
+#: features whose kernels a render compiles only when its scene uses them (`scene_features`),
+#: each recorded from one plain shipped scene that has it: the entries that scene compiles
+#: beyond the plain plan, stored under FEATURE_PREFIX + feature
+PLAN_FEATURES = {
+    "sss": "sss_head",
+    "motion": "motion_blur",
+}
+FEATURE_PREFIX = "+"
+
+
+def _beyond(entries: list, base: list) -> list:
+    """``entries`` without the signatures ``base`` holds for the same kernel."""
+    known = {}
+    for module, attr, sigs in base:
+        known.setdefault((module, attr), []).extend(sigs)
+    out = []
+    for module, attr, sigs in entries:
+        new = [s for s in sigs if s not in known.get((module, attr), ())]
+        if new:
+            out.append((module, attr, new))
+    return out
 
 
 def record_variant(variant: str, scenes: list[str]) -> list:
@@ -252,9 +328,14 @@ def _main(argv=None) -> int:
     ap.add_argument("--out", default=PLAN_FILE)
     ap.add_argument("--record", nargs=2, metavar=("VARIANT", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if args.record:  # a child: one variant, into the empty cache its parent chose
-        variant = "" if args.record[0] == "plain" else args.record[0]
-        scenes = [os.path.join(args.scenes, f"{s}.npz") for s in PLAN_SCENES[variant]]
+    if args.record:  # a child: one variant or feature, into the empty cache its parent chose
+        label = args.record[0]
+        if label.startswith(FEATURE_PREFIX):
+            variant, names = "", (PLAN_FEATURES[label[len(FEATURE_PREFIX):]],)
+        else:
+            variant = "" if label == "plain" else label
+            names = PLAN_SCENES[variant]
+        scenes = [os.path.join(args.scenes, f"{s}.npz") for s in names]
         with open(args.record[1], "wb") as f:
             pickle.dump(record_variant(variant, scenes), f)
         return 0
@@ -262,7 +343,7 @@ def _main(argv=None) -> int:
 
     variants = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for variant in PLAN_SCENES:
+        for variant in [*PLAN_SCENES, *(FEATURE_PREFIX + f for f in PLAN_FEATURES)]:
             label = variant or "plain"
             cache = os.path.join(tmp, label)
             os.makedirs(cache)
@@ -275,6 +356,8 @@ def _main(argv=None) -> int:
                             "--record", label, out], env=env, check=True)
             with open(out, "rb") as f:
                 variants[variant] = pickle.load(f)
+            if variant.startswith(FEATURE_PREFIX):  # only what the plain plan lacks
+                variants[variant] = _beyond(variants[variant], variants[""])
             shutil.rmtree(cache, ignore_errors=True)
             print(f"{label}: {len(variants[variant])} kernels, "
                   f"{sum(len(s) for _, _, s in variants[variant])} signatures, {time.perf_counter() - t0:.0f} s")

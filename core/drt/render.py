@@ -31,7 +31,7 @@ from .film import Film, luminance
 from .geometry import build_geometry
 from .integrator import Integrator
 from .kernels import mark_kernels_compiled, scene_kernel_variant
-from .compile_plan import precompile
+from .compile_plan import mark_features_compiled, precompile, scene_features
 from .lights import EmissiveTriangles, LightSet
 from .materials import MaterialTable
 from .sampling.pixel_filter import PixelFilter
@@ -420,7 +420,7 @@ def render(
     threads = max(1, int(threads or os.cpu_count() or 1))
     # the first render of a kind of scene compiles the kernels, on every core (compile_plan);
     # a cancel meanwhile (or while an earlier render's batch still compiles) returns at once
-    if not (settle_abandoned_batches(cancel) and precompile(scene_kernel_variant(scene), cancel)):
+    if not (settle_abandoned_batches(cancel) and precompile(scene_kernel_variant(scene), cancel, scene_features(scene))):
         film, _ = _film_for(scene, xs_all, ys_all, tile)
         film.stats = RenderStats(samples_total=count, threads=threads, cancelled=True,
                                  seconds=time.perf_counter() - t0)
@@ -560,6 +560,9 @@ def render(
     stats.cancelled = cancelled
     if stats.samples_done:
         mark_kernels_compiled(ctx.integrator.kernel_variant)
+        integ = ctx.integrator
+        mark_features_compiled(f for f in scene_features(scene)
+                               if (f == "sss" and integ.sss is not None and integ.sss.walks) or (f == "motion" and integ.motion))
     stats.seconds = time.perf_counter() - t0
     stats.rays, stats.embree_seconds = workers.counters()
     stats.nan_samples = film.nan_samples
