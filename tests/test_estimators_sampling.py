@@ -113,6 +113,19 @@ def test_image_is_bit_identical_for_any_thread_count_and_batch_cut():
     assert np.array_equal(one.variance, three.variance) and np.array_equal(one.depth, three.depth)
 
 
+def test_an_absurd_thread_count_is_cut_to_a_few_per_core(monkeypatch):
+    """``--threads 999`` on a small machine: each worker thread holds a batch's path arrays
+    (~18 MB), so the render runs at most MAX_THREADS_PER_CORE per core, with the same image."""
+    from drt import render as render_module
+
+    monkeypatch.setattr(render_module.os, "cpu_count", lambda: 2)
+    h, a = cornell_box(64, 64, 4)
+    scene = scene_from_dict(h, a)
+    many = render(scene, spp=4, threads=999, seed=3)
+    assert many.stats.threads == render_module.MAX_THREADS_PER_CORE * 2
+    assert np.array_equal(many.combined, render(scene, spp=4, threads=2, seed=3).combined)
+
+
 def test_batches_reuse_returned_output_buffers_without_changing_the_image(monkeypatch):
     """The render loop gives each batch's output arrays back once the film has added them
     (``SampleBatch.release``) and later batches write into them: the image equals, to the bit,

@@ -92,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("-o", "--output", required=True, help="output EXR path")
     r.add_argument("--spp", type=_positive, help="samples per pixel (default: the scene's)")
     r.add_argument("--seed", type=_non_negative, help="random seed (default: the scene's)")
-    r.add_argument("--threads", type=_positive, help="worker threads (default: all cores)")
+    r.add_argument("--threads", type=_positive, help="worker threads (default: all cores; at most 4 per core)")
     r.add_argument("--resolution", type=_resolution, help="override WIDTHxHEIGHT (keeps the camera's framing)")
     r.add_argument("--sampler", **_choice("SOBOL", "STRATIFIED", "RANDOM"),
                    help="how sample positions are spread over pixel, lens, time and lights (default sobol)")

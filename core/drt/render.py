@@ -49,6 +49,11 @@ MIN_BATCH_PATHS = 1 << 12
 #: how often cancel() is polled while a batch runs: a viewport edit waits at most this long
 #: (plus the batches in flight) before its new image starts; 100 wake-ups/s cost nothing
 CANCEL_POLL_SECONDS = 0.01
+#: worker threads per core at most: the kernels are CPU-bound, so threads beyond the cores only
+#: cost memory (each holds a batch's path arrays, ~18 MB: a 512² render took 272 MB with 2
+#: threads and 819 MB with 32 on 2 cores, and ran slower); a larger request (``--threads 999``)
+#: is cut to this many per core
+MAX_THREADS_PER_CORE = 4
 #: how long a cancelled render waits for its batches already running before it leaves them to
 #: finish on their own: a batch takes well under this, but the first batch of a fresh install
 #: compiles the kernels (a minute or more), and a cancel must not wait for that
@@ -417,7 +422,7 @@ def render(
     if sample_offset < 0 or count < 0 or sample_offset + count > spp:
         raise SceneError("sample range", f"[{sample_offset}, {sample_offset + count}) is not within [0, {spp})")
     xs_all, ys_all = _pixel_region(scene, tile)
-    threads = max(1, int(threads or os.cpu_count() or 1))
+    threads = min(max(1, int(threads or os.cpu_count() or 1)), MAX_THREADS_PER_CORE * (os.cpu_count() or 1))
     # the first render of a kind of scene compiles the kernels, on every core (compile_plan);
     # a cancel meanwhile (or while an earlier render's batch still compiles) returns at once
     if not (settle_abandoned_batches(cancel) and precompile(scene_kernel_variant(scene), cancel, scene_features(scene))):
