@@ -25,6 +25,12 @@ subject, lighting only its rim) the weak unoccluded ones must still be found oft
 beside a 400 W area light got 3.5–5.5 % of the samples at such points and came back ×20–30
 (sss_head's fireflies; Cycles's light tree gives it 33–70 % there, docs/lights.md).
 
+At a matte point (kg = kt = 0: only diffuse-class lobes, shaded about ``n``) a light whose
+whole bounding cone lies below the horizon adds exactly nothing, so it gets no share at all
+(``reflect_only``; Cycles's light tree gives such lights no importance either). Elsewhere every
+light keeps its even share: glossy lobes may be shaded about another normal (the
+valid-reflection or coat normal) whose horizon lies lower.
+
 Directions are world space; ``n`` is the shading normal on wo's side, ``wo`` points from the
 surface toward the viewer (docs/architecture.md).
 
@@ -147,6 +153,20 @@ def bsdf_factor(to_light, radius2, hint):
 
 
 @scalar_kernel
+def reflect_only(hint, guided):
+    """The hint's lobes only reflect about its normal (kg = kt = 0: diffuse, sheen, velvet), so
+    a light whose whole bounding cone lies below that normal's horizon contributes exactly
+    nothing at the point: not even the defensive share goes to it."""
+    return guided and hint[3] == 0.0 and hint[5] == 0.0
+
+
+@scalar_kernel
+def reaches(w, g, strict):
+    """Does a strategy with weights (E_j, E_j·B_j) take part in the defensive share?"""
+    return w > 0.0 and (g > 0.0 or not strict)
+
+
+@scalar_kernel
 def hint_known(hint):
     """The hint says something about the material (kd + kg + kt > 0): BSDF-aware selection."""
     return hint[2] + hint[3] + hint[5] > 0.0
@@ -201,13 +221,14 @@ def selection_totals(ld, p, hint, guided):
     pw = tw = pg = tg = 0.0
     bw = bg = False
     reaching = 0
+    strict = reflect_only(hint, guided)
     for j in range(ld.n_strategies):
         w, rel = distance_weight(ld, j, p)
         pw, tw, bw = _accumulate(pw, tw, bw, w)
-        if w > 0.0:
+        g = w * strategy_bsdf_factor(ld, j, rel, hint) if guided else 0.0
+        if reaches(w, g, strict):
             reaching += 1
         if guided:
-            g = w * strategy_bsdf_factor(ld, j, rel, hint)
             pg, tg, bg = _accumulate(pg, tg, bg, g)
     return pw, tw, pw > 0.0 and not bw, pg, tg, pg > 0.0 and not bg, reaching
 
@@ -217,7 +238,7 @@ def strategy_prob(ld, j, p, hint, guided, totals):
     """Probability of strategy j at p given `selection_totals` (per-point selection)."""
     w, rel = distance_weight(ld, j, p)
     g = w * strategy_bsdf_factor(ld, j, rel, hint) if guided and totals[5] else 0.0
-    return _prob_given(ld, j, w, g, guided, totals)
+    return _prob_given(ld, j, w, g, guided, totals, reflect_only(hint, guided))
 
 
 @scalar_kernel
@@ -282,7 +303,7 @@ def _weights(ld, j, p, hint, guided):
 
 
 @scalar_kernel
-def _prob_given(ld, j, w, g, guided, totals):
+def _prob_given(ld, j, w, g, guided, totals, strict):
     """`strategy_prob` from strategy j's weights (w, g) already computed."""
     pw, tw, ok_w, pg, tg, ok_g, reaching = totals
     if ok_w:
@@ -293,7 +314,7 @@ def _prob_given(ld, j, w, g, guided, totals):
         return dist_pmf
     guided_pmf = (min(g, _FMAX) / pg) / tg if ok_g else dist_pmf
     if ok_w and reaching > 0:
-        even = (1.0 / reaching) if w > 0.0 else 0.0
+        even = (1.0 / reaching) if reaches(w, g, strict) else 0.0
     else:
         even = dist_pmf
     return _GUIDED_SHARE * guided_pmf + DEFENSIVE_SHARE * even
@@ -327,9 +348,10 @@ def _select_cached(ld, p, hint, u, guided):
     pw = tw = pg = tg = 0.0
     bw = bg = False
     reaching = 0
+    strict = reflect_only(hint, guided)
     for j in range(k):
         pw, tw, bw = _accumulate(pw, tw, bw, W[j])
-        if W[j] > 0.0:
+        if reaches(W[j], G[j], strict):
             reaching += 1
         if guided:
             pg, tg, bg = _accumulate(pg, tg, bg, G[j])
@@ -337,7 +359,7 @@ def _select_cached(ld, p, hint, u, guided):
     c = 0.0
     last, last_prob, last_top = -1, 0.0, 0.0
     for j in range(k):
-        pj = _prob_given(ld, j, W[j], G[j], guided, totals)
+        pj = _prob_given(ld, j, W[j], G[j], guided, totals, strict)
         c += pj
         cj = 1.0 if j == k - 1 else c
         if u < cj or j == k - 1:
