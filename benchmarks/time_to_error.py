@@ -1,7 +1,7 @@
 """DRT vs Cycles: time to equal error on the shipped scenes, whole processes, same run.
 
     python benchmarks/time_to_error.py [SCENE.npz ...] [--threads 2] [--ref-spp 1024]
-                                       [--drt-spp 8,16,32,64,128,256] [--repeat 1]
+                                       [--drt-spp 8,16,32,64,128,256] [--repeat 1] [--seeds 1]
                                        [--out bench_out/tte]
 
 For each scene (default: every ``blend_scenes/*.npz`` with a ``.blend`` beside it):
@@ -19,6 +19,12 @@ For each scene (default: every ``blend_scenes/*.npz`` with a ``.blend`` beside i
 With ``--repeat N`` every timed process (Cycles at 64 spp, each DRT run) runs N times and the
 fastest counts, both engines alike: on a shared machine one slow run (another job waking up)
 otherwise decides a scene's ratio. Images do not depend on the repeat (fixed seeds).
+
+With ``--seeds K`` every timed process runs once per seed (K seeds × N repeats, the fastest
+counts) and the error of each engine at each sample count is the mean relMSE of its K images.
+One image's relMSE is itself a noisy number: on sss_head (rare bright paths) single seeds at 64
+spp spread ±15 % around their mean, so with one seed per engine a scene's ratio moved by as much
+between runs. The reference stays one Cycles image (its noise adds to both engines alike).
 
 Prints one row per scene and the ratio DRT time / Cycles time (≤ 1: DRT is faster), for whole
 processes and for the render alone (Cycles: ``bpy.ops.render.render``; DRT: the time its CLI
@@ -77,14 +83,16 @@ def cycles_run(blend: str, spp: int, seed: int, threads: int, width: int, height
     return wall, render_s, _read_rgba(out)
 
 
-def drt_run(scene: str, spp: int, threads: int, out: str):
-    """One whole DRT process (the CLI): (wall seconds, render-only seconds, image)."""
+def drt_run(scene: str, spp: int, seed, threads: int, out: str):
+    """One whole DRT process (the CLI): (wall seconds, render-only seconds, image); seed None:
+    the scene's own."""
     import numpy as np
 
     from drt.exr import read_exr
 
+    seed_args = [] if seed is None else ["--seed", str(seed)]
     wall, proc = _wall([sys.executable, "-m", "drt", "render", scene, "-o", out, "--spp", str(spp),
-                        "--threads", str(threads)])
+                        "--threads", str(threads)] + seed_args)
     if proc.returncode != 0:
         raise RuntimeError(f"DRT failed on {scene}: {proc.stderr.strip()[-800:]}")
     ch, _ = read_exr(out)
@@ -93,15 +101,18 @@ def drt_run(scene: str, spp: int, threads: int, out: str):
     return wall, render_s, np.stack([ch[c] for c in "RGBA"], axis=-1).astype(np.float64)
 
 
-def _fastest(repeat: int, run, *args):
-    """``run(*args)`` (→ wall s, render s, image) ``repeat`` times: the fastest wall and render
-    times (each the minimum over the runs) and the image of the last run."""
-    walls, renders = [], []
-    for _ in range(max(1, repeat)):
-        wall, render_s, image = run(*args)
-        walls.append(wall)
-        renders.append(render_s)
-    return min(walls), min(renders), image
+def _fastest(repeat: int, seeds, run, *args):
+    """``run(seed, *args)`` (→ wall s, render s, image) ``repeat`` times for each of ``seeds``:
+    the fastest wall and render times (each the minimum over all runs) and one image per seed
+    (its last run's)."""
+    walls, renders, images = [], [], []
+    for seed in seeds:
+        for _ in range(max(1, repeat)):
+            wall, render_s, image = run(seed, *args)
+            walls.append(wall)
+            renders.append(render_s)
+        images.append(image)
+    return min(walls), min(renders), images
 
 
 def main(argv=None) -> int:
@@ -112,6 +123,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cycles-spp", type=int, default=64)
     ap.add_argument("--drt-spp", default="8,16,32,64,128,256")
     ap.add_argument("--repeat", type=int, default=1, help="runs per timed process; the fastest counts")
+    ap.add_argument("--seeds", type=int, default=1,
+                    help="seeds per timed process: errors are the mean relMSE over them")
     ap.add_argument("--out", default=os.path.join("bench_out", "time_to_error"))
     args = ap.parse_args(argv)
     import numpy as np
@@ -139,14 +152,17 @@ def main(argv=None) -> int:
         w, h = r.width, r.height
         base = os.path.join(args.out, name)
         _, _, ref = cycles_run(blend, args.ref_spp, 7, args.threads, w, h, base + "_ref.exr")
-        c_wall, c_render, c_img = _fastest(args.repeat, cycles_run, blend, args.cycles_spp, 0, args.threads, w, h,
-                                           base + "_cycles.exr")
-        target = rel_mse(c_img[..., :3], ref[..., :3])
+        c_wall, c_render, c_imgs = _fastest(
+            args.repeat, range(args.seeds),
+            lambda seed, *a: cycles_run(blend, args.cycles_spp, seed, *a, base + f"_cycles_s{seed}.exr"),
+            args.threads, w, h)
+        target = float(np.mean([rel_mse(c[..., :3], ref[..., :3]) for c in c_imgs]))
         secs, render_secs, errs, runs = [], [], [], []
         for spp in spp_list:
-            d_wall, d_render, d_img = _fastest(args.repeat, drt_run, scene_path, spp, args.threads,
-                                               base + f"_drt_{spp}.exr")
-            e = rel_mse(np.asarray(d_img, dtype=np.float64)[..., :3], ref[..., :3])
+            d_wall, d_render, d_imgs = _fastest(
+                args.repeat, [None] + [1000 + k for k in range(1, args.seeds)],
+                lambda seed, *a: drt_run(scene_path, spp, seed, *a, base + f"_drt_{spp}_s{seed}.exr"), args.threads)
+            e = float(np.mean([rel_mse(np.asarray(d, dtype=np.float64)[..., :3], ref[..., :3]) for d in d_imgs]))
             secs.append(d_wall)
             render_secs.append(d_render)
             errs.append(e)
@@ -165,7 +181,8 @@ def main(argv=None) -> int:
         print(f"{name:16s} {w:4d}x{h:<4d} {target:9.2e} {c_wall:9.2f} {c_render:9.2f} {mark}{(t or float('nan')):8.2f} "
               f"{(t_r or float('nan')):9.2f} {ratio:11.2f} {render_ratio:11.2f}  " + "; ".join(runs), flush=True)
     with open(os.path.join(args.out, "time_to_error.json"), "w") as f:
-        json.dump(dict(threads=args.threads, ref_spp=args.ref_spp, cycles_spp=args.cycles_spp, rows=rows), f, indent=1)
+        json.dump(dict(threads=args.threads, ref_spp=args.ref_spp, cycles_spp=args.cycles_spp, seeds=args.seeds,
+                       repeat=args.repeat, rows=rows), f, indent=1)
     return 0
 
 
