@@ -125,7 +125,9 @@ def main(argv=None) -> int:
     if not args.child:
         # a cold compile into an empty cache, so that numba generates (and we see) the object code
         with tempfile.TemporaryDirectory(prefix="drt-profile-") as cache:
-            env = dict(os.environ, DRT_CACHE_DIR=cache)
+            # and in this process: kernels the precompile helpers compiled would be loaded from
+            # the cache as object code the capture never sees, and stay unnamed
+            env = dict(os.environ, DRT_CACHE_DIR=cache, DRT_NO_PRECOMPILE="1")
             env.pop("NUMBA_CACHE_DIR", None)
             return subprocess.call([sys.executable, os.path.abspath(__file__), *(argv or sys.argv[1:]), "--child"],
                                    env=env)
