@@ -155,19 +155,19 @@ def test_a_weak_light_keeps_an_even_share_beside_a_strong_one():
 
 
 def test_lights_below_the_horizon_lose_to_lights_above():
+    from drt.lights.selection import DEFENSIVE_SHARE, KT_FLOOR
     ls = LightSet([sphere(0, 0, 2.0), sphere(0, 0, -2.0)])
     hint = _glossy_hint(1, roughness=1.0, kd=0.8)
+    hint.kt[:] = KT_FLOOR  # (else the light below gets nothing at all: see the next test)
     pmf = ls.selection_pmf(np.zeros((1, 3)), hint)
-    from drt.lights.selection import DEFENSIVE_SHARE
     assert np.isclose(pmf[0, 1], DEFENSIVE_SHARE * 0.5)  # only the defensive share is left
 
 
 def test_a_diffuse_point_gives_no_samples_to_a_light_below_its_horizon():
-    """A matte point (diffuse lobes only: kg = kt = 0) cannot reflect a light whose whole
-    bounding cone lies below its horizon, so that light gets nothing, not even the defensive
-    share (sss_head's SSS exits facing the camera spent 1/8 of their light samples on the back
-    light behind the head). A light straddling the horizon keeps its share, and a glossy point
-    keeps the defensive share for every light (its lobes may be shaded about another normal)."""
+    """A point that only reflects (kt = 0), all its lobes about its normal, cannot reflect a light
+    whose whole bounding cone lies below its horizon, so that light gets nothing, not even the
+    defensive share (sss_head's SSS exits facing the camera spent 1/8 of their light samples on
+    the back light behind the head). A light straddling the horizon keeps its share."""
     from drt.lights.selection import DEFENSIVE_SHARE
     above, below, straddling = sphere(0.3, 0, 2.0), sphere(0, 0.2, -2.0), sphere(2.0, 0, 0.05, r=0.2)
     matte = _glossy_hint(1, kd=0.8)
@@ -179,54 +179,54 @@ def test_a_diffuse_point_gives_no_samples_to_a_light_below_its_horizon():
     pmf = LightSet([above, below, straddling]).selection_pmf(p, matte)
     assert pmf[0, 1] == 0.0 and np.isclose(pmf.sum(), 1.0)
     assert pmf[0, 2] >= 0.5 * DEFENSIVE_SHARE * (1 - 1e-12)
-    glossy = _glossy_hint(1, roughness=1.0, kd=0.8)
-    assert np.isclose(LightSet([above, below]).selection_pmf(p, glossy)[0, 1], 0.5 * DEFENSIVE_SHARE)
+    glossy = _glossy_hint(1, roughness=1.0, kd=0.8)  # glossy lobes about n reflect nothing below it either
+    assert LightSet([above, below]).selection_pmf(p, glossy)[0, 1] == 0.0
 
 
-def test_diffuse_light_sampling_stays_unbiased_with_lights_about_the_horizon():
-    """Matte points tilted every way under lights above, below and across their horizons:
-    light sampling (which now skips the lights wholly below) agrees with BSDF sampling within 4
-    standard errors at every point."""
+@pytest.mark.parametrize("lobes", ["matte", "glossy"])
+def test_light_sampling_stays_unbiased_with_lights_about_the_horizon(lobes):
+    """Matte and glossy points tilted every way under lights above, below and across their
+    horizons: light sampling (which now skips the lights wholly below) agrees with BSDF
+    sampling within 4 standard errors at every point."""
     from drt.estimators import ShadingPoints
-    from failure_scenes import DIFFUSE, PointSetup, _materials
+    from failure_scenes import DIFFUSE, PointSetup, _materials, glossy
     lights = LightSet([sphere(0.3, 0, 1.5, r=0.3, power=40.0), sphere(0, 0.2, -1.5, r=0.3, power=40.0),
                        sphere(1.5, 0, 0.1, r=0.4, power=40.0)])
     tilt = np.radians([0.0, 30.0, 60.0, 85.0, 100.0, 150.0])
     n = np.stack([np.sin(tilt), np.zeros_like(tilt), np.cos(tilt)], axis=1)
     wo = np.stack([np.sin(tilt + 0.2), np.zeros_like(tilt), np.cos(tilt + 0.2)], axis=1)
-    setup = PointSetup(lights, _materials(DIFFUSE), ShadingPoints(np.zeros((len(tilt), 3)), n, wo, 0))
+    material = _materials(DIFFUSE if lobes == "matte" else DIFFUSE + glossy(0.4))
+    setup = PointSetup(lights, material, ShadingPoints(np.zeros((len(tilt), 3)), n, wo, 0))
     x = {m: setup.direct().direct_samples(m, setup.points, 16384, seed=5) @ LUM for m in ("LIGHT", "BSDF")}
     se = np.hypot(x["LIGHT"].std(axis=1), x["BSDF"].std(axis=1)) / math.sqrt(16384)
     assert np.all(x["BSDF"].mean(axis=1) > 0)
     assert np.all(np.abs(x["LIGHT"].mean(axis=1) - x["BSDF"].mean(axis=1)) < 4 * se)
 
 
-def test_the_summary_says_matte_only_for_lobes_about_the_shading_normal():
-    """kg = kt = 0 in the light-selection summary is a promise (nothing below the shading
-    normal's horizon is lit), kept when a lobe is shaded about another normal although the
-    summary's weights would say matte — a sheen about a smooth (delta, so unsummarised)
-    coat's normal: such a material gets kt = KT_FLOOR instead."""
+def test_a_tilted_point_keeps_the_defensive_share_below_its_horizon():
+    """The hint of a point where a lobe is shaded about another normal than the hint's (a
+    smooth mesh's silhouette, a valid-reflection or coat normal: ``path_stages.hint_code``)
+    carries kt = KT_FLOOR, so lights below the horizon keep their even share there; the hint of
+    any other point carries the material's own kt."""
+    from drt.lights.selection import DEFENSIVE_SHARE, KT_FLOOR
     from drt.materials import MaterialTable
-    from drt.materials.table import KT_FLOOR
-    mats = MaterialTable.from_scene([
-        {"name": "matte", "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}], "emission": [0, 0, 0]},
-        {"name": "sheen over a mirror coat", "lobes": [
-            {"type": "SHEEN", "color": [0.5] * 3, "roughness": 0.5, "layer_weight": 0.5, "frame": "SHEEN"},
-            {"type": "DIELECTRIC_SPECULAR", "color": [1] * 3, "roughness": 0.0, "ior": 1.5, "layer": 0,
-             "layer_weight": 1.0, "frame": "COAT"},
-            {"type": "DIFFUSE", "color": [0.8] * 3, "layer": 1}], "emission": [0, 0, 0]},
-        {"name": "glossy", "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]},
-                                     {"type": "GLOSSY", "color": [0.5, 0.5, 0.5], "roughness": 0.5}],
-         "emission": [0, 0, 0]},
-        {"name": "translucent", "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]},
-                                          {"type": "TRANSLUCENT", "color": [0.3, 0.3, 0.3]}],
-         "emission": [0, 0, 0]},
-    ])
-    kd, kg, alpha, kt = mats.lobe_summary(np.arange(4))
-    assert kd[0] > 0 and kg[0] == 0 and kt[0] == 0
-    assert kg[1] == 0 and kt[1] == KT_FLOOR
-    assert kg[2] > 0 and kt[2] == 0
-    assert kt[3] > 0.1
+    from drt.path_stages import HINT_TILTED, hint_code, material_hint
+    md = MaterialTable.from_scene([
+        {"name": "glossy", "lobes": [{"type": "DIFFUSE", "color": [0.8] * 3},
+                                     {"type": "GLOSSY", "color": [0.5] * 3, "roughness": 0.5}], "emission": [0, 0, 0]},
+        {"name": "translucent", "lobes": [{"type": "DIFFUSE", "color": [0.8] * 3},
+                                          {"type": "TRANSLUCENT", "color": [0.3] * 3}], "emission": [0, 0, 0]},
+    ]).data
+    n, wo = (0.0, 0.0, 1.0), (0.0, 0.6, 0.8)
+    assert hint_code(0, False) == 0 and hint_code(0, True) == HINT_TILTED and hint_code(-1, True) == -1
+    assert material_hint(md, hint_code(0, False), n, wo)[5] == 0.0
+    assert material_hint(md, hint_code(0, True), n, wo)[5] == KT_FLOOR
+    assert material_hint(md, hint_code(1, True), n, wo)[5] == material_hint(md, 1, n, wo)[5] > 0.1
+    assert material_hint(md, -1, n, wo)[2:] == (0.0, 0.0, 0.0, 0.0)
+    ls = LightSet([sphere(0.3, 0, 2.0), sphere(0, 0.2, -2.0)])
+    tilted = _glossy_hint(1, roughness=1.0, kd=0.8)
+    tilted.kt[:] = KT_FLOOR
+    assert np.isclose(ls.selection_pmf(np.zeros((1, 3)), tilted)[0, 1], 0.5 * DEFENSIVE_SHARE)
 
 
 def test_guided_sample_and_intersect_pdfs_agree():

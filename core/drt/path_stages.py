@@ -43,6 +43,7 @@ from .camera import camera_ray
 from .kernels import inline_kernel, kernel
 from .kernels.vec3 import add, build_frame, dot, load, mul, neg, normalize, scale, store, sub, to_local, to_world
 from .lights.common import I_VISIBLE_CAMERA
+from .lights.selection import KT_FLOOR
 from .lights import (emissive_pdf, light_sample_full, shape_emission, shape_intersect, sun_emission,
                      sun_in_cone, world_pdf, world_radiance)
 from .lights.world_map import world_radiance_at
@@ -95,7 +96,8 @@ Paths = namedtuple("Paths", [
     "o", "d", "tmax", "tau",              # rays (n, 3), (n, 3), (n,), (n,) shutter fraction
     "throughput",                         # (n, 3)
     "prev_pdf", "prev_delta",             # BSDF pdf of the ray / it left the camera or a delta lobe
-    "prev_p", "prev_n", "prev_wo", "prev_mat",  # the vertex the ray left (MIS pdfs, selection hint)
+    "prev_p", "prev_n", "prev_wo", "prev_mat",  # the vertex the ray left (MIS pdfs, selection hint;
+                                                # prev_mat: its hint_code)
     "counts",                             # (n, 4) int32: bounces, diffuse, glossy, transmission
     "terminate",                          # (n,) bool: collect emission at the next hit, then stop
     "slot", "pixel", "index",             # batch row, flat pixel id, sample number
@@ -247,13 +249,35 @@ def world_emission(ld, pd, regs, point, d, flags, counts, camera):
     return world_radiance(ld, d)
 
 
+#: added to a hint's material code (``prev_mat``) when a lobe of that point may reflect light
+#: from below ``n``'s horizon (``hint_code``)
+HINT_TILTED = 1 << 32
+
+
 @inline_kernel
-def material_hint(md, mat, n, wo):
-    """The light-selection hint of a shading point (all zero: nothing known, e.g. camera rays)."""
-    if mat < 0:
+def hint_code(mat, tilted):
+    """The material code of a shading point for ``material_hint``: the material, + HINT_TILTED
+    when not all of its lobes are shaded about the hint's normal n_wo — at a smooth mesh's
+    silhouette (wo below the shading normal: there a glossy lobe reflects below n_wo) or where
+    a valid-reflection or coat normal differs from it. Light selection then keeps the defensive
+    share for lights below the horizon."""
+    return mat + HINT_TILTED if tilted and mat >= 0 else mat
+
+
+@inline_kernel
+def material_hint(md, code, n, wo):
+    """The light-selection hint of a shading point (all zero: nothing known, e.g. camera rays)
+    from its ``hint_code``. A tilted point's kt is at least ``KT_FLOOR``: kt = 0 tells the
+    selection that nothing below n's horizon is lit (``drt.lights.selection.reflect_only``)."""
+    if code < 0:
         return ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
+    mat = code
+    kt_min = 0.0
+    if code >= HINT_TILTED:
+        mat = code - HINT_TILTED
+        kt_min = KT_FLOOR
     s = md.summary[mat]
-    return (n, wo, s[0], s[1], s[2], s[3])
+    return (n, wo, s[0], s[1], s[2], max(s[3], kt_min))
 
 
 @inline_kernel
@@ -694,10 +718,11 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # lights are sampled over N''s hemisphere; transmitted light stays reachable by BSDF
         # sampling, whose MIS weight is then 1
         n_wo = ns if front > 0.0 else neg(ns)
+        code = hint_code(mat, silhouette or nv_local[2] < 1.0 or nc_local[2] < 1.0)
 
         # --- next-event estimation
         if direct != DIRECT_BSDF and ld.n_strategies > 0 and not md.delta_only[mat]:
-            hint = material_hint(md, mat, n_wo, wo)
+            hint = material_hint(md, code, n_wo, wo)
             # (light position, selection): one jointly stratified 3-D sample, as Cycles's
             ul0, ul1, u_light_select = sample_3d(sd, pixel, idx, base + 1)
             wi, dist, le, lpdf, l_delta, l_valid, strategy, l_tri = light_sample_full(
@@ -835,7 +860,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         store(paths.prev_p, j, p)
         store(paths.prev_n, j, n_wo)
         store(paths.prev_wo, j, wo)
-        paths.prev_mat[j] = mat
+        paths.prev_mat[j] = code
         paths.prev_flags[j] = ((RAY_SINGULAR if b_delta else (RAY_DIFFUSE if kind == LOBE_DIFFUSE or kind == LOBE_TRANSLUCENT
                                                               else RAY_GLOSSY))
                                | (0 if refl_sh else RAY_TRANSMIT))

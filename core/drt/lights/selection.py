@@ -25,11 +25,11 @@ subject, lighting only its rim) the weak unoccluded ones must still be found oft
 beside a 400 W area light got 3.5–5.5 % of the samples at such points and came back ×20–30
 (sss_head's fireflies; Cycles's light tree gives it 33–70 % there, docs/lights.md).
 
-At a matte point (kg = kt = 0: only diffuse-class lobes, shaded about ``n``) a light whose
+At a point that only reflects (kt = 0), with every lobe shaded about ``n``, a light whose
 whole bounding cone lies below the horizon adds exactly nothing, so it gets no share at all
-(``reflect_only``; Cycles's light tree gives such lights no importance either). Elsewhere every
-light keeps its even share: glossy lobes may be shaded about another normal (the
-valid-reflection or coat normal) whose horizon lies lower.
+(``reflect_only``; Cycles's light tree gives such lights no importance either). Where a lobe is
+shaded about another normal (a smooth mesh's silhouette, a valid-reflection or coat normal)
+the hint carries kt = ``KT_FLOOR`` and every light keeps its even share.
 
 Directions are world space; ``n`` is the shading normal on wo's side, ``wo`` points from the
 surface toward the viewer (docs/architecture.md).
@@ -51,6 +51,11 @@ from .common import scalar_kernel
 from ..kernels.vec3 import dot, sub
 from .common import S_CENTRE, S_FACING, S_IS_SUN, S_IS_WORLD, S_LOCAL, S_ONE_SIDED, S_RADIUS2, S_SCALE, S_SUN_DIR, S_SUN_SIN2  # noqa: F401 (table columns)
 from ..kernels.vec3 import load_col3
+
+#: a hint's kt when the point has no transmission but a lobe shaded about a normal other than the
+#: hint's (a silhouette, a valid-reflection or coat normal): far below any real weight, so it
+#: moves no choice, but nonzero, so that lights below n's horizon keep their defensive share
+KT_FLOOR = 1e-9
 
 #: share of the BSDF-aware selection spread evenly over the lights reaching the point (robustness
 #: to a bad guess and to occlusion, which no estimate sees)
@@ -154,10 +159,11 @@ def bsdf_factor(to_light, radius2, hint):
 
 @scalar_kernel
 def reflect_only(hint, guided):
-    """The hint's lobes only reflect about its normal (kg = kt = 0: diffuse, sheen, velvet), so
-    a light whose whole bounding cone lies below that normal's horizon contributes exactly
-    nothing at the point: not even the defensive share goes to it."""
-    return guided and hint[3] == 0.0 and hint[5] == 0.0
+    """The hint's lobes only reflect, about its normal n (kt = 0; a point where some lobe is
+    shaded about another normal has kt ≥ KT_FLOOR, ``drt.path_stages.material_hint``), so a
+    light whose whole bounding cone lies below n's horizon contributes exactly nothing at the
+    point: not even the defensive share goes to it."""
+    return guided and hint[5] == 0.0
 
 
 @scalar_kernel

@@ -90,9 +90,6 @@ BSDF_TYPES = {"DIFFUSE": BSDF_DIFFUSE, "GLOSSY": BSDF_GLOSSY, "GLASS": BSDF_GLAS
               "SHEEN": BSDF_SHEEN, "VELVET": BSDF_VELVET}
 #: lobe types that transmit (wi on the other side from wo)
 TRANSMITTING = (BSDF_GLASS, BSDF_TRANSLUCENT, BSDF_REFRACTION)
-#: the light-selection summary's kt for a material that may send light below its shading
-#: normal's horizon while its table weights say it does not (``_summarise_lobes``)
-KT_FLOOR = 1e-9
 #: lobe types that may be a layer over others (a lobe's "layer")
 LAYER_TYPES = ("DIELECTRIC_SPECULAR", "SHEEN")
 #: name of the white Lambert material appended to tables with SSS: shades SSS exit points
@@ -978,17 +975,6 @@ class MaterialTable:
         kg = wg.sum(axis=1)
         alpha = np.divide((wg * self.lobe_alpha).sum(axis=1), kg, out=np.ones_like(kg), where=kg > 0)
         kt = np.where(np.isin(self.lobe_type, TRANSMITTING), weight, 0.0).sum(axis=1)
-        # kg = kt = 0 tells light selection that the material only reflects about the shading
-        # normal (``selection.reflect_only``): lights wholly below its horizon then get no
-        # samples at all. Keep that true whatever the weights: a lobe of another type with no
-        # weight in the table (a program may give it one per hit) or a sheen about a coat's
-        # normal gets kt a floor far below any real weight, which moves no other choice.
-        reflecting = (used & ~self.lobe_delta & (self.lobe_type != BSDF_NONE) & (self.lobe_type != BSDF_HOLDOUT)
-                      & (self.lobe_type != BSDF_SUBSURFACE))
-        about_shading = np.isin(self.lobe_type, (BSDF_DIFFUSE, BSDF_SHEEN, BSDF_VELVET)) \
-            & (self.lobe_frame == FRAME_SHADING)
-        other = np.any(reflecting & ~about_shading, axis=1)
-        kt = np.where(other & (kd > 0) & (kg == 0) & (kt == 0), KT_FLOOR, kt)
         return kd, kg, alpha, kt
 
     # ------------------------------------------------------------------ construction
