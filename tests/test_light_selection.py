@@ -207,7 +207,7 @@ def test_a_tilted_point_keeps_the_defensive_share_below_its_horizon():
     """The hint of a point where a lobe is shaded about another normal than the hint's (a
     smooth mesh's silhouette, a valid-reflection or coat normal: ``path_stages.hint_code``)
     carries kt = KT_FLOOR, so lights below the horizon keep their even share there; the hint of
-    any other point carries the material's own kt."""
+    any other point carries the material's own kt, and a summary that knows nothing stays so."""
     from drt.lights.selection import DEFENSIVE_SHARE, KT_FLOOR
     from drt.materials import MaterialTable
     from drt.path_stages import HINT_TILTED, hint_code, material_hint
@@ -216,6 +216,7 @@ def test_a_tilted_point_keeps_the_defensive_share_below_its_horizon():
                                      {"type": "GLOSSY", "color": [0.5] * 3, "roughness": 0.5}], "emission": [0, 0, 0]},
         {"name": "translucent", "lobes": [{"type": "DIFFUSE", "color": [0.8] * 3},
                                           {"type": "TRANSLUCENT", "color": [0.3] * 3}], "emission": [0, 0, 0]},
+        {"name": "mirror", "lobes": [{"type": "GLOSSY", "color": [0.9] * 3, "roughness": 0.0}], "emission": [0, 0, 0]},
     ]).data
     n, wo = (0.0, 0.0, 1.0), (0.0, 0.6, 0.8)
     assert hint_code(0, False) == 0 and hint_code(0, True) == HINT_TILTED and hint_code(-1, True) == -1
@@ -223,6 +224,9 @@ def test_a_tilted_point_keeps_the_defensive_share_below_its_horizon():
     assert material_hint(md, hint_code(0, True), n, wo)[5] == KT_FLOOR
     assert material_hint(md, hint_code(1, True), n, wo)[5] == material_hint(md, 1, n, wo)[5] > 0.1
     assert material_hint(md, -1, n, wo)[2:] == (0.0, 0.0, 0.0, 0.0)
+    # a summary that knows nothing (a mirror: no lobe NEE can reach) stays unknown when tilted
+    mirror = material_hint(md, hint_code(2, True), n, wo)
+    assert mirror[2] + mirror[3] + mirror[5] == 0.0
     ls = LightSet([sphere(0.3, 0, 2.0), sphere(0, 0.2, -2.0)])
     tilted = _glossy_hint(1, roughness=1.0, kd=0.8)
     tilted.kt[:] = KT_FLOOR

@@ -268,16 +268,17 @@ def hint_code(mat, tilted):
 def material_hint(md, code, n, wo):
     """The light-selection hint of a shading point (all zero: nothing known, e.g. camera rays)
     from its ``hint_code``. A tilted point's kt is at least ``KT_FLOOR``: kt = 0 tells the
-    selection that nothing below n's horizon is lit (``drt.lights.selection.reflect_only``)."""
+    selection that nothing below n's horizon is lit (``drt.lights.selection.reflect_only``).
+    A summary that knows nothing (kd = kg = kt = 0: no lobe light sampling can reach) stays
+    so, tilted or not: the floor would make the selection BSDF-aware on no information."""
     if code < 0:
         return ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
-    mat = code
-    kt_min = 0.0
-    if code >= HINT_TILTED:
-        mat = code - HINT_TILTED
-        kt_min = KT_FLOOR
+    mat = code - HINT_TILTED if code >= HINT_TILTED else code
     s = md.summary[mat]
-    return (n, wo, s[0], s[1], s[2], max(s[3], kt_min))
+    kt = s[3]
+    if code >= HINT_TILTED and s[0] + s[1] > 0.0:
+        kt = max(kt, KT_FLOOR)
+    return (n, wo, s[0], s[1], s[2], kt)
 
 
 @inline_kernel
