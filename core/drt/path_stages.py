@@ -56,7 +56,7 @@ from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N
 from .materials.programs import eval_material
 from .materials.transparency import straight_lobe
 from .materials.holdout import holdout_weight
-from .materials.table import LOBE_SUBSURFACE, LOBE_TRANSLUCENT, layered_emission, pick_lobe
+from .materials.table import LOBE_SUBSURFACE, LOBE_TRANSLUCENT, layered_emission, pick_lobe_view
 from .subsurface import SSS_DEAD, SSS_EXIT, SSS_EXIT_FLAT, SSS_NONE, SSS_WALK, sss_coefficients
 from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_3d, sample_5d
@@ -793,7 +793,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         if refl_sh:  # shadow terminator shading offset (reflections only, as Cycles)
             weight = scale(weight, shading_factor(surf, prim, abs(wi_l[2])))
         alive = b_valid and (refl_geo == refl_sh or silhouette) and any_positive(weight)
-        if alive and b_delta and kind == LOBE_TRANSMISSION and straight_lobe(md, mat, u_lobe):
+        if alive and b_delta and kind == LOBE_TRANSMISSION and straight_lobe(md, mat, u_lobe, wo_l, nc_local,
+                                                                            nv_local, front):
             # --- an IOR-1 lobe (alpha, Transparent BSDF): the ray passes straight on, a
             # transparent bounce. No bounce is counted and the MIS state of the last real
             # vertex is kept, so a light hit behind pairs with that vertex's light sampling
@@ -831,7 +832,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
 
         if entering:
             # the walk (drt.subsurface, run by the integrator) starts here, just inside
-            s_slot, _ = pick_lobe(md, mat, u_lobe)
+            s_slot, _, _ = pick_lobe_view(md, mat, u_lobe, wo_l, nc_local, nv_local, front)  # bsdf_sample's pick
             sss_coefficients(md, mat, s_slot, paths.sss_coef, j)
             # the walk guides about Cycles's sd->N (subsurface_bounce: subsurface.N = sd->N):
             # the interpolated normal on wo's geometric side, without the valid-reflection

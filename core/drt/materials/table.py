@@ -31,7 +31,9 @@ toward the next vertex. Diffuse and glossy lobes reflect on whichever side wo is
 when wo.z > 0 and exits when wo.z < 0.
 
 Lobe selection, as Cycles's closure selection (``bsdf_alloc``: ``sample_weight =
-average(weight)``): probability ∝ the *average* of the lobe colour's RGB channels. The pdf
+average(weight)``): probability ∝ the *average* of the lobe colour's RGB channels; in a layered
+material (``has_layers``) ∝ that × the layers' weight above the lobe at wo × a Fresnel lobe's
+albedo at wo (``view_weight``), so the choice follows the view as Cycles's does. The pdf
 reported for a non-delta sample is the whole material's, Σ_l p_l pdf_l over the non-delta lobes
 (one-sample MIS over lobes), and its weight is (Σ_l f_l)·|cos θi| / that pdf, so that an
 estimator using sample() is unbiased for every mix. A delta sample (mirror, smooth glass) has
@@ -330,9 +332,20 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
     pdf = 0.0
     memo_top = -1  # the last layer chain weight computed (memo_under_weight)
     memo_w = (1.0, 1.0, 1.0)
+    layered = md.has_layers[m] > 0
+    total = 0.0  # a layered material's view_weight sum: its lobe choice depends on wo
     for s in range(md.lobe_type.shape[1]):
         t = md.lobe_type[m, s]
-        if t == BSDF_NONE or md.lobe_delta[m, s]:
+        if t == BSDF_NONE:
+            continue
+        if layered:  # every lobe counts in the total, also those not evaluated below
+            sel, uw_s, memo_top, memo_w = view_weight(md, m, s, wo_main, nc_local, nv_local, front, memo_top,
+                                                      memo_w)
+            total += sel
+        else:
+            sel = md.lobe_select[m, s]
+            uw_s = (1.0, 1.0, 1.0)  # (no lobe has a layer)
+        if md.lobe_delta[m, s]:
             continue  # a delta lobe has no density to evaluate
         wo = wo_main
         wi = wi_main
@@ -356,24 +369,22 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             fc, p = dielectric_spec_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s],
                                          lobe_f0(md, m, s), md.lobe_fresnel[m, s, 3] > 0.0)
             if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
-                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, front, memo_top, memo_w)
-                fc = (fc[0] * uw[0], fc[1] * uw[1], fc[2] * uw[2])
+                fc = (fc[0] * uw_s[0], fc[1] * uw_s[1], fc[2] * uw_s[2])  # (view_weight's)
             f0 += md.lobe_color[m, s, 0] * fc[0]
             f1 += md.lobe_color[m, s, 1] * fc[1]
             f2 += md.lobe_color[m, s, 2] * fc[2]
-            pdf += md.lobe_select[m, s] * p
+            pdf += sel * p
             continue
         if t == BSDF_METALLIC:
             k = md.lobe_fresnel[m, s, 4]
             fc, p = metallic_eval(wo, wi, md.lobe_alpha[m, s], metal_f0(md, m, s), lobe_f0(md, m, s),
                                   md.lobe_fresnel[m, s, 3] > 0.0)
             if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
-                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, front, memo_top, memo_w)
-                fc = (fc[0] * uw[0], fc[1] * uw[1], fc[2] * uw[2])
+                fc = (fc[0] * uw_s[0], fc[1] * uw_s[1], fc[2] * uw_s[2])  # (view_weight's)
             f0 += k * fc[0]
             f1 += k * fc[1]
             f2 += k * fc[2]
-            pdf += md.lobe_select[m, s] * p
+            pdf += sel * p
             continue
         if t == BSDF_DIFFUSE:
             v, p = diffuse_eval(facing_front(wo, front), wi)
@@ -413,15 +424,16 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
                 f1 += c1 * v
                 f2 += c2 * v
             else:
-                uw, memo_top, memo_w = memo_under_weight(md, m, s, wo_main, nc_local, nv_local, front, memo_top, memo_w)
-                f0 += c0 * (v * uw[0])
-                f1 += c1 * (v * uw[1])
-                f2 += c2 * (v * uw[2])
+                f0 += c0 * (v * uw_s[0])  # (view_weight's under_weight of this slot)
+                f1 += c1 * (v * uw_s[1])
+                f2 += c2 * (v * uw_s[2])
         else:
             f0 += c0 * v
             f1 += c1 * v
             f2 += c2 * v
-        pdf += md.lobe_select[m, s] * p
+        pdf += sel * p
+    if layered:
+        pdf = pdf / total if total > 0.0 else 0.0
     return (f0, f1, f2), pdf
 
 
@@ -513,14 +525,33 @@ def layer_factor(md, m, top, wo, nc_local, nv_local, front):
     taken about the layer's own normal (``slot_cos``), as Cycles's albedo of the closure. A
     sheen layer's albedo is read at cos θo clamped to 0 where wo is below N' (``front``, a
     silhouette), as the sheen lobe itself (``sheen_facing``)."""
-    k = md.lobe_coat[m, top, 0]
-    cos_o = wo[2] if nc_local[2] >= 1.0 and nv_local[2] >= 1.0 else \
-        slot_cos(md.lobe_frame, md.lobe_coat, m, top, wo, nc_local, nv_local)
+    cos_o = layer_cos(md, m, top, wo, nc_local, nv_local)
+    return factor_of_albedo(md, m, top, layer_albedo(md, m, top, cos_o, front), cos_o)
+
+
+@inline_kernel
+def layer_cos(md, m, s, wo, nc_local, nv_local):
+    """cos θo of slot s about its own normal (``slot_cos``; wo[2] without coat / valid normals)."""
+    if nc_local[2] >= 1.0 and nv_local[2] >= 1.0:
+        return wo[2]
+    return slot_cos(md.lobe_frame, md.lobe_coat, m, s, wo, nc_local, nv_local)
+
+
+@inline_kernel
+def layer_albedo(md, m, top, cos_o, front):
+    """Albedo at cos θo (``layer_cos``) of a layer lobe per unit weight: a sheen's
+    ``sheen_albedo`` (cos θo clamped to 0 below N', ``front``), a specular layer's largest RGB
+    albedo (``layer_albedo_max``)."""
     if md.lobe_type[m, top] == BSDF_SHEEN:
-        a = sheen_albedo(md.lobe_alpha[m, top], cos_o if cos_o * front >= 0.0 else 0.0)
-    else:
-        a = layer_albedo_max(md.lobe_alpha[m, top], md.lobe_ior[m, top], lobe_f0(md, m, top),
-                             md.lobe_fresnel[m, top, 3] > 0.0, cos_o)
+        return sheen_albedo(md.lobe_alpha[m, top], cos_o if cos_o * front >= 0.0 else 0.0)
+    return layer_albedo_max(md.lobe_alpha[m, top], md.lobe_ior[m, top], lobe_f0(md, m, top),
+                            md.lobe_fresnel[m, top, 3] > 0.0, cos_o)
+
+
+@inline_kernel
+def factor_of_albedo(md, m, top, a, cos_o):
+    """``layer_factor`` of layer slot ``top`` from its albedo a at cos θo."""
+    k = md.lobe_coat[m, top, 0]
     lw = min(max(1.0 - k * a, 0.0), 1.0)
     t0 = md.lobe_coat[m, top, 1]
     t1 = md.lobe_coat[m, top, 2]
@@ -532,6 +563,86 @@ def layer_factor(md, m, top, wo, nc_local, nv_local, front):
         return (lw * (1.0 + k * (t0 ** depth - 1.0)), lw * (1.0 + k * (t1 ** depth - 1.0)),
                 lw * (1.0 + k * (t2 ** depth - 1.0)))
     return lw, lw, lw
+
+
+@inline_kernel
+def view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w):
+    """Unnormalised probability of picking slot s of a layered material (``has_layers`` > 0)
+    at view wo, as Cycles's closure sample_weight: the lobe's scalar weight × the layers above
+    it (their chain weight at wo, averaged over RGB) × for a Fresnel lobe its albedo at wo
+    (``bsdf_microfacet_adjust_weight``; a sheen's ``sheen_albedo``). A coat seen at a grazing
+    angle reflects many times its average, so a constant, cosine-averaged choice would pick it
+    too rarely and return it with a large weight (fireflies). Any positive choice keeps the
+    estimator unbiased; ``pick_lobe_view`` and ``bsdf_eval_bump`` only have to agree.
+
+    Returns (weight, uw, memo_top, memo_w): uw the slot's ``under_weight`` (3-tuple), and
+    ``memo_under_weight``'s memo, left holding a layer lobe's own chain (its factor, from the
+    albedo just read, × uw) so that the lobes under it, which come next, read it for free."""
+    t = md.lobe_type[m, s]
+    uw = (1.0, 1.0, 1.0)
+    if t == BSDF_NONE or t == BSDF_HOLDOUT:
+        return 0.0, uw, memo_top, memo_w
+    if md.lobe_layer[m, s] >= 0:
+        uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w)
+    c = (md.lobe_color[m, s, 0] + md.lobe_color[m, s, 1] + md.lobe_color[m, s, 2]) * (1.0 / 3.0)
+    if t == BSDF_DIELECTRIC_SPECULAR or t == BSDF_SHEEN:
+        cos_o = layer_cos(md, m, s, wo, nc_local, nv_local)
+        a = layer_albedo(md, m, s, cos_o, front)
+        f = factor_of_albedo(md, m, s, a, cos_o)
+        memo_top = s
+        memo_w = (uw[0] * f[0], uw[1] * f[1], uw[2] * f[2])
+        if t == BSDF_DIELECTRIC_SPECULAR:
+            a = max(a, 1e-6)  # (a dropped sheen is 0 in its eval too)
+    elif t == BSDF_METALLIC:  # f is k × F(f0): the weight is k × Schlick's F averaged over RGB
+        f0 = metal_f0(md, m, s)
+        x = 1.0 - min(abs(layer_cos(md, m, s, wo, nc_local, nv_local)), 1.0)
+        x5 = x * x * x * x * x
+        c = md.lobe_fresnel[m, s, 4]
+        a = max((f0[0] + f0[1] + f0[2]) * (1.0 / 3.0) * (1.0 - x5) + x5, 1e-6)
+    elif md.lobe_layer[m, s] < 0:
+        a = (md.lobe_avg[m, s, 0] + md.lobe_avg[m, s, 1] + md.lobe_avg[m, s, 2]) * (1.0 / 3.0)
+    else:
+        a = 1.0  # (lobe_avg of a lobe under layers holds their average; uw has them at wo)
+    if t == BSDF_SUBSURFACE:  # Cycles's bssrdf_setup: × the number of channels with a radius
+        a *= ((1.0 if md.lobe_sss[m, s, SSS_RADIUS] > 0.0 else 0.0)
+              + (1.0 if md.lobe_sss[m, s, SSS_RADIUS + 1] > 0.0 else 0.0)
+              + (1.0 if md.lobe_sss[m, s, SSS_RADIUS + 2] > 0.0 else 0.0))
+    if md.lobe_layer[m, s] >= 0:
+        a *= max((uw[0] + uw[1] + uw[2]) * (1.0 / 3.0), 1e-6)
+    return c * a, uw, memo_top, memo_w
+
+
+@inline_kernel
+def pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front):
+    """(slot, u_rest, p_sel): the lobe u_lobe selects at view wo (local frame; the normals as
+    ``bsdf_eval_bump``), u_lobe rescaled inside its interval, and its probability. A layered
+    material picks by ``view_weight``, any other by its constant ``lobe_select``. p_sel 0: no
+    lobe can be picked."""
+    if not md.has_layers[m]:
+        slot, u_rest = pick_lobe(md, m, u_lobe)
+        return slot, u_rest, md.lobe_select[m, slot]
+    count = md.lobe_count[m]
+    total = 0.0
+    memo_top = -1
+    memo_w = (1.0, 1.0, 1.0)
+    for s in range(count):
+        w, _, memo_top, memo_w = view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w)
+        total += w
+    if not total > 0.0:
+        return 0, 0.0, 0.0
+    target = u_lobe * total
+    cum = 0.0
+    last = 0
+    last_w = 0.0
+    for s in range(count):
+        w, _, memo_top, memo_w = view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w)
+        if w > 0.0:
+            if target < cum + w:
+                return s, min(max((target - cum) / w, 0.0), _ONE_MINUS_EPS), w / total
+            last = s
+            last_w = w
+        cum += w
+    return last, _ONE_MINUS_EPS, last_w / total  # (rounding left u_lobe past the last lobe)
 
 
 @inline_kernel
@@ -571,8 +682,9 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, fr
     count = md.lobe_count[m]
     if count == 0 or wo[2] == 0.0:
         return zero, zero, 0.0, LOBE_NONE, False, False
-    slot, u_rest = pick_lobe(md, m, u_lobe)
-    p_sel = md.lobe_select[m, slot]
+    slot, u_rest, p_sel = pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front)
+    if not p_sel > 0.0:
+        return zero, zero, 0.0, LOBE_NONE, False, False
     t = md.lobe_type[m, slot]
     is_delta = md.lobe_delta[m, slot]
     # alpha 0 makes the lobe functions take their delta path (also for glass with ior ≈ 1)

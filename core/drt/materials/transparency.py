@@ -14,7 +14,7 @@ import numpy as np
 
 from ..kernels import kernel
 from .dielectric import IOR_ONE_EPS
-from .table import BSDF_GLASS, pick_lobe
+from .table import BSDF_GLASS, pick_lobe_view
 
 
 @kernel
@@ -31,10 +31,10 @@ def transparency(md, m):
 
 
 @kernel
-def straight_lobe(md, m, u_lobe):
-    """Whether ``u_lobe`` picks (as ``bsdf_sample`` does) one of material m's IOR-1 GLASS lobes,
-    through which a ray passes straight."""
-    slot, _ = pick_lobe(md, m, u_lobe)
+def straight_lobe(md, m, u_lobe, wo, nc_local, nv_local, front):
+    """Whether ``u_lobe`` picks (as ``bsdf_sample_bump`` does at view wo, the normals as there)
+    one of material m's IOR-1 GLASS lobes, through which a ray passes straight."""
+    slot, _, _ = pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front)
     return md.lobe_type[m, slot] == BSDF_GLASS and abs(md.lobe_ior[m, slot] - 1.0) < IOR_ONE_EPS
 
 
