@@ -142,6 +142,31 @@ def test_principled_glass_reflects_untinted_and_refracts_tinted():
             assert np.all(np.abs(a - b) < 4 * se), (a, b)
 
 
+@pytest.mark.parametrize("mu", [0.2, 0.7])
+def test_black_glass_and_metal_keep_their_reflection(mu):
+    """A Principled glass with a black base (colour k·sqrt(black) = 0) still reflects, untinted,
+    and a black metal's F82 still reflects at grazing angles (Cycles weights both closures by k,
+    not by the colour): the table keeps both lobes and samples them, and sample() agrees with
+    eval() integrated over the sphere. Alone and beside a diffuse lobe, which must not take
+    every sample."""
+    n = 200_000
+    glass = {"type": "GLASS", "color": [0, 0, 0], "roughness": 0.3, "ior": 1.5, "reflection_weight": 1.0}
+    metal = {"type": "METALLIC", "color": [0, 0, 0], "roughness": 0.3, "weight": 1.0}
+    diffuse = {"type": "DIFFUSE", "color": [0.5, 0.5, 0.5]}
+    t = _table([glass], [metal], [diffuse, glass], [diffuse, metal])
+    rng = np.random.default_rng(int(100 * mu))
+    for m in range(4):
+        assert t.data.lobe_count[m] == (1 if m < 2 else 2)
+        s = t.sample(np.full(n, m), _wo(mu, n), rng.random(n), rng.random((n, 2)))
+        d = _sphere_dirs(rng, n)
+        f, _ = t.eval(np.full(n, m), _wo(mu, n), d)
+        a, b = s.weight[:, 0].mean(), (f[:, 0] * 4 * np.pi).mean()
+        tol = 4 * math.hypot(s.weight[:, 0].std(), (f[:, 0] * 4 * np.pi).std()) / math.sqrt(n)
+        assert abs(a - b) < tol, (m, a, b, tol)
+        own = a - (0.5 if m >= 2 else 0.0)  # what the black lobe adds beside the diffuse
+        assert own > (0.02 if m % 2 == 0 else 1e-3), (m, a)
+
+
 @pytest.mark.parametrize("rough, mu", [(0.5, 0.7), (0.9, 0.3), (0.7, -0.8)])
 def test_multiscatter_glass_white_furnace(rough, mu):
     """Multiscatter GGX glass with a white Fss keeps all the energy (Cycles's compensation
@@ -373,11 +398,14 @@ def _cases():
             textured_principled("Metallic", {"Base Color": (0.3, 0.6, 0.9, 1), "Roughness": 0.6,
                                              "Transmission Weight": 1.0}, dist="MULTI_GGX"),
             glossy((0.9, 0.6, 0.3, 1), 0.6, "MULTI_GGX"), glossy((1, 1, 1, 1), 0.9, "MULTI_GGX"),
-            glossy((0.9, 0.6, 0.3, 1), 0.6, "GGX")]
+            glossy((0.9, 0.6, 0.3, 1), 0.6, "GGX"),
+            # black: the glass's untinted reflection still reflects (a lobe weighted by its colour
+            # alone was dropped, and never picked)
+            principled_glass((0, 0, 0, 1), 0.3)]
 
 
 #: per-case tolerance of the channel means (measured ≤ 0.4 %)
-_TOL = [0.01] * 22
+_TOL = [0.01] * 23
 
 
 @pytest.mark.parametrize("shape, side", [("plane", "behind"), ("plane", "front"), ("sphere", "front")])

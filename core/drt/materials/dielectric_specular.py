@@ -111,6 +111,17 @@ def fss_real(eta):
 
 
 @kernel
+def glass_select_weight(c, k, eta):
+    """Lobe-selection weight of a Principled glass lobe (``reflection_weight`` set): its
+    refraction's mean colour c and its untinted reflection's weight k, mixed by the
+    cosine-averaged Fresnel of the IOR eta (``fss_real``). The colour alone would give a black
+    glass (k·sqrt(black) = 0) no chance of being sampled, and its reflection none of being seen
+    by BSDF rays."""
+    f = min(max(fss_real(eta), 0.0), 1.0)
+    return c * (1.0 - f) + k * f
+
+
+@kernel
 def remap(f_real, f0_real):
     """saturate(inverse_lerp(f0_real, 1, f_real))."""
     if f0_real >= 1.0:

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..kernels import inline_kernel, kernel
 from .dielectric import IOR_ONE_EPS
-from .dielectric_specular import specular_eta_f0
+from .dielectric_specular import glass_select_weight, specular_eta_f0
 from .ggx import ALPHA_SQ_SINGULAR
 from .procedural import floor64, procedural_op
 from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, POINT_N, POINT_NG, POINT_NSMOOTH,
@@ -1180,6 +1180,18 @@ def fresnel_from_registers(md, regs, m, l, ir, lr, tr):
 
 
 @inline_kernel
+def constant_select_weight(md, m, l):
+    """Lobe l's selection weight from this hit's row (as ``MaterialTable`` computes
+    ``lobe_select``): the mean of its colour × ``lobe_avg``; a Principled glass's by
+    ``glass_select_weight``."""
+    w = (md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0] + md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]
+         + md.lobe_color[m, l, 2] * md.lobe_avg[m, l, 2]) * (1.0 / 3.0)
+    if md.lobe_type[m, l] == 3 and md.lobe_fresnel[m, l, 3] > 0.0:  # (3: BSDF_GLASS)
+        w = glass_select_weight(w, md.lobe_fresnel[m, l, 4], md.lobe_ior[m, l])
+    return w
+
+
+@inline_kernel
 def eval_material(pd, md, regs, m, prim, b1, b2, point):
     """Run material m's program at a hit and write its per-hit parameters into row m of ``md``
     (which must be this thread's private copy): lobe colours and alphas, the lobe selection
@@ -1220,16 +1232,14 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
             md.lobe_coat[m, l, 1] = max(regs[ctr, 0], 0.0)
             md.lobe_coat[m, l, 2] = max(regs[ctr, 1], 0.0)
             md.lobe_coat[m, l, 3] = max(regs[ctr, 2], 0.0)
-        total += (md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0] + md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]
-                  + md.lobe_color[m, l, 2] * md.lobe_avg[m, l, 2]) * (1.0 / 3.0)
+        total += constant_select_weight(md, m, l)
     cdf = 0.0
     delta_only = True
     trans_delta = False
     a0 = a1 = a2 = 0.0
     for l in range(count):
         # weighted by the lobe's average share (a specular layer's albedo, what its base keeps)
-        w = (md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0] + md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]
-             + md.lobe_color[m, l, 2] * md.lobe_avg[m, l, 2]) * (1.0 / 3.0)
+        w = constant_select_weight(md, m, l)
         p = w / total if total > 0.0 else 0.0
         md.lobe_select[m, l] = p
         cdf += p

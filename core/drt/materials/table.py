@@ -55,7 +55,7 @@ from ..kernels.vec3 import build_frame, load, store, to_local, to_world
 from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample, refraction_eval, refraction_sample
 from .diffuse import INV_PI, diffuse_eval, diffuse_sample, translucent_eval, translucent_sample
 from .dielectric_specular import (average_albedo, dielectric_spec_delta_weight, dielectric_spec_eval,
-                                  glossy_energy, layer_albedo_max, layer_weight, metallic_average_albedo,
+                                  glass_select_weight, glossy_energy, layer_albedo_max, layer_weight, metallic_average_albedo,
                                   metallic_delta_weight,
                                   metallic_eval)
 from .glass_ms import glass_energy_factor
@@ -603,6 +603,11 @@ def view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w):
         a = (md.lobe_avg[m, s, 0] + md.lobe_avg[m, s, 1] + md.lobe_avg[m, s, 2]) * (1.0 / 3.0)
     else:
         a = 1.0  # (lobe_avg of a lobe under layers holds their average; uw has them at wo)
+    if t == BSDF_GLASS and md.lobe_fresnel[m, s, 3] > 0.0:  # a Principled glass: as Cycles's albedo
+        cos_o = layer_cos(md, m, s, wo, nc_local, nv_local)
+        ior = md.lobe_ior[m, s]
+        f = fresnel(cos_o, ior if cos_o >= 0.0 else 1.0 / ior)
+        c = c * (1.0 - f) + md.lobe_fresnel[m, s, 4] * f
     if t == BSDF_SUBSURFACE:  # Cycles's bssrdf_setup: × the number of channels with a radius
         a *= ((1.0 if md.lobe_sss[m, s, SSS_RADIUS] > 0.0 else 0.0)
               + (1.0 if md.lobe_sss[m, s, SSS_RADIUS + 1] > 0.0 else 0.0)
@@ -1012,6 +1017,14 @@ class MaterialTable:
         eff[used & (self.lobe_type == BSDF_HOLDOUT)] = 0.0
         self.lobe_effective = self.lobe_color * eff if n_slots else self.lobe_color
         w = np.where(used, self.lobe_effective.mean(axis=2), 0.0)
+        for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_GLASS) & (self.lobe_fresnel[..., 3] > 0))):
+            w[i, j] = glass_select_weight(w[i, j], self.lobe_fresnel[i, j, 4], self.lobe_ior[i, j])
+        for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_METALLIC) & (self.lobe_layer < 0))):
+            # k × its average albedo (= the colour × lobe_avg where F0 > 0; a black metal's F82
+            # still reflects at grazing angles)
+            k = self.lobe_fresnel[i, j, 4]
+            f0 = np.clip(self.lobe_color[i, j] / max(k, 1e-12), 0.0, 1.0)
+            w[i, j] = k * metallic_average_albedo(f0, self.lobe_fresnel[i, j, :3]).mean()
         # Cycles's bssrdf_setup: a BSSRDF's sample weight is average(weight) × its channel count
         w = np.where(sss, w * (self.lobe_sss[..., SSS_RADIUS:SSS_RADIUS + 3] > 0).sum(axis=-1), w)
         total = w.sum(axis=1, keepdims=True)
@@ -1177,7 +1190,11 @@ class MaterialTable:
                                       FRAME_SHADING))
                     if not np.any(sss[SSS_RADIUS:SSS_RADIUS + 3] > 0):
                         continue  # every channel became Lambert
-                if color.mean() >= CLOSURE_WEIGHT_CUTOFF:
+                # (a Principled glass's reflection and a metal's Fresnel are weighted by k, not by
+                # the colour: a black glass or metal still reflects)
+                weight = max(color.mean(), fr[4]) if (kind == "GLASS" and fr[3] > 0) or kind == "METALLIC" \
+                    else color.mean()
+                if weight >= CLOSURE_WEIGHT_CUTOFF:
                     slot_of[j] = len(rows)
                     rows.append((BSDF_TYPES[kind], color, alpha, ior, sss, fr, under, coat, frame))
             # Lambert lobes split off SSS channels go last: program registers address the
