@@ -1179,15 +1179,24 @@ def fresnel_from_registers(md, regs, m, l, ir, lr, tr):
             md.lobe_ior[m, l] = max(regs[ir, 0], 1e-5)
 
 
+#: cosine-weighted average albedo per unit weight of a METALLIC lobe with F0 = 0 and a white
+#: F82 tint, 2∫(1 − μ)⁵ μ dμ = 1/21: the floor of a metal's selection weight per unit k (a
+#: textured base colour may be black at a hit, where the lobe still reflects at grazing angles
+#: and must stay pickable)
+BLACK_METAL_ALBEDO = 1.0 / 21.0
+
+
 @inline_kernel
 def constant_select_weight(md, m, l):
     """Lobe l's selection weight from this hit's row (as ``MaterialTable`` computes
     ``lobe_select``): the mean of its colour × ``lobe_avg``; a Principled glass's by
-    ``glass_select_weight``."""
+    ``glass_select_weight``; a metal's at least ``BLACK_METAL_ALBEDO`` × its weight k."""
     w = (md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0] + md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]
          + md.lobe_color[m, l, 2] * md.lobe_avg[m, l, 2]) * (1.0 / 3.0)
     if md.lobe_type[m, l] == 3 and md.lobe_fresnel[m, l, 3] > 0.0:  # (3: BSDF_GLASS)
         w = glass_select_weight(w, md.lobe_fresnel[m, l, 4], md.lobe_ior[m, l])
+    elif md.lobe_type[m, l] == 6:  # (6: BSDF_METALLIC) at least a black metal's F82 albedo
+        w = max(w, BLACK_METAL_ALBEDO * md.lobe_fresnel[m, l, 4])
     return w
 
 

@@ -55,9 +55,8 @@ from ..kernels.vec3 import build_frame, load, store, to_local, to_world
 from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample, refraction_eval, refraction_sample
 from .diffuse import INV_PI, diffuse_eval, diffuse_sample, translucent_eval, translucent_sample
 from .dielectric_specular import (average_albedo, dielectric_spec_delta_weight, dielectric_spec_eval,
-                                  glass_select_weight, glossy_energy, layer_albedo_max, layer_weight, metallic_average_albedo,
-                                  metallic_delta_weight,
-                                  metallic_eval)
+                                  glass_select_weight, glossy_energy, layer_albedo_max, layer_weight,
+                                  metallic_average_albedo, metallic_delta_weight, metallic_eval)
 from .glass_ms import glass_energy_factor
 from .sheen import (average_albedo as sheen_average_albedo, sheen_albedo, sheen_eval, sheen_sample,
                     velvet_average_albedo, velvet_eval, velvet_sample)
@@ -591,8 +590,8 @@ def view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w):
         f = factor_of_albedo(md, m, s, a, cos_o)
         memo_top = s
         memo_w = (uw[0] * f[0], uw[1] * f[1], uw[2] * f[2])
-        if t == BSDF_DIELECTRIC_SPECULAR:
-            a = max(a, 1e-6)  # (a dropped sheen is 0 in its eval too)
+        if t == BSDF_DIELECTRIC_SPECULAR:  # (a sheen's 0, where Cycles drops it, is its eval's too)
+            a = max(a, 1e-6)
     elif t == BSDF_METALLIC:  # f is k × F(f0): the weight is k × Schlick's F averaged over RGB
         f0 = metal_f0(md, m, s)
         x = 1.0 - min(abs(layer_cos(md, m, s, wo, nc_local, nv_local)), 1.0)
