@@ -164,19 +164,17 @@ def layer_albedo_max(alpha, eta, f0t, multiscatter, cos_o):
     rough = math.sqrt(alpha)
     z = math.sqrt(abs((eta - 1.0) / (eta + 1.0)))
     s = table_3d(GEN_SCHLICK_IOR_S, rough, min(abs(cos_o), 1.0), z)
-    a0 = f0t[0] + (1.0 - f0t[0]) * s
-    a1 = f0t[1] + (1.0 - f0t[1]) * s
-    a2 = f0t[2] + (1.0 - f0t[2]) * s
+    # both factors of a channel's albedo grow with its f0, so the largest is the largest f0's
+    f0 = max(f0t[0], f0t[1], f0t[2])
+    a = f0 + (1.0 - f0) * s
     if multiscatter:
         # Cycles scales the closure weight by the darkening d = k·E = E + Fms·(1 − E) only
         # (energy_scale 1/E is applied at evaluation), and the layering reads that weight
         e = max(table_2d(GGX_E, rough, abs(cos_o)), 1e-6)
         e_avg = table_1d(GGX_EAVG, rough)
         s_avg = remap(fss_real(eta), f0_from_ior(eta))
-        a0 *= e + _fms(f0t[0], s_avg, e_avg) * (1.0 - e)
-        a1 *= e + _fms(f0t[1], s_avg, e_avg) * (1.0 - e)
-        a2 *= e + _fms(f0t[2], s_avg, e_avg) * (1.0 - e)
-    return max(a0, a1, a2)
+        a *= e + _fms(f0, s_avg, e_avg) * (1.0 - e)
+    return a
 
 
 @kernel

@@ -418,7 +418,8 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             continue
         if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
             if md.has_layers[m] == 1:  # one plain specular layer: a scalar factor
-                v *= single_layer_weight(md, m, md.lobe_layer[m, s], wo_main)
+                # (view_weight's chain is that factor where cos θo is wo's own: no second lookup)
+                v *= uw_s[0] if not framed else single_layer_weight(md, m, md.lobe_layer[m, s], wo_main)
                 f0 += c0 * v
                 f1 += c1 * v
                 f2 += c2 * v
@@ -629,8 +630,19 @@ def pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front):
     total = 0.0
     memo_top = -1
     memo_w = (1.0, 1.0, 1.0)
+    # the first four weights are kept for the second walk (no arrays in a kernel: scalars);
+    # more lobes than that are weighed again
+    w0 = w1 = w2 = w3 = 0.0
     for s in range(count):
         w, _, memo_top, memo_w = view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w)
+        if s == 0:
+            w0 = w
+        elif s == 1:
+            w1 = w
+        elif s == 2:
+            w2 = w
+        elif s == 3:
+            w3 = w
         total += w
     if not total > 0.0:
         return 0, 0.0, 0.0
@@ -639,7 +651,10 @@ def pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front):
     last = 0
     last_w = 0.0
     for s in range(count):
-        w, _, memo_top, memo_w = view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w)
+        if s < 4:
+            w = w0 if s == 0 else (w1 if s == 1 else (w2 if s == 2 else w3))
+        else:
+            w, _, memo_top, memo_w = view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w)
         if w > 0.0:
             if target < cum + w:
                 return s, min(max((target - cum) / w, 0.0), _ONE_MINUS_EPS), w / total
