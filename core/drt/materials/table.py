@@ -1009,11 +1009,12 @@ class MaterialTable:
         for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_DIELECTRIC_SPECULAR))):
             eff[i, j] = average_albedo(self.lobe_alpha[i, j], self.lobe_ior[i, j],
                                        self.lobe_fresnel[i, j, :3], self.lobe_fresnel[i, j, 3] > 0)
+        metal_avg = {}  # (i, j) → a METALLIC lobe's average albedo per channel (lobe selection)
         for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_METALLIC))):
             k = max(self.lobe_fresnel[i, j, 4], 1e-12)
             f0 = np.clip(self.lobe_color[i, j] / k, 0.0, 1.0)
-            eff[i, j] = np.divide(metallic_average_albedo(f0, self.lobe_fresnel[i, j, :3]), f0,
-                                  out=np.ones(3), where=f0 > 0)
+            metal_avg[i, j] = metallic_average_albedo(f0, self.lobe_fresnel[i, j, :3])
+            eff[i, j] = np.divide(metal_avg[i, j], f0, out=np.ones(3), where=f0 > 0)
         for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_SHEEN))):
             eff[i, j] = sheen_average_albedo(self.lobe_alpha[i, j])
         for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_VELVET))):
@@ -1036,9 +1037,7 @@ class MaterialTable:
         for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_METALLIC) & (self.lobe_layer < 0))):
             # k × its average albedo (= the colour × lobe_avg where F0 > 0; a black metal's F82
             # still reflects at grazing angles)
-            k = self.lobe_fresnel[i, j, 4]
-            f0 = np.clip(self.lobe_color[i, j] / max(k, 1e-12), 0.0, 1.0)
-            w[i, j] = k * metallic_average_albedo(f0, self.lobe_fresnel[i, j, :3]).mean()
+            w[i, j] = self.lobe_fresnel[i, j, 4] * metal_avg[i, j].mean()
         # Cycles's bssrdf_setup: a BSSRDF's sample weight is average(weight) × its channel count
         w = np.where(sss, w * (self.lobe_sss[..., SSS_RADIUS:SSS_RADIUS + 3] > 0).sum(axis=-1), w)
         total = w.sum(axis=1, keepdims=True)
