@@ -501,3 +501,36 @@ def test_lobe_choice_follows_the_view(mu):
     assert s.valid.mean() > 0.999
     assert s.weight[s.valid].max() < 1.2
     assert abs(s.weight[:, 0].mean() - 1.0) < 0.01  # white over white: albedo ≈ 1
+
+
+@pytest.mark.parametrize("coat_normal", [None, (0.3, -0.2, 0.93)])
+def test_the_light_samples_lobe_weights_pick_the_same_lobe(coat_normal):
+    """The integrator evaluates a vertex's light sample first and lets the BSDF sample pick its
+    lobe from the weights that evaluation computed (``bsdf_eval_weights``): the samples must be
+    the very ones the sample's own weighing gives, for layered stacks of up to four lobes and
+    for a five-lobe one (which weighs again), on both sides and at grazing views."""
+    five = _stack()
+    five = dict(five, name="five", lobes=five["lobes"] + [
+        {"type": "GLOSSY", "color": [0.3, 0.3, 0.3], "roughness": 0.2}])
+    metal = {"name": "metal", "lobes": [
+        {"type": "DIELECTRIC_SPECULAR", "color": [1, 1, 1], "roughness": 0.05, "ior": 1.5, "layer_weight": 1.0},
+        {"type": "METALLIC", "color": [0.9, 0.6, 0.2], "roughness": 0.3, "layer": 0, "weight": 1.0}]}
+    t = MaterialTable.from_scene([_stack(), _stack(sheen_w=0.0, tint=(0.8, 0.5, 0.3), coat_r=0.02), metal, five,
+                                  {"name": "plain", "lobes": [
+                                      {"type": "DIELECTRIC_SPECULAR", "color": [1, 1, 1], "roughness": 0.4,
+                                       "ior": 1.5},
+                                      {"type": "DIFFUSE", "color": [0.7, 0.2, 0.2], "layer": 0}]}])
+    assert t.data.has_layers.min() > 0 and t.data.lobe_count.max() == 5
+    rng = np.random.default_rng(11)
+    n = 40_000
+    mat = rng.integers(0, 5, n)
+    wo = _uniform_dirs(rng, n) * rng.choice([-1.0, 1.0], (n, 1))
+    wo[: n // 8, 2] *= 0.01  # grazing
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    light_wi = _uniform_dirs(rng, n)
+    u_lobe, u2 = rng.random(n), rng.random((n, 2))
+    own = t.sample(mat, wo, u_lobe, u2, coat_normal=coat_normal)
+    reused = t.sample(mat, wo, u_lobe, u2, coat_normal=coat_normal, light_wi=light_wi)
+    for field in ("wi", "weight", "pdf", "lobe_kind", "is_delta", "valid"):
+        np.testing.assert_array_equal(getattr(reused, field), getattr(own, field), err_msg=field)
+    assert own.valid.mean() > 0.5 and len(np.unique(own.lobe_kind[own.valid])) >= 2

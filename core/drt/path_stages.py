@@ -56,7 +56,8 @@ from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N
 from .materials.programs import eval_material
 from .materials.transparency import straight_lobe
 from .materials.holdout import holdout_weight
-from .materials.table import LOBE_SUBSURFACE, LOBE_TRANSLUCENT, layered_emission, pick_lobe_view
+from .materials.table import (LOBE_SUBSURFACE, LOBE_TRANSLUCENT, NO_VIEW_WEIGHTS, bsdf_eval_weights,
+                              layered_emission, pick_lobe_weights)
 from .subsurface import SSS_DEAD, SSS_EXIT, SSS_EXIT_FLAT, SSS_NONE, SSS_WALK, sss_coefficients
 from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_3d, sample_5d
@@ -722,6 +723,9 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         code = hint_code(mat, silhouette or nv_local[2] < 1.0 or nc_local[2] < 1.0)
 
         # --- next-event estimation
+        # (a layered material's lobe weights at this wo, from the light sample's evaluation:
+        # the BSDF sample below picks its lobe from them)
+        view_weights = NO_VIEW_WEIGHTS
         if direct != DIRECT_BSDF and ld.n_strategies > 0 and not md.delta_only[mat]:
             hint = material_hint(md, code, n_wo, wo)
             # (light position, selection): one jointly stratified 3-D sample, as Cycles's
@@ -740,7 +744,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                                              add(p, scale(wi, dist)))
             if l_valid and lpdf > 0.0:
                 wi_l = to_local(wi, t_ax, b_ax, ns)
-                f, bpdf = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local, nc_local, nv_local, front)
+                f, bpdf, view_weights = bsdf_eval_weights(md, mat, wo_l, wi_l, ns_local, nc_local, nv_local,
+                                                          front)
                 f = scale(f, shading_factor(surf, prim, wi_l[2] * front))
                 # geometric and shading normals must agree on reflection vs transmission
                 same_geo = dot(wi, ng) * dot(wo, ng) > 0.0
@@ -769,7 +774,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # union of lobes but not within each lobe (glass, mixes: docs/estimators.md)
         ub0, ub1, u_lobe = sample_3d(sd, pixel, idx, base + 2)
         wi_l, weight, bpdf, kind, b_delta, b_valid = bsdf_sample_bump(md, mat, wo_l, u_lobe, ub0, ub1, ns_local,
-                                                                      nc_local, nv_local, front)
+                                                                      nc_local, nv_local, front, view_weights)
         if settings.indirect != INDIRECT_BSDF and not md.transmission_or_delta[mat]:
             # the lecture's hemisphere estimators, on wo's side of the surface
             if settings.indirect == INDIRECT_COSINE:
@@ -832,7 +837,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
 
         if entering:
             # the walk (drt.subsurface, run by the integrator) starts here, just inside
-            s_slot, _, _ = pick_lobe_view(md, mat, u_lobe, wo_l, nc_local, nv_local, front)  # bsdf_sample's pick
+            s_slot, _, _ = pick_lobe_weights(md, mat, u_lobe, wo_l, nc_local, nv_local, front,
+                                             view_weights)  # bsdf_sample's pick
             sss_coefficients(md, mat, s_slot, paths.sss_coef, j)
             # the walk guides about Cycles's sd->N (subsurface_bounce: subsurface.N = sd->N):
             # the interpolated normal on wo's geometric side, without the valid-reflection

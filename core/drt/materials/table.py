@@ -306,7 +306,18 @@ def slot_cos(lobe_frame, lobe_coat, m, s, wo, nc_local, nv_local):
 
 @inline_kernel
 def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
-    """``bsdf_eval`` at a normal-mapped hit (the local frame's z is the mapped normal;
+    """``bsdf_eval`` at a normal-mapped hit (``bsdf_eval_weights`` without the lobe weights)."""
+    f, pdf, _ = bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front)
+    return f, pdf
+
+
+#: ``bsdf_eval_weights``'s "no lobe weights to reuse": ``pick_lobe_view`` weighs the lobes itself
+NO_VIEW_WEIGHTS = (-1.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@inline_kernel
+def bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front):
+    """(f, pdf, view weights): ``bsdf_eval`` at a normal-mapped hit (the local frame's z is the mapped normal;
     ``ns_local`` the unmapped one in that frame, ``NO_BUMP`` when there is no map): Cycles's
     bump map correction (``bump_shadowing``) applied. ``nc_local``: the coat normal in that
     frame (``NO_BUMP``: the coat has none of its own); ``nv_local`` the valid-reflection
@@ -314,7 +325,13 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
     ``lobe_frame`` are evaluated with wo and wi in their own normal's frame, and get Cycles's
     bump side check and diffuse softening against their own normal. ``front``: ±1, the z sign of
     Cycles's N' (the shading normal on wo's geometric side) — it differs from wo's own side only
-    at a smooth silhouette, where diffuse-class lobes follow it (``facing_front``)."""
+    at a smooth silhouette, where diffuse-class lobes follow it (``facing_front``).
+
+    The view weights are (total, w0, w1, w2, w3): a layered material's ``view_weight`` of slots
+    0–3 and their sum, which this walk computes anyway for its pdf and which are the same for
+    every wi at this vertex: ``bsdf_sample_bump`` at the same (m, wo, normals, front) picks its
+    lobe from them instead of weighing the lobes again. ``NO_VIEW_WEIGHTS`` (total < 0) where
+    there are none to reuse (no layers, more than four lobes, an early return)."""
     g_diffuse = 1.0
     keep = True
     bumped = ns_local[2] < 1.0
@@ -322,7 +339,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
         keep, g_diffuse = bump_shadowing(ns_local, wi)
     framed = nc_local[2] < 1.0 or nv_local[2] < 1.0
     if not keep and not framed:
-        return (0.0, 0.0, 0.0), 0.0
+        return (0.0, 0.0, 0.0), 0.0, NO_VIEW_WEIGHTS
     wo_main = wo
     wi_main = wi
     f0 = 0.0
@@ -333,6 +350,7 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
     memo_w = (1.0, 1.0, 1.0)
     layered = md.has_layers[m] > 0
     total = 0.0  # a layered material's view_weight sum: its lobe choice depends on wo
+    w0 = w1 = w2 = w3 = 0.0  # (the first four weights, for the sample's pick: no arrays)
     for s in range(md.lobe_type.shape[1]):
         t = md.lobe_type[m, s]
         if t == BSDF_NONE:
@@ -341,6 +359,14 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             sel, uw_s, memo_top, memo_w = view_weight(md, m, s, wo_main, nc_local, nv_local, front, memo_top,
                                                       memo_w)
             total += sel
+            if s == 0:
+                w0 = sel
+            elif s == 1:
+                w1 = sel
+            elif s == 2:
+                w2 = sel
+            elif s == 3:
+                w3 = sel
         else:
             sel = md.lobe_select[m, s]
             uw_s = (1.0, 1.0, 1.0)  # (no lobe has a layer)
@@ -432,9 +458,12 @@ def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             f1 += c1 * v
             f2 += c2 * v
         pdf += sel * p
+    weights = NO_VIEW_WEIGHTS
     if layered:
         pdf = pdf / total if total > 0.0 else 0.0
-    return (f0, f1, f2), pdf
+        if md.lobe_count[m] <= 4:
+            weights = (total, w0, w1, w2, w3)
+    return (f0, f1, f2), pdf, weights
 
 
 @inline_kernel
@@ -665,6 +694,30 @@ def pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front):
 
 
 @inline_kernel
+def pick_lobe_weights(md, m, u_lobe, wo, nc_local, nv_local, front, weights):
+    """``pick_lobe_view`` from the view weights ``bsdf_eval_weights`` returned at this vertex
+    (the same choice, without weighing the lobes again), or by itself where there are none."""
+    total = weights[0]
+    if not (total >= 0.0 and md.has_layers[m]):
+        return pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front)
+    if not total > 0.0:
+        return 0, 0.0, 0.0
+    target = u_lobe * total
+    cum = 0.0
+    last = 0
+    last_w = 0.0
+    for s in range(md.lobe_count[m]):  # (at most four: bsdf_eval_weights)
+        w = weights[1] if s == 0 else (weights[2] if s == 1 else (weights[3] if s == 2 else weights[4]))
+        if w > 0.0:
+            if target < cum + w:
+                return s, min(max((target - cum) / w, 0.0), _ONE_MINUS_EPS), w / total
+            last = s
+            last_w = w
+        cum += w
+    return last, _ONE_MINUS_EPS, last_w / total  # (rounding left u_lobe past the last lobe)
+
+
+@inline_kernel
 def pick_lobe(md, m, u_lobe):
     """(slot, u_rest): the lobe u_lobe selects and u_lobe rescaled inside its interval."""
     count = md.lobe_count[m]
@@ -682,11 +735,12 @@ def pick_lobe(md, m, u_lobe):
 @inline_kernel
 def bsdf_sample(md, m, wo, u_lobe, u0, u1):
     """``bsdf_sample_bump`` without a normal map (see there)."""
-    return bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, NO_BUMP, NO_BUMP, NO_BUMP, 1.0 if wo[2] >= 0.0 else -1.0)
+    return bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, NO_BUMP, NO_BUMP, NO_BUMP, 1.0 if wo[2] >= 0.0 else -1.0,
+                            NO_VIEW_WEIGHTS)
 
 
 @inline_kernel
-def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, front):
+def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, front, weights):
     """md: MaterialData; m: material index; wo: local unit 3-tuple; u_lobe in [0, 1) picks the
     lobe (and, rescaled inside the picked interval, glass's reflect/refract choice); (u0, u1) in
     [0, 1)² picks the direction. Returns (wi, weight, pdf, lobe_kind, is_delta, valid):
@@ -696,12 +750,13 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, fr
     unmapped shading normal at a normal-mapped hit (``bsdf_eval_bump``), else ``NO_BUMP``;
     ``nc_local``, ``nv_local`` the coat and valid-reflection normals (``bsdf_eval_bump``): a lobe
     with a ``lobe_frame`` samples wi about its own normal; ``front`` the side diffuse-class lobes
-    reflect on (``bsdf_eval_bump``)."""
+    reflect on (``bsdf_eval_bump``); ``weights`` the view weights ``bsdf_eval_weights`` returned
+    for the same (m, wo, normals, front), or ``NO_VIEW_WEIGHTS``."""
     zero = (0.0, 0.0, 0.0)
     count = md.lobe_count[m]
     if count == 0 or wo[2] == 0.0:
         return zero, zero, 0.0, LOBE_NONE, False, False
-    slot, u_rest, p_sel = pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front)
+    slot, u_rest, p_sel = pick_lobe_weights(md, m, u_lobe, wo, nc_local, nv_local, front, weights)
     if not p_sel > 0.0:
         return zero, zero, 0.0, LOBE_NONE, False, False
     t = md.lobe_type[m, slot]
@@ -821,11 +876,16 @@ def _eval_rows(md, mat, wo, wi, nc, f, pdf):
 
 
 @kernel
-def _sample_rows(md, mat, wo, u_lobe, u2, nc, wi, weight, pdf, kind, is_delta, valid):
+def _sample_rows(md, mat, wo, u_lobe, u2, nc, light_wi, wi, weight, pdf, kind, is_delta, valid):
     for i in range(mat.shape[0]):
         w_o = load(wo, i)
+        front = 1.0 if w_o[2] >= 0.0 else -1.0
+        weights = NO_VIEW_WEIGHTS
+        if light_wi.shape[0]:  # as shade: the light sample's evaluation first, its weights reused
+            _, _, weights = bsdf_eval_weights(md, mat[i], w_o, load(light_wi, i), NO_BUMP, load(nc, i), NO_BUMP,
+                                              front)
         w, wt, p, k, d, ok = bsdf_sample_bump(md, mat[i], w_o, u_lobe[i], u2[i, 0], u2[i, 1], NO_BUMP,
-                                              load(nc, i), NO_BUMP, 1.0 if w_o[2] >= 0.0 else -1.0)
+                                              load(nc, i), NO_BUMP, front, weights)
         store(wi, i, w)
         store(weight, i, wt)
         pdf[i] = p
@@ -960,6 +1020,10 @@ def _metallic_lobe(lobe: dict, where: str) -> np.ndarray:
     if not k > 0.0:
         raise _fail(where, f"weight must be > 0, got {k!r}")
     return np.concatenate([tint, [1.0 if ms else 0.0, k]])
+
+
+#: ``MaterialTable.sample``'s "no light sample first" (0 rows)
+_NO_ROWS = np.zeros((0, 3))
 
 
 class MaterialTable:
@@ -1361,12 +1425,14 @@ class MaterialTable:
         return f, pdf
 
     def sample(self, mat: np.ndarray, wo: np.ndarray, u_lobe: np.ndarray,
-               u2: np.ndarray, coat_normal=None) -> BSDFSample:
+               u2: np.ndarray, coat_normal=None, light_wi=None) -> BSDFSample:
         """mat (n,) int; wo (n, 3) local; u_lobe (n,) in [0, 1) picks the lobe (and, rescaled
         inside the picked interval, glass's reflect/refract choice); u2 (n, 2) in [0, 1)² picks
         the direction. See BSDFSample and the module docstring for weight and pdf. Applies
         ``bsdf_sample`` to each row; wi is 0 in rows where no lobe could be sampled.
-        ``coat_normal`` as in ``eval``."""
+        ``coat_normal`` as in ``eval``. ``light_wi`` (n, 3): as the integrator does, evaluate
+        each row at this direction first (a light sample) and pick the lobe from the weights
+        that evaluation computed (``bsdf_eval_weights``): the same samples, bit for bit."""
         mat = self._mat_rows(mat)
         n = mat.shape[0]
         wi = np.empty((n, 3))
@@ -1377,5 +1443,6 @@ class MaterialTable:
         valid = np.empty(n, bool)
         _sample_rows(self.data, mat, vec3_rows(wo), scalar_rows(u_lobe, n),
                      f64_array(u2).reshape(n, 2), self._coat_rows(coat_normal, n),
+                     _NO_ROWS if light_wi is None else vec3_rows(light_wi),
                      wi, weight, pdf, kind, is_delta, valid)
         return BSDFSample(wi, weight, pdf, kind, is_delta, valid)
