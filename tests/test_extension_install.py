@@ -41,6 +41,8 @@ sc.render.filepath = out
 bpy.ops.render.render(write_still=True)
 print("RENDERED", flush=True)
 print("CORE", sorted(m for m in sys.modules if m.endswith("drt.integrator")), flush=True)
+kernels = sys.modules["bl_ext.user_default.drt.drt.kernels"]
+print("PREBUILT", kernels.PREBUILT_TARGET, "CACHE", kernels._KEYED_CACHE_DIR, flush=True)
 """
 
 
@@ -52,10 +54,14 @@ def linux_wheels() -> list[str]:
     return b.download_wheels(b.legacy_wheels(b.manifest_wheels()))
 
 
-def build_linux_extension(tmp, wheels) -> str:
-    """A linux-x64 extension zip of the current tree (manifest narrowed to that platform)."""
+def build_linux_extension(tmp, wheels, prebuilt_kernels: bool = False) -> str:
+    """A linux-x64 extension zip of the current tree (manifest narrowed to that platform), with
+    its kernels compiled in advance if asked (as ``build_extension.build_extension`` adds them)."""
     import build_extension as b
     stage = b.stage_addon(os.path.join(tmp, "stage", "drt"))
+    if prebuilt_kernels:
+        folder = b.prebuild_kernels(stage, os.path.join(tmp, "prebuilt"))
+        shutil.copytree(folder, os.path.join(stage, b.PREBUILT_IN_ZIP, os.path.basename(folder)))
     os.makedirs(os.path.join(stage, "wheels"))
     for wheel in wheels:
         shutil.copy2(wheel, os.path.join(stage, "wheels"))
@@ -82,14 +88,20 @@ def test_extension_zip_installs_enables_and_renders(tmp_path):
         pytest.skip(f"could not fetch the wheels: {e}")
     names = {os.path.basename(w).split("-")[0] for w in wheels}
     assert {"embreex", "numba", "llvmlite", "distributed", "dask", "tornado", "msgpack", "psutil"} <= names
-    zip_path = build_linux_extension(str(tmp_path), wheels)
+    import build_extension as b
+    # with its kernels compiled in advance where this machine can (Linux x86-64, the zip's
+    # Python and numba): the installed extension must then render without compiling any
+    prebuilt_kernels = b.can_prebuild_kernels() is None
+    zip_path = build_linux_extension(str(tmp_path), wheels, prebuilt_kernels)
     user = tmp_path / "user"
     user.mkdir()
+    cache = tmp_path / "kernel_cache"  # an empty user cache: a fresh machine
     out = tmp_path / "render.exr"
     script = tmp_path / "install_and_render.py"
     script.write_text(INSTALL_AND_RENDER)
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user))
-    env.pop("PYTHONPATH", None)  # the installed extension, not the source tree, must do the work
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user), DRT_CACHE_DIR=str(cache))
+    for var in ("PYTHONPATH", "NUMBA_CACHE_DIR", "DRT_SET_NUMBA_CACHE_DIR", "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES"):
+        env.pop(var, None)  # the installed extension, not the source tree, must do the work
     p = subprocess.run([sys.executable, str(script), zip_path,
                         os.path.join(REPO, "blend_scenes", "cornell_box.blend"), str(out)],
                        env=env, cwd=str(tmp_path), capture_output=True, text=True, timeout=1800)  # cold compile: ~10 min
@@ -98,6 +110,14 @@ def test_extension_zip_installs_enables_and_renders(tmp_path):
     assert "INSTALL {'FINISHED'}" in log and "ENABLED ['bl_ext.user_default.drt']" in log, log[-3000:]
     assert "RENDERED" in log
     assert "CORE ['bl_ext.user_default.drt.drt.integrator']" in log, log[-3000:]
+    if prebuilt_kernels:
+        from drt.kernels import prebuilt
+        assert f"PREBUILT {prebuilt.PORTABLE_X86_64!r}" in log, log[-3000:]
+        keyed = re.search(r"CACHE (\S+)", log).group(1)
+        seeded = os.path.getmtime(os.path.join(keyed, prebuilt.SEEDED_MARK))
+        compiled = [os.path.relpath(os.path.join(d, f), keyed) for d, _, files in os.walk(keyed) for f in files
+                    if f.endswith((".nbi", ".nbc")) and os.path.getmtime(os.path.join(d, f)) > seeded]
+        assert not compiled, compiled  # the render found every kernel it called in the shipped ones
     # the engine that rendered is the installed copy, with embreex from the bundled wheel
     installed = user / "extensions" / "user_default" / "drt"
     assert (installed / "drt" / "integrator.py").exists()

@@ -180,6 +180,31 @@ def _configure_numba_cache() -> None:
         import numba.core.config as _config
 
         _config.CACHE_DIR = path
+    _use_prebuilt_kernels(key, path)
+
+
+#: the CPU target (name, features) of the shipped kernels this process uses, or None: it
+#: compiles for its own CPU (drt.kernels.prebuilt)
+PREBUILT_TARGET = None
+
+
+def _use_prebuilt_kernels(key: str, cache: str) -> None:
+    """Use the kernels shipped with this copy of the package for this source key, if any and if
+    they run on this CPU: copy them into the cache folder and compile for their CPU target
+    (drt.kernels.prebuilt)."""
+    from . import prebuilt
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    chosen = prebuilt.choose(root, key)
+    if chosen is None:
+        prebuilt.forget()
+        return
+    folder, target = chosen
+    if prebuilt.seed(folder, cache) and prebuilt.apply(target):
+        global PREBUILT_TARGET
+        PREBUILT_TARGET = target
+    else:
+        prebuilt.forget()
 
 
 _configure_numba_cache()
