@@ -9,11 +9,12 @@
    ``bpy/<ver>/scripts/addons_core/bl_pkg/cli/blender_ext.py``, with ``--split-platforms``:
    one ``drt-<version>-<platform>.zip`` per platform. Install with
    Edit > Preferences > Get Extensions > Install from Disk, or ``blender --command extension
-   install-file -r user_default <zip>``. Built on Linux x86-64 with the Python 3.11 and numba the
-   zip carries, the linux-x64 zip also holds its kernels compiled in advance for a portable CPU
-   (``drt/prebuilt_kernels``, drt.kernels.prebuilt): a first render there starts in seconds, not
-   minutes, when installed into the default repository (``user_default``: compiled code names its
-   modules). ``--no-prebuilt-kernels`` leaves them out.
+   install-file -r user_default <zip>``. Built on Linux x86-64, the linux-x64 zip also holds its
+   kernels compiled in advance for a portable CPU (``drt/prebuilt_kernels``,
+   drt.kernels.prebuilt) by this interpreter (Python 3.11: Blender 4.2 - 5.0) and each
+   ``--prebuild-python`` (3.13: Blender 5.1+) that has the numba the zip carries: a first render
+   there starts in seconds, not minutes, when installed into the default repository
+   (``user_default``: compiled code names its modules). ``--no-prebuilt-kernels`` leaves them out.
 3. Legacy add-on (Blender 3.4 - 4.1): ``drt_legacy-<version>-linux-x64.zip`` holding the folder
    ``drt_blender/`` with embreex unpacked into ``drt_blender/_vendor`` (appended to sys.path by
    the add-on). Install with Preferences > Add-ons > Install... Blender builds without numpy
@@ -187,27 +188,37 @@ def _prebuilt_module():
     return module
 
 
-def can_prebuild_kernels() -> str | None:
-    """Why this machine cannot compile the linux-x64 extension's kernels in advance, or None: it
-    must be Linux x86-64 with the Python (3.11, Blender 4.2 - 5.0) and numba the zip carries for
-    it (the cache is keyed on both)."""
-    import platform
-    if sys.platform != "linux" or platform.machine() != "x86_64":
-        return f"not Linux x86-64 ({sys.platform}, {platform.machine()})"
-    if f"cp{sys.version_info[0]}{sys.version_info[1]}" != PYTHON_TAGS[0]:
-        return f"Python {sys.version_info[0]}.{sys.version_info[1]}, not the {PYTHON_TAGS[0]} of Blender 4.2 - 5.0"
-    from importlib.metadata import version
-    shipped = [w.split("-")[1] for w in manifest_wheels() if w.startswith("numba-")]
-    if version("numba") not in shipped:
-        return f"numba {version('numba')} here, the extension carries {', '.join(sorted(set(shipped)))}"
+_PROBE = ("import sys, platform; from importlib.metadata import version; "
+          "print(sys.platform, platform.machine(), f'cp{sys.version_info[0]}{sys.version_info[1]}', version('numba'))")
+
+
+def can_prebuild_kernels(python: str = sys.executable) -> str | None:
+    """Why the interpreter ``python`` cannot compile kernels for the linux-x64 extension in
+    advance, or None: it must run on Linux x86-64, be a Python the extension supports
+    (``PYTHON_TAGS``: 3.11 for Blender 4.2 - 5.0, 3.13 for 5.1+) and have the numba the zip
+    carries (the cache is keyed on both), with numpy and embreex to render."""
+    try:
+        p = subprocess.run([python, "-c", _PROBE], capture_output=True, text=True, timeout=120)
+        system, machine, tag, numba_version = p.stdout.split()
+    except (OSError, ValueError, subprocess.SubprocessError) as e:
+        said = p.stderr.strip().splitlines()[-1:] if isinstance(e, ValueError) else [str(e)]
+        return f"{python} cannot run the build's probe ({'; '.join(said) or 'no answer'})"
+    if system != "linux" or machine != "x86_64":
+        return f"not Linux x86-64 ({system}, {machine})"
+    if tag not in PYTHON_TAGS:
+        return f"{tag}, not a Python the extension supports ({', '.join(PYTHON_TAGS)})"
+    shipped = {w.split("-")[1] for w in manifest_wheels() if w.startswith("numba-")}
+    if numba_version not in shipped:
+        return f"numba {numba_version} in {python}, the extension carries {', '.join(sorted(shipped))}"
     return None
 
 
 def prebuild_kernels(stage: str, dest: str, package: str = EXTENSION_PACKAGE,
-                     scenes: list[str] | None = None) -> str:
+                     scenes: list[str] | None = None, python: str = sys.executable) -> str:
     """Compile the kernels of the staged extension ``stage`` (its core in ``stage/drt``, imported
-    as ``package``.drt) for the portable CPU target by rendering every shipped scene at 24 x 16,
-    and copy them into ``dest/<source key>`` (drt.kernels.prebuilt). Returns that folder."""
+    as ``package``.drt) with the interpreter ``python`` for the portable CPU target by rendering
+    every shipped scene at 24 x 16, and copy them into ``dest/<source key>``
+    (drt.kernels.prebuilt; the key differs per Python). Returns that folder."""
     prebuilt = _prebuilt_module()
     scenes = scenes if scenes is not None else sorted(glob.glob(os.path.join(REPO, "blend_scenes", "*.npz")))
     with tempfile.TemporaryDirectory() as cache:
@@ -215,7 +226,7 @@ def prebuild_kernels(stage: str, dest: str, package: str = EXTENSION_PACKAGE,
                    NUMBA_CPU_FEATURES=prebuilt.PORTABLE_X86_64[1])
         for var in ("NUMBA_CACHE_DIR", "DRT_SET_NUMBA_CACHE_DIR", "DRT_NO_PRECOMPILE", "PYTHONPATH"):
             env.pop(var, None)
-        p = subprocess.run([sys.executable, "-c", _PREBUILD_CHILD, json.dumps([stage, package, scenes])],
+        p = subprocess.run([python, "-c", _PREBUILD_CHILD, json.dumps([stage, package, scenes])],
                            env=env, capture_output=True, text=True)
         line = [ln for ln in p.stdout.splitlines() if ln.startswith("PREBUILT ")]
         if p.returncode != 0 or not line:
@@ -225,9 +236,13 @@ def prebuild_kernels(stage: str, dest: str, package: str = EXTENSION_PACKAGE,
         if os.path.exists(out):
             shutil.rmtree(out)
         shutil.copytree(keyed, out)
-        from importlib.metadata import version
-        prebuilt.write_target(out, prebuilt.PORTABLE_X86_64, version("numba"))
+        prebuilt.write_target(out, prebuilt.PORTABLE_X86_64, _numba_of(python))
     return out
+
+
+def _numba_of(python: str) -> str:
+    return subprocess.run([python, "-c", "import numba; print(numba.__version__)"], capture_output=True,
+                          text=True, check=True).stdout.strip()
 
 
 def add_prebuilt_to_zip(zip_path: str, folder: str) -> None:
@@ -254,9 +269,10 @@ def blender_ext_cli() -> str:
     return found[0]
 
 
-def build_extension(out: str, wheels: list[str], prebuild: bool = True) -> list[str]:
-    """One zip per platform; the linux-x64 one with its kernels compiled in advance when this
-    machine can compile them (``can_prebuild_kernels``; ~3 min on two cores)."""
+def build_extension(out: str, wheels: list[str], prebuild_pythons: list[str] | None = None) -> list[str]:
+    """One zip per platform; the linux-x64 one with its kernels compiled in advance by each of
+    ``prebuild_pythons`` (default: this interpreter) that can (``can_prebuild_kernels``; ~3 min
+    each on two cores; [] for none)."""
     stage = os.path.join(REPO, "build", "extension", "drt")
     stage_addon(stage)
     os.makedirs(os.path.join(stage, "wheels"))
@@ -267,14 +283,17 @@ def build_extension(out: str, wheels: list[str], prebuild: bool = True) -> list[
                     "--output-dir", out, "--split-platforms"], check=True)
     zips = sorted(glob.glob(os.path.join(out, f"drt-{manifest_version()}-*.zip")))
     linux = [z for z in zips if z.endswith("-linux_x64.zip") or z.endswith("-linux-x64.zip")]
-    why_not = can_prebuild_kernels() if prebuild else "--no-prebuilt-kernels"
-    if why_not or not linux:
-        print(f"the linux-x64 zip compiles its kernels on a first render ({why_not or 'no linux-x64 zip'})")
-        return zips
-    folder = prebuild_kernels(stage, os.path.join(REPO, "build", "prebuilt_kernels"))
-    for z in linux:
-        add_prebuilt_to_zip(z, folder)
-    print(f"{os.path.basename(linux[0])} carries kernels compiled for {_prebuilt_module().PORTABLE_X86_64[0]}")
+    pythons = [sys.executable] if prebuild_pythons is None else prebuild_pythons
+    for python in pythons:
+        why_not = can_prebuild_kernels(python)
+        if why_not or not linux:
+            print(f"no kernels compiled in advance with {python}: {why_not or 'no linux-x64 zip'}")
+            continue
+        folder = prebuild_kernels(stage, os.path.join(REPO, "build", "prebuilt_kernels"), python=python)
+        for z in linux:
+            add_prebuilt_to_zip(z, folder)
+        print(f"{os.path.basename(linux[0])} carries kernels compiled by {python} for "
+              f"{_prebuilt_module().PORTABLE_X86_64[0]}")
     return zips
 
 
@@ -307,6 +326,10 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default=os.path.join(REPO, "dist"))
     p.add_argument("--legacy-only", action="store_true")
+    p.add_argument("--prebuild-python", action="append", metavar="PYTHON",
+                   help="an interpreter (3.11 or 3.13, with the zip's numba, numpy and embreex) that "
+                        "compiles the linux-x64 extension's kernels in advance; repeatable "
+                        "(default: this one)")
     p.add_argument("--no-prebuilt-kernels", action="store_true",
                    help="do not compile the linux-x64 extension's kernels in advance")
     opts = p.parse_args(argv)
@@ -316,7 +339,8 @@ def main(argv=None) -> int:
     wheels = download_wheels(manifest_wheels())
     built = []
     if not opts.legacy_only:
-        built += build_extension(opts.out, wheels, prebuild=not opts.no_prebuilt_kernels)
+        built += build_extension(opts.out, wheels,
+                                 prebuild_pythons=[] if opts.no_prebuilt_kernels else opts.prebuild_python)
     built.append(build_legacy(opts.out, legacy_wheels(wheels)))
     for b in built:
         print(f"built {b} ({os.path.getsize(b) / 1e6:.1f} MB)")

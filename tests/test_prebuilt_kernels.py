@@ -116,3 +116,25 @@ def test_the_build_packs_shipped_kernels_under_the_core_in_the_zip(tmp_path):
 def test_this_cpu_is_described_in_llvms_feature_names():
     features = prebuilt.host_features()
     assert features and "64bit" in features and "sse2" in features
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="fake interpreters are shell scripts")
+def test_the_build_says_why_an_interpreter_cannot_compile_the_kernels(tmp_path):
+    sys.path.insert(0, os.path.join(REPO, "scripts"))
+    try:
+        import build_extension as b
+    finally:
+        sys.path.pop(0)
+    assert "/nonexistent/python" in b.can_prebuild_kernels("/nonexistent/python")
+
+    def fake(answer):
+        path = tmp_path / f"python-{abs(hash(answer))}"
+        path.write_text(f"#!/bin/sh\necho {answer}\n")
+        path.chmod(0o755)
+        return str(path)
+
+    numba = [w.split("-")[1] for w in b.manifest_wheels() if w.startswith("numba-")][0]
+    assert "cp312" in b.can_prebuild_kernels(fake(f"linux x86_64 cp312 {numba}"))
+    assert "not Linux x86-64" in b.can_prebuild_kernels(fake(f"win32 AMD64 cp311 {numba}"))
+    assert "numba 0.1.0" in b.can_prebuild_kernels(fake("linux x86_64 cp313 0.1.0"))
+    assert b.can_prebuild_kernels(fake(f"linux x86_64 cp313 {numba}")) is None

@@ -77,6 +77,33 @@ def test_pickled_arrays_are_refused(tmp_path):
         load_scene(path)
 
 
+@pytest.mark.parametrize("version", [(1, 0), (2, 0), (3, 0)])
+def test_npy_members_of_each_format_version(tmp_path, version):
+    """Members in .npy format 1.0 and 2.0 (what numpy writes) are read through numpy's public
+    header readers, the same in numpy 1 and 2 (Blender 5.1+); 3.0 is refused by name."""
+    import zipfile
+    h, a = cornell_box()
+    good = tmp_path / "good.npz"
+    save_scene(good, h, a)
+    path = tmp_path / f"v{version[0]}.npz"
+    with zipfile.ZipFile(good) as src, zipfile.ZipFile(path, "w") as dst:
+        for info in src.infolist():
+            data = src.read(info)
+            if info.filename == "mesh0.positions.npy":
+                import io
+                arr = np.lib.format.read_array(io.BytesIO(data))
+                buf = io.BytesIO()
+                np.lib.format.write_array(buf, arr, version=version)
+                data = buf.getvalue()
+            dst.writestr(info.filename, data)
+    if version == (3, 0):
+        with pytest.raises(SceneError, match=r"mesh0.positions.*format version 3.0"):
+            load_scene(path)
+    else:
+        _, arrays = read_scene_arrays(path)
+        assert np.array_equal(arrays["mesh0.positions"], a["mesh0.positions"])
+
+
 NAN, INF = float("nan"), float("inf")
 
 

@@ -110,7 +110,14 @@ def _read_member(z: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:
     with z.open(info) as f:
         try:
             version = np.lib.format.read_magic(f)
-            shape, fortran, dtype = np.lib.format._read_array_header(f, version, max_header_size=10000)
+            # (numpy's public readers: its private _read_array_header moved in numpy 2, which
+            # Blender 5.1+ bundles; format 3.0 only differs for non-Latin-1 field names)
+            if version == (1, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_1_0(f, max_header_size=10000)
+            elif version == (2, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_2_0(f, max_header_size=10000)
+            else:
+                raise ValueError(f"format version {version[0]}.{version[1]} is not one DRT writes")
         except (ValueError, SyntaxError, TypeError) as e:
             raise SceneError(name, f"is not a valid .npy array ({e})") from None
         if dtype.hasobject:

@@ -19,6 +19,7 @@ import logging
 import os
 import time
 import uuid
+from concurrent.futures import CancelledError
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
@@ -411,6 +412,12 @@ def render_frames(
                     part = f.result(timeout=timeout)
                 except TimeoutError:
                     raise FarmError(f"a finished task's result did not arrive within {timeout:g} s") from None
+                except CancelledError:
+                    # its worker died after it finished, with the only copy of the frame's scene:
+                    # Dask cannot recompute it and cancels it; send both again (as above)
+                    lost.setdefault(fr.index, []).append(fr.futures.pop(f.key))
+                    fr.handles.pop(f.key)
+                    continue
                 fr.parts[fr.futures.pop(f.key)] = part
                 fr.handles.pop(f.key)
                 outstanding -= 1
