@@ -359,14 +359,7 @@ def bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             sel, uw_s, memo_top, memo_w = view_weight(md, m, s, wo_main, nc_local, nv_local, front, memo_top,
                                                       memo_w)
             total += sel
-            if s == 0:
-                w0 = sel
-            elif s == 1:
-                w1 = sel
-            elif s == 2:
-                w2 = sel
-            elif s == 3:
-                w3 = sel
+            w0, w1, w2, w3 = keep_first_four(s, sel, w0, w1, w2, w3)
         else:
             sel = md.lobe_select[m, s]
             uw_s = (1.0, 1.0, 1.0)  # (no lobe has a layer)
@@ -647,39 +640,32 @@ def view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w):
 
 
 @inline_kernel
-def pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front):
-    """(slot, u_rest, p_sel): the lobe u_lobe selects at view wo (local frame; the normals as
-    ``bsdf_eval_bump``), u_lobe rescaled inside its interval, and its probability. A layered
-    material picks by ``view_weight``, any other by its constant ``lobe_select``. p_sel 0: no
-    lobe can be picked."""
-    if not md.has_layers[m]:
-        slot, u_rest = pick_lobe(md, m, u_lobe)
-        return slot, u_rest, md.lobe_select[m, slot]
-    count = md.lobe_count[m]
-    total = 0.0
-    memo_top = -1
-    memo_w = (1.0, 1.0, 1.0)
-    # the first four weights are kept for the second walk (no arrays in a kernel: scalars);
-    # more lobes than that are weighed again
-    w0 = w1 = w2 = w3 = 0.0
-    for s in range(count):
-        w, _, memo_top, memo_w = view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w)
-        if s == 0:
-            w0 = w
-        elif s == 1:
-            w1 = w
-        elif s == 2:
-            w2 = w
-        elif s == 3:
-            w3 = w
-        total += w
+def keep_first_four(s, w, w0, w1, w2, w3):
+    """(w0, w1, w2, w3) with slot s's weight w stored if s < 4: a kernel has no arrays of its
+    own, so a lobe walk keeps the weights it needs again in scalars."""
+    if s == 0:
+        return w, w1, w2, w3
+    if s == 1:
+        return w0, w, w2, w3
+    if s == 2:
+        return w0, w1, w, w3
+    if s == 3:
+        return w0, w1, w2, w
+    return w0, w1, w2, w3
+
+
+@inline_kernel
+def _invert_lobe_weights(md, m, u_lobe, wo, nc_local, nv_local, front, total, w0, w1, w2, w3, memo_top,
+                         memo_w):
+    """(slot, u_rest, p_sel) for u_lobe over the view weights of material m's lobes, whose sum is
+    total: slots 0-3 from (w0..w3), any further ones weighed again (with the walk's memo)."""
     if not total > 0.0:
         return 0, 0.0, 0.0
     target = u_lobe * total
     cum = 0.0
     last = 0
     last_w = 0.0
-    for s in range(count):
+    for s in range(md.lobe_count[m]):
         if s < 4:
             w = w0 if s == 0 else (w1 if s == 1 else (w2 if s == 2 else w3))
         else:
@@ -694,27 +680,37 @@ def pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front):
 
 
 @inline_kernel
+def pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front):
+    """(slot, u_rest, p_sel): the lobe u_lobe selects at view wo (local frame; the normals as
+    ``bsdf_eval_bump``), u_lobe rescaled inside its interval, and its probability. A layered
+    material picks by ``view_weight``, any other by its constant ``lobe_select``. p_sel 0: no
+    lobe can be picked."""
+    if not md.has_layers[m]:
+        slot, u_rest = pick_lobe(md, m, u_lobe)
+        return slot, u_rest, md.lobe_select[m, slot]
+    count = md.lobe_count[m]
+    total = 0.0
+    memo_top = -1
+    memo_w = (1.0, 1.0, 1.0)
+    # the first four weights are kept for the second walk; more lobes than that are weighed again
+    w0 = w1 = w2 = w3 = 0.0
+    for s in range(count):
+        w, _, memo_top, memo_w = view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w)
+        w0, w1, w2, w3 = keep_first_four(s, w, w0, w1, w2, w3)
+        total += w
+    return _invert_lobe_weights(md, m, u_lobe, wo, nc_local, nv_local, front, total, w0, w1, w2, w3, memo_top,
+                                memo_w)
+
+
+@inline_kernel
 def pick_lobe_weights(md, m, u_lobe, wo, nc_local, nv_local, front, weights):
     """``pick_lobe_view`` from the view weights ``bsdf_eval_weights`` returned at this vertex
     (the same choice, without weighing the lobes again), or by itself where there are none."""
-    total = weights[0]
-    if not (total >= 0.0 and md.has_layers[m]):
+    if not (weights[0] >= 0.0 and md.has_layers[m]):
         return pick_lobe_view(md, m, u_lobe, wo, nc_local, nv_local, front)
-    if not total > 0.0:
-        return 0, 0.0, 0.0
-    target = u_lobe * total
-    cum = 0.0
-    last = 0
-    last_w = 0.0
-    for s in range(md.lobe_count[m]):  # (at most four: bsdf_eval_weights)
-        w = weights[1] if s == 0 else (weights[2] if s == 1 else (weights[3] if s == 2 else weights[4]))
-        if w > 0.0:
-            if target < cum + w:
-                return s, min(max((target - cum) / w, 0.0), _ONE_MINUS_EPS), w / total
-            last = s
-            last_w = w
-        cum += w
-    return last, _ONE_MINUS_EPS, last_w / total  # (rounding left u_lobe past the last lobe)
+    # (at most four lobes: bsdf_eval_weights gives none for more)
+    return _invert_lobe_weights(md, m, u_lobe, wo, nc_local, nv_local, front, weights[0], weights[1], weights[2],
+                                weights[3], weights[4], -1, (1.0, 1.0, 1.0))
 
 
 @inline_kernel
