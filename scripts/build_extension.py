@@ -174,7 +174,8 @@ for path in scenes:
     scene.render = replace(scene.render, width=24, height=16)
     render.render(scene, spp=2)
     print("compiled for", os.path.basename(path), flush=True)
-print("PREBUILT " + json.dumps([os.environ["NUMBA_CACHE_DIR"], kernels.source_key()]), flush=True)
+import numba
+print("PREBUILT " + json.dumps([os.environ["NUMBA_CACHE_DIR"], kernels.source_key(), numba.__version__]), flush=True)
 """
 
 
@@ -231,18 +232,13 @@ def prebuild_kernels(stage: str, dest: str, package: str = EXTENSION_PACKAGE,
         line = [ln for ln in p.stdout.splitlines() if ln.startswith("PREBUILT ")]
         if p.returncode != 0 or not line:
             raise SystemExit(f"compiling the kernels in advance failed:\n{p.stdout[-2000:]}{p.stderr[-3000:]}")
-        keyed, key = json.loads(line[-1][len("PREBUILT "):])
+        keyed, key, numba_version = json.loads(line[-1][len("PREBUILT "):])
         out = os.path.join(dest, key)
         if os.path.exists(out):
             shutil.rmtree(out)
         shutil.copytree(keyed, out)
-        prebuilt.write_target(out, prebuilt.PORTABLE_X86_64, _numba_of(python))
+        prebuilt.write_target(out, prebuilt.PORTABLE_X86_64, numba_version)
     return out
-
-
-def _numba_of(python: str) -> str:
-    return subprocess.run([python, "-c", "import numba; print(numba.__version__)"], capture_output=True,
-                          text=True, check=True).stdout.strip()
 
 
 def add_prebuilt_to_zip(zip_path: str, folder: str) -> None:
