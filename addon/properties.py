@@ -99,7 +99,9 @@ class DRTSceneSettings(bpy.types.PropertyGroup):
         default=0.0, min=0.0)
 
     filter_type: EnumProperty(
-        name="Pixel Filter", description="Pixel filter; its width is Blender's Filter Size",
+        name="Pixel Filter",
+        description="Pixel filter when the Cycles add-on is disabled (its width is Blender's Filter "
+                    "Size); otherwise DRT uses Cycles's Film > Pixel Filter settings",
         items=FILTER_ITEMS, default="BLACKMAN_HARRIS")
 
     use_sample_subset: BoolProperty(

@@ -193,8 +193,16 @@ class DRT_RENDER_PT_film(DRTRenderPanel, bpy.types.Panel):
         layout.use_property_decorate = False
         rd = context.scene.render
         col = layout.column()
-        col.prop(context.scene.drt, "filter_type")
-        col.prop(rd, "filter_size", text="Width")
+        cycles = getattr(context.scene, "cycles", None)
+        if cycles is not None and hasattr(cycles, "pixel_filter_type"):
+            # the same settings as Cycles's Film panel: one .blend, one filter for both engines
+            col.prop(cycles, "pixel_filter_type", text="Pixel Filter")
+            if cycles.pixel_filter_type != "BOX":  # (a box is one pixel wide, as in Cycles)
+                col.prop(cycles, "filter_width", text="Width")
+        else:
+            col.prop(context.scene.drt, "filter_type")
+            if context.scene.drt.filter_type != "BOX":
+                col.prop(rd, "filter_size", text="Width")
         col.prop(rd, "film_transparent", text="Transparent")
 
 

@@ -88,7 +88,7 @@ def setup_scene(n):
     sc.cycles.use_denoising = False
     sc.cycles.use_adaptive_sampling = False
     sc.cycles.max_bounces = 0
-    sc.render.filter_size = 0.01
+    sc.cycles.filter_width = 0.01  # both engines read Cycles's pixel filter
     sc.render.resolution_x = sc.render.resolution_y = n * TILE
     sc.render.resolution_percentage = 100
     sc.render.threads_mode = "FIXED"

@@ -87,6 +87,53 @@ def test_defaults_match_cycles(registered):
     assert d.sampler == "SOBOL" and d.filter_type == "BLACKMAN_HARRIS"
 
 
+def test_the_pixel_filter_is_cycles_film_setting(registered):
+    """DRT renders with Cycles's Film > Pixel Filter (one .blend, one filter), not with Blender's
+    render.filter_size (EEVEE's, which Cycles ignores); Cycles's box is one pixel wide whatever
+    the width; without the Cycles add-on DRT's own type and Blender's Filter Size."""
+    from types import SimpleNamespace
+
+    from addon.export.scene_parts import pixel_filter, render_settings
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.filter_size = 2.0
+    sc.cycles.pixel_filter_type, sc.cycles.filter_width = "GAUSSIAN", 0.7
+    assert render_settings(sc)["filter"] == {"type": "GAUSSIAN", "width": 0.7}
+    sc.cycles.filter_width = 0.01  # Blender's float32 minimum, rounded up to the validator's 0.01
+    assert pixel_filter(sc) == {"type": "GAUSSIAN", "width": 0.01}
+    sc.cycles.pixel_filter_type = "BOX"
+    assert pixel_filter(sc) == {"type": "BOX", "width": 1.0}
+    no_cycles = SimpleNamespace(drt=SimpleNamespace(filter_type="BLACKMAN_HARRIS"),
+                                render=SimpleNamespace(filter_size=2.5))
+    assert pixel_filter(no_cycles) == {"type": "BLACKMAN_HARRIS", "width": 2.5}
+
+    # DRT's Film panel edits those same properties (the width hidden for a box, as in Cycles)
+    from addon import ui
+
+    class Layout:
+        use_property_split = use_property_decorate = False
+
+        def __init__(self):
+            self.props = []
+
+        def column(self):
+            return self
+
+        def prop(self, data, name, **_kw):
+            getattr(data, name)  # AttributeError for a missing property
+            self.props.append((data, name))
+
+    def film_panel_props():
+        panel = type("FakePanel", (), {"layout": Layout()})()
+        ui.DRT_RENDER_PT_film.draw(panel, bpy.context)
+        return panel.layout.props
+
+    assert film_panel_props()[:1] == [(sc.cycles, "pixel_filter_type")]
+    sc.cycles.pixel_filter_type = "BLACKMAN_HARRIS"
+    assert film_panel_props()[:2] == [(sc.cycles, "pixel_filter_type"), (sc.cycles, "filter_width")]
+
+
 def test_render_cornell_box(tmp_path):
     scene = open_scene("cornell_box")
     assert scene.render.engine == "DRT"

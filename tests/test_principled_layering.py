@@ -234,7 +234,7 @@ def test_principled_spheres_in_a_white_world_match_cycles(tmp_path):
         bpy_obj = __import__("bpy").context.object
         bpy_obj.data.materials.append(_material(f"w{k}", case, True))
     C.reference_settings(sc, samples=SPP)
-    sc.render.filter_size = 0.01
+    sc.cycles.filter_width = 0.01  # both engines read Cycles's pixel filter
     sc.render.resolution_x = sc.render.resolution_y = n * TILE
     sc.cycles.use_light_tree = False
     sc.world.node_tree.nodes["Background"].inputs[1].default_value = 1.0

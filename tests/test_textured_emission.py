@@ -18,7 +18,7 @@ def build_scene(res=(48, 36), spp=16, bounces=2):
 
     sc = setup_scene(1)
     sc.render.resolution_x, sc.render.resolution_y = res
-    sc.render.filter_size = 1.5
+    sc.cycles.filter_width = 1.5
     sc.cycles.max_bounces = bounces
     sc.cycles.samples = spp
     sc.cycles.sample_clamp_indirect = 0.0

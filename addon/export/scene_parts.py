@@ -50,6 +50,23 @@ def shutter_interval(render) -> list | None:
     return [delta - 0.5 * s, delta + 0.5 * s]
 
 
+def pixel_filter(scene) -> dict:
+    """The pixel filter Cycles renders the scene with: the Cycles add-on's Film > Pixel Filter
+    (``scene.cycles.pixel_filter_type``, ``.filter_width``), not Blender's ``render.filter_size``
+    (EEVEE's: Cycles ignores it). Cycles's box filter is one pixel wide whatever the width says
+    (its UI hides the width then). Without the Cycles add-on: DRT's own type and Blender's Filter
+    Size. The width is rounded to 6 decimals: Blender's float32 0.01 (the minimum) is
+    0.00999999977, below the scene validator's 0.01."""
+    cycles = getattr(scene, "cycles", None)
+    if cycles is not None and hasattr(cycles, "pixel_filter_type"):
+        kind, width = cycles.pixel_filter_type, cycles.filter_width
+    else:
+        kind, width = scene.drt.filter_type, scene.render.filter_size
+    if kind == "BOX":
+        width = 1.0
+    return {"type": kind, "width": round(float(width), 6)}
+
+
 def render_settings(scene, preview: bool = False) -> dict:
     r = scene.render
     d = scene.drt
@@ -64,7 +81,7 @@ def render_settings(scene, preview: bool = False) -> dict:
         "pixel_aspect": [float(r.pixel_aspect_x), float(r.pixel_aspect_y)],
         "border": border,
         "film_transparent": bool(r.film_transparent),
-        "filter": {"type": d.filter_type, "width": round(float(r.filter_size), 6)},  # float32 0.01 < 0.01
+        "filter": pixel_filter(scene),
         "spp": int(d.preview_samples if preview else d.samples),
         "seed": int(d.seed),
         "sampler": d.sampler,
