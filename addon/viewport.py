@@ -79,13 +79,19 @@ class ViewportSync:
             self.synced = True
             return
         geometry, materials, lights, world, settings, objects = set(), [], False, False, False, False
-        for u in depsgraph.updates:
+        updates = list(depsgraph.updates)
+        shading_edit = any(type(u.id).__name__ in ("Material", "ShaderNodeTree") for u in updates)
+        # original data-block pointer → that data-block's own geometry flag in this batch
+        data_geometry = {u.id.original.as_pointer(): u.is_updated_geometry
+                         for u in updates if type(u.id).__name__ != "Object"}
+        for u in updates:
             idt = u.id
             kind = type(idt).__name__
             if kind == "Object":
                 if idt.type == "LIGHT":
                     lights = True
-                elif u.is_updated_geometry:
+                elif u.is_updated_geometry and not (
+                        shading_edit and self._only_its_material_changed(idt, data_geometry)):
                     geometry.add(idt.original.name)
                     objects = True
                 elif u.is_updated_transform:
@@ -117,6 +123,20 @@ class ViewportSync:
             self._sync_lights(depsgraph)
         if world or settings:
             self._sync_world_and_settings(depsgraph.scene)
+
+    @staticmethod
+    def _only_its_material_changed(obj, data_geometry: dict) -> bool:
+        """Whether an object's geometry flag only echoes an edit of one of its materials.
+
+        Blender 5.1+ flags ``is_updated_geometry`` on every object that uses an edited material
+        (5.0 did not); its mesh comes in the same batch with its own geometry flag off. A real
+        edit of the mesh flags the mesh too, and a geometry-nodes edit does not list the mesh, but
+        any modifier could read anything: an object with modifiers is exported again anyway.
+        DRT's material programs never move geometry (displacement is bump), so the mesh export
+        and the hierarchy rebuild would change nothing."""
+        orig = obj.original
+        data = orig.data
+        return data is not None and data_geometry.get(data.as_pointer()) is False and not orig.modifiers
 
     def _full(self, depsgraph) -> None:
         self._reconcile(depsgraph, set())

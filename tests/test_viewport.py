@@ -387,6 +387,42 @@ def test_blender_material_edit_reexports_only_that_material(blender_viewport):
 
 
 @blender_only
+def test_blender_5_1_material_edit_flags_do_not_reexport_meshes(blender_viewport):
+    """Blender 5.1+ flags the geometry of every object using an edited material, and lists its
+    mesh with the mesh's own geometry flag off: DRT converts the material again and leaves the
+    mesh (and its hierarchy) alone. The same batch with the mesh itself flagged (a real edit in
+    the same update) does export it again. The batch is 5.3's, replayed on the real data-blocks."""
+    vp = blender_viewport
+    live = vp.session.live
+    dg = bpy.context.evaluated_depsgraph_get()
+
+    class Batch:
+        def __init__(self, updates):
+            self.updates = updates
+
+        def __getattr__(self, name):  # scene, object_instances: the real depsgraph's
+            return getattr(dg, name)
+
+    def update(idt, geometry, shading=True):
+        return types.SimpleNamespace(id=idt, is_updated_geometry=geometry, is_updated_transform=False,
+                                     is_updated_shading=shading)
+
+    room, mat = bpy.data.objects["Room"], bpy.data.materials["Green"]
+    assert not room.modifiers and mat.name in [s.material.name for s in room.material_slots]
+
+    def batch(mesh_flag):
+        return Batch([update(room, True), update(room.data, mesh_flag), update(mat, False),
+                      update(mat.node_tree, False, shading=False)])
+
+    exports, builds = dict(vp.exports), live.counters.static_builds
+    vp.sync(batch(mesh_flag=False))
+    assert vp.exports == dict(exports, materials=exports["materials"] + 1)
+    assert live.counters.static_builds == builds
+    vp.sync(batch(mesh_flag=True))
+    assert vp.exports["meshes"] == exports["meshes"] + 1
+
+
+@blender_only
 def test_blender_geometry_edit_reexports_that_object(blender_viewport):
     vp = blender_viewport
     exports = dict(vp.exports)

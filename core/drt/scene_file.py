@@ -180,6 +180,9 @@ def read_scene_arrays(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarr
         raise SceneError("file", f"{p} does not exist")
     try:
         with zipfile.ZipFile(p) as z:
+            if any(not i.filename for i in z.infolist()):
+                # (Python 3.11's ZipInfo.is_dir raised IndexError on it; 3.13's does not)
+                raise SceneError("file", f"{p} has a member with an empty name")
             infos = [i for i in z.infolist() if not i.is_dir()]
             names = [i.filename[:-4] if i.filename.endswith(".npy") else i.filename for i in infos]
             if "header" not in names:
@@ -199,7 +202,7 @@ def read_scene_arrays(path: str | os.PathLike) -> tuple[dict, dict[str, np.ndarr
     except MemoryError:
         raise SceneError("file", f"{p} does not fit in the available memory") from None
     except Exception as e:  # noqa: BLE001 - zipfile/numpy raise many types on corrupt archives
-        # (BadZipFile, EOFError, zlib.error, struct.error, IndexError on an empty member name, ...)
+        # (BadZipFile, EOFError, zlib.error, struct.error, ...)
         raise SceneError("file", f"{p} is not a readable scene archive ({type(e).__name__}: {e})") from None
     raw = arrays.pop("header")
     if raw.dtype != np.uint8 or raw.ndim != 1:
