@@ -196,6 +196,7 @@ class DRT_RENDER_PT_film(DRTRenderPanel, bpy.types.Panel):
         cycles = getattr(context.scene, "cycles", None)
         if cycles is not None and hasattr(cycles, "pixel_filter_type"):
             # the same settings as Cycles's Film panel: one .blend, one filter for both engines
+            col.prop(cycles, "film_exposure", text="Exposure")
             col.prop(cycles, "pixel_filter_type", text="Pixel Filter")
             if cycles.pixel_filter_type != "BOX":  # (a box is one pixel wide, as in Cycles)
                 col.prop(cycles, "filter_width", text="Width")

@@ -87,7 +87,7 @@ def test_defaults_match_cycles(registered):
     assert d.sampler == "SOBOL" and d.filter_type == "BLACKMAN_HARRIS"
 
 
-def test_the_pixel_filter_is_cycles_film_setting(registered):
+def test_the_pixel_filter_and_exposure_are_cycles_film_settings(registered):
     """DRT renders with Cycles's Film > Pixel Filter (one .blend, one filter), not with Blender's
     render.filter_size (EEVEE's, which Cycles ignores); Cycles's box is one pixel wide whatever
     the width; without the Cycles add-on DRT's own type and Blender's Filter Size."""
@@ -129,9 +129,12 @@ def test_the_pixel_filter_is_cycles_film_setting(registered):
         ui.DRT_RENDER_PT_film.draw(panel, bpy.context)
         return panel.layout.props
 
-    assert film_panel_props()[:1] == [(sc.cycles, "pixel_filter_type")]
+    assert film_panel_props()[:2] == [(sc.cycles, "film_exposure"), (sc.cycles, "pixel_filter_type")]
     sc.cycles.pixel_filter_type = "BLACKMAN_HARRIS"
-    assert film_panel_props()[:2] == [(sc.cycles, "pixel_filter_type"), (sc.cycles, "filter_width")]
+    assert film_panel_props()[1:3] == [(sc.cycles, "pixel_filter_type"), (sc.cycles, "filter_width")]
+    # and Cycles's Film > Exposure
+    sc.cycles.film_exposure = 1.75
+    assert render_settings(sc)["exposure"] == 1.75
 
 
 def test_render_cornell_box(tmp_path):

@@ -463,6 +463,32 @@ def test_alpha_cut_out_casts_a_cut_out_shadow_like_cycles(tmp_path):
     assert (np.abs(drt - cycles).max(axis=-1)[flat] > 2e-3).mean() < 0.02
 
 
+def test_film_exposure_scales_like_cycles(tmp_path):
+    """Cycles's Film > Exposure 2.5 (transparent film): both engines scale the radiance, not
+    the alpha; DRT's image against Cycles's pixel by pixel."""
+    from addon.export import export_depsgraph
+    from drt.render import render
+    from drt.scene import scene_from_dict
+
+    sc = _shadow_scene(lambda: _diffuse_material("card", (0.2, 0.5, 0.9, 1)))
+    sc.cycles.film_exposure = 2.5
+    sc.render.film_transparent = True
+    path = str(tmp_path / "exposure.exr")
+    sc.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path)
+    cycles = np.array(img.pixels[:], dtype=np.float64).reshape(32, 32, 4)[::-1]
+    bpy.data.images.remove(img)
+    res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
+    assert res.header["render"]["exposure"] == 2.5
+    drt = np.asarray(render(scene_from_dict(res.header, res.arrays), threads=1).combined, np.float64)
+    assert cycles[..., :3].max() > 1.5  # the lit ground: 2.5 × 0.67
+    np.testing.assert_array_equal(drt[..., 3], cycles[..., 3])
+    assert abs(drt[..., :3].mean() / cycles[..., :3].mean() - 1) < 0.01
+    flat = _interior(drt[..., :3], 1e-3)
+    assert (np.abs(drt - cycles)[..., :3].max(axis=-1)[flat] > 5e-3).mean() < 0.02
+
+
 def test_is_shadow_ray_trick_removes_a_shadow_like_cycles(tmp_path):
     """Mix(Diffuse, Transparent, Is Shadow Ray): the card is seen but casts no shadow."""
     def card():

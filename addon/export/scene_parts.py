@@ -92,7 +92,14 @@ def render_settings(scene, preview: bool = False) -> dict:
         "shutter": shutter_interval(r),
     } | ({"volume_bounces": int(d.volume_bounces)} if getattr(d, "volume_bounces", 0) else {}) \
       | ({"transparent_bounces": int(d.transparent_bounces)}
-         if getattr(d, "transparent_bounces", 8) != 8 else {})
+         if getattr(d, "transparent_bounces", 8) != 8 else {}) \
+      | ({"exposure": exposure} if (exposure := film_exposure(scene)) != 1.0 else {})
+
+
+def film_exposure(scene) -> float:
+    """Cycles's Film > Exposure (a scale of the written radiance, ``scene.cycles.film_exposure``);
+    1 without the Cycles add-on. Exported only when not 1, as the other optional settings."""
+    return float(getattr(getattr(scene, "cycles", None), "film_exposure", 1.0))
 
 
 def camera_dict(cam_obj, matrix) -> dict:

@@ -94,6 +94,9 @@ class Film:
     count: np.ndarray = None
     nan_samples: int = 0
     meta: dict = field(default_factory=dict)
+    #: radiance scale applied as samples are added (Cycles's Film > Exposure); films merged
+    #: from exposed parts keep 1
+    exposure: float = 1.0
 
     def __post_init__(self):
         n = self.width * self.height
@@ -106,7 +109,8 @@ class Film:
             self.count = np.zeros(n, dtype=np.int64)
 
     def add(self, b: SampleBatch) -> None:
-        _accumulate(np.ascontiguousarray(b.pixel, dtype=np.int64), _rows3(b.radiance),
+        radiance = b.radiance if self.exposure == 1.0 else np.asarray(b.radiance) * self.exposure
+        _accumulate(np.ascontiguousarray(b.pixel, dtype=np.int64), _rows3(radiance),
                     np.ascontiguousarray(b.alpha, dtype=np.float64),
                     np.ascontiguousarray(b.depth, dtype=np.float64), _rows3(b.normal), _rows3(b.albedo),
                     self.sum_rgba, self.sum_lum2, self.sum_normal, self.sum_albedo, self.min_depth,

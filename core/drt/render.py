@@ -344,10 +344,10 @@ def _film_for(scene: Scene, xs: np.ndarray, ys: np.ndarray, tile) -> tuple[Film,
     the tile (a 4K frame's full film is ~0.8 GB per task), and the (frame width, x0, y0, tile
     width) that maps frame pixels into it (None: the whole frame)."""
     if tile is None:
-        return Film(scene.render.width, scene.render.height), None
+        return Film(scene.render.width, scene.render.height, exposure=scene.render.exposure), None
     fx0, fy0 = (int(xs.min()), int(ys.min())) if len(xs) else (tile[0], tile[1])
     fx1, fy1 = (int(xs.max()) + 1, int(ys.max()) + 1) if len(xs) else (tile[0], tile[1])
-    film = Film(fx1 - fx0, fy1 - fy0)
+    film = Film(fx1 - fx0, fy1 - fy0, exposure=scene.render.exposure)
     film.meta["tile"] = [fx0, fy0, fx1, fy1]
     return film, (scene.render.width, fx0, fy0, fx1 - fx0)
 

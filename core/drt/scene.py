@@ -178,6 +178,9 @@ class RenderSettings:
     pixel_aspect: tuple[float, float] = (1.0, 1.0)
     border: tuple[float, float, float, float] | None = None
     film_transparent: bool = False
+    #: Cycles's Film > Exposure: the film's radiance (not alpha, depth, normal or albedo) is
+    #: multiplied by it, after clamping, as Cycles writes its passes
+    exposure: float = 1.0
     filter_type: str = "BLACKMAN_HARRIS"
     filter_width: float = 1.5
     spp: int = 64
@@ -338,6 +341,7 @@ def _render_settings(h: dict) -> RenderSettings:
         pixel_aspect=(float(aspect[0]), float(aspect[1])),
         border=border,
         film_transparent=_bool(r, "film_transparent", p, False),
+        exposure=_number(r, "exposure", p, 1.0, lo=0, hi=2.0**32),
         filter_type=ftype,
         filter_width=fwidth,
         spp=_number(r, "spp", p, 64, lo=1, hi=MAX_SPP, integer=True),
