@@ -119,6 +119,21 @@ def test_hidden_and_holdout_objects_excluded(fresh):
     assert names == ["Visible"]
 
 
+def test_ray_visibility_drt_ignores_is_named_in_a_warning(fresh):
+    """Cycles's per-object ray visibility and shadow catcher are not rendered yet: the export
+    says which objects and settings, once each, and is quiet for objects at the defaults."""
+    mat = C.diffuse("M", (0.5, 0.5, 0.5))
+    C.quad("Plain", (0, 0, 0), 1.0, mat)
+    assert not [w for w in export_current().warnings if "ray visibility" in w]
+    card = C.quad("Card", (0, 0, 1), 1.0, mat)
+    card.visible_camera = card.visible_shadow = False
+    C.quad("Catcher", (0, 0, 2), 1.0, mat).is_shadow_catcher = True
+    found = [w for w in export_current().warnings if "ray visibility" in w]
+    assert len(found) == 1
+    assert "'Card' (camera, shadow)" in found[0] and "'Catcher' (shadow catcher)" in found[0]
+    assert "Plain" not in found[0]
+
+
 def test_no_camera_is_an_export_error():
     ensure_registered()
     C.reset()

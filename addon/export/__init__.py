@@ -57,6 +57,21 @@ def _is_rendered(inst) -> bool:
     return True
 
 
+#: Cycles's per-object ray visibility (Object > Visibility) and the shadow catcher, with the
+#: value at which DRT renders the object the same
+_RAY_VISIBILITY = (("visible_camera", True, "camera"), ("visible_diffuse", True, "diffuse"),
+                   ("visible_glossy", True, "glossy"), ("visible_transmission", True, "transmission"),
+                   ("visible_volume_scatter", True, "volume scatter"), ("visible_shadow", True, "shadow"),
+                   ("is_shadow_catcher", False, "shadow catcher"))
+
+
+def ignored_ray_visibility(obj) -> list[str]:
+    """The ray-visibility settings of a mesh object that DRT does not honour yet (it renders
+    every object visible to every ray): their names, [] when all are at Cycles's defaults."""
+    return [name for attr, default, name in _RAY_VISIBILITY
+            if bool(getattr(obj, attr, default)) != default]
+
+
 def _deform_candidate(inst, scene) -> bool:
     """Objects whose shape may change over the shutter (compared later, vertex by vertex)."""
     if inst.is_instance:
@@ -107,6 +122,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     deform_keys: dict = {}  # instance key -> mesh index (candidates for deformation)
     lights: list[dict] = []
     infos: list[dict] = []  # Object Info per object, attached if a material reads it
+    unsupported_visibility: dict[str, list[str]] = {}  # object name -> ray settings DRT ignores
 
     for inst in depsgraph.object_instances:
         obj = inst.object
@@ -119,6 +135,8 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
         if obj.type not in MESH_LIKE_TYPES or not _is_rendered(inst):
             continue
         key = _instance_key(inst)
+        if ignored := ignored_ray_visibility(obj):
+            unsupported_visibility.setdefault(obj.name, ignored)
         matrix = matrix_list(inst.matrix_world.copy())
         slots = [s.material for s in obj.material_slots] or [None]
         slot_mats = np.array([mats.index_of(m) for m in slots], dtype=np.int32)
@@ -161,6 +179,11 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
             _export_motion(depsgraph, scene, frame_set, render["shutter"], camera, objects,
                            object_index, deform_keys, meshes, arrays, warnings)
 
+    if unsupported_visibility:
+        named = "; ".join(f"'{n}' ({', '.join(v)})" for n, v in sorted(unsupported_visibility.items())[:8])
+        more = len(unsupported_visibility) - 8
+        warnings.append("ray visibility is not supported yet: rendered as visible to every ray: "
+                        + named + (f" and {more} more" if more > 0 else ""))
     warnings += mats.warnings
     if mats.reads_object_info():
         for o, info in zip(objects, infos):
