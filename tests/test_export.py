@@ -134,6 +134,16 @@ def test_ray_visibility_drt_ignores_is_named_in_a_warning(fresh):
     assert "Plain" not in found[0]
 
 
+def test_transparent_glass_is_named_in_a_warning(fresh):
+    """Film > Transparent Glass (Cycles) is not rendered yet: a transparent film with it warns."""
+    C.quad("Plain", (0, 0, 0), 1.0, C.diffuse("M", (0.5, 0.5, 0.5)))
+    sc = bpy.context.scene
+    sc.cycles.film_transparent_glass = True
+    assert not [w for w in export_current().warnings if "Transparent Glass" in w]  # opaque film
+    sc.render.film_transparent = True
+    assert len([w for w in export_current().warnings if "Transparent Glass" in w]) == 1
+
+
 def test_no_camera_is_an_export_error():
     ensure_registered()
     C.reset()
