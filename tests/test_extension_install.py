@@ -1,5 +1,6 @@
 """The Blender 4.2+ extension package: built with Blender's own builder, installed from the zip
-into a fresh user directory of the bpy module (5.0) the way Install from Disk does, enabled, and
+into a fresh user directory of the bpy module (5.0; or 5.1+ under Python 3.13) the way Install
+from Disk does, enabled, and
 used for an F12-style render of a shipped scene. Runs in a subprocess (an install must not
 touch the test process's Blender state). Linux-x64 only: the one platform this machine can run.
 """
@@ -48,10 +49,16 @@ print("PREBUILT", kernels.PREBUILT_TARGET, "CACHE", kernels._KEYED_CACHE_DIR, fl
 
 def linux_wheels() -> list[str]:
     """The manifest's linux-x64 wheels for this Python (embreex, numba, llvmlite; Dask and its
-    dependencies: pure-Python, cp311 and abi3 wheels)."""
+    dependencies: pure-Python, this CPython's and abi3 wheels): cp311 with the bpy 5.0 module,
+    cp313 with bpy 5.1+ (Blender 5.1+'s Python)."""
     import build_extension as b
-    assert sys.version_info[:2] == (3, 11)  # the bpy 5.0 module's Python, as legacy_wheels picks
-    return b.download_wheels(b.legacy_wheels(b.manifest_wheels()))
+    minor = sys.version_info[1]
+
+    def fits(name):
+        _dist, _version, py, abi, plat = name[:-4].split("-", 4)
+        return plat == "any" or ("manylinux" in plat and (
+            py == f"cp3{minor}" or (abi == "abi3" and int(py[3:]) <= minor)))
+    return b.download_wheels([w for w in b.manifest_wheels() if fits(w)])
 
 
 def build_linux_extension(tmp, wheels, prebuilt_kernels: bool = False) -> str:
