@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import compat, denoising
-from .export import _instance_key, _instance_name, _is_rendered
+from .export import _instance_key, _instance_name, _is_rendered, ray_visibility, visibility_bits
 from .export.materials import MaterialExporter
 from .export.node_programs import ImageTable
 from .export.mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays
@@ -94,8 +94,8 @@ class ViewportSync:
                         shading_edit and self._only_its_material_changed(idt, data_geometry)):
                     geometry.add(idt.original.name)
                     objects = True
-                elif u.is_updated_transform:
-                    objects = True
+                elif u.is_updated_transform or u.is_updated_shading:
+                    objects = True  # (shading: object settings such as its ray visibility)
                 if idt.instance_type != "NONE" or idt.type == "EMPTY":
                     objects = True  # an instancer or a parent: its instances may move
             elif kind == "Material":
@@ -115,7 +115,7 @@ class ViewportSync:
         if materials:
             self._update_materials(depsgraph.scene, materials)
             # a program that now reads geometry inputs its meshes lack: export those again
-            geometry |= {key[0] for _, key in self._objects.values()
+            geometry |= {key[0] for _, key, _ in self._objects.values()
                          if not set(self._materials.reads(key[1])) <= self._mesh_reads.get(key, set())}
         if objects or geometry:
             self._reconcile(depsgraph, geometry)
@@ -213,6 +213,7 @@ class ViewportSync:
                 continue
             key = _instance_key(inst)
             matrix = np.array(matrix_list(inst.matrix_world), dtype=np.float64)
+            visibility = visibility_bits(ray_visibility(obj))
             slots = [s.material for s in obj.material_slots] or [None]
             slot_mats = tuple(self._materials.index_of(m) for m in slots)
             mesh_key = (obj.original.name, slot_mats)
@@ -220,8 +221,10 @@ class ViewportSync:
             seen.add(key)
             if old is not None and old[1] == mesh_key and obj.original.name not in geometry:
                 if not np.array_equal(old[0], matrix):
-                    self._objects[key] = (matrix, mesh_key)
                     edits.append(lambda live, k=key, m=matrix: live.set_matrix(k, m))
+                if old[2] != visibility:
+                    edits.append(lambda live, k=key, v=visibility: live.set_visibility(k, v))
+                self._objects[key] = (matrix, mesh_key, visibility)
                 continue
             mesh = exported.get(mesh_key)
             if mesh is None:
@@ -236,9 +239,9 @@ class ViewportSync:
                     edits.append(lambda live, k=key: live.remove_object(k))
                     del self._objects[key]
                 continue
-            self._objects[key] = (matrix, mesh_key)
-            edits.append(lambda live, k=key, n=_instance_name(inst, key), me=mesh, m=matrix:
-                         live.set_object(k, n, me, m))
+            self._objects[key] = (matrix, mesh_key, visibility)
+            edits.append(lambda live, k=key, n=_instance_name(inst, key), me=mesh, m=matrix, v=visibility:
+                         live.set_object(k, n, me, m, v))
         for key in [k for k in self._objects if k not in seen]:
             del self._objects[key]
             edits.append(lambda live, k=key: live.remove_object(k))

@@ -119,19 +119,25 @@ def test_hidden_and_holdout_objects_excluded(fresh):
     assert names == ["Visible"]
 
 
-def test_ray_visibility_drt_ignores_is_named_in_a_warning(fresh):
-    """Cycles's per-object ray visibility and shadow catcher are not rendered yet: the export
-    says which objects and settings, once each, and is quiet for objects at the defaults."""
+def test_ray_visibility_is_exported_and_the_shadow_catcher_warns(fresh):
+    """Cycles's per-object ray visibility goes into the object's "visibility" (only when some
+    ray kind is off); the shadow catcher, not rendered yet, is named in one warning."""
     mat = C.diffuse("M", (0.5, 0.5, 0.5))
     C.quad("Plain", (0, 0, 0), 1.0, mat)
-    assert not [w for w in export_current().warnings if "ray visibility" in w]
     card = C.quad("Card", (0, 0, 1), 1.0, mat)
     card.visible_camera = card.visible_shadow = False
+    res = export_current()
+    objs = {o["name"]: o for o in res.header["objects"]}
+    assert "visibility" not in objs["Plain"]
+    assert objs["Card"]["visibility"] == {"camera": False, "diffuse": True, "glossy": True,
+                                          "transmission": True, "volume_scatter": True, "shadow": False}
+    assert not [w for w in res.warnings if "shadow catcher" in w]
+    from drt.scene import VIS_ALL, VIS_CAMERA, VIS_SHADOW, scene_from_dict
+    vis = {o.name: o.visibility for o in scene_from_dict(res.header, res.arrays).objects}
+    assert vis == {"Plain": VIS_ALL, "Card": VIS_ALL & ~VIS_CAMERA & ~VIS_SHADOW}
     C.quad("Catcher", (0, 0, 2), 1.0, mat).is_shadow_catcher = True
-    found = [w for w in export_current().warnings if "ray visibility" in w]
-    assert len(found) == 1
-    assert "'Card' (camera, shadow)" in found[0] and "'Catcher' (shadow catcher)" in found[0]
-    assert "Plain" not in found[0]
+    found = [w for w in export_current().warnings if "shadow catcher" in w]
+    assert len(found) == 1 and "'Catcher' (shadow catcher)" in found[0] and "Card" not in found[0]
 
 
 def test_transparent_glass_is_named_in_a_warning(fresh):

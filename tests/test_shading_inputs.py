@@ -489,6 +489,27 @@ def test_film_exposure_scales_like_cycles(tmp_path):
     assert (np.abs(drt - cycles)[..., :3].max(axis=-1)[flat] > 5e-3).mean() < 0.02
 
 
+@pytest.mark.parametrize("hidden", [("visible_camera",), ("visible_shadow",),
+                                    ("visible_camera", "visible_diffuse")])
+def test_ray_visibility_matches_cycles(tmp_path, hidden):
+    """Object > Visibility: a card hidden from camera rays still casts its shadow; one hidden
+    from shadow rays is seen and casts none; pixel by pixel against Cycles."""
+    def card():
+        return _diffuse_material("card", (0.2, 0.5, 0.9, 1))
+    sc = _shadow_scene(card)
+    ob = next(o for o in sc.objects if o.type == "MESH" and o.active_material
+              and o.active_material.name.startswith("card"))
+    for attr in hidden:
+        setattr(ob, attr, False)
+    cycles, drt = _render_both(sc, tmp_path, "visibility_" + "_".join(hidden))
+    assert abs(drt.mean() / cycles.mean() - 1) < 0.01, (drt.mean(), cycles.mean())
+    flat = _interior(drt, 1e-3)
+    assert flat.sum() > 300
+    assert (np.abs(drt - cycles).max(axis=-1)[flat] > 2e-3).mean() < 0.02
+    blue = (cycles[..., 2] > 2 * cycles[..., 0] + 0.02).sum()  # the card's blue pixels
+    assert (blue == 0) == ("visible_camera" in hidden), blue
+
+
 def test_is_shadow_ray_trick_removes_a_shadow_like_cycles(tmp_path):
     """Mix(Diffuse, Transparent, Is Shadow Ray): the card is seen but casts no shadow."""
     def card():

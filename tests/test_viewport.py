@@ -423,6 +423,32 @@ def test_blender_5_1_material_edit_flags_do_not_reexport_meshes(blender_viewport
 
 
 @blender_only
+def test_blender_ray_visibility_edit_reaches_the_viewport(blender_viewport):
+    """Object > Visibility > Camera off: the live object's visibility changes, without a mesh
+    export or a hierarchy rebuild, and the next frame no longer shows the box."""
+    from drt.scene import VIS_ALL, VIS_CAMERA
+
+    vp = blender_viewport
+    live = vp.session.live
+    exports, builds = dict(vp.exports), live.counters.static_builds
+    before = vp.session.wait(lambda f: f.divider == 1, 60)
+    ob = bpy.data.objects["TallBox"]
+    ob.visible_camera = False
+    evaluate()
+    gen = vp.session.generation
+    after = vp.session.wait(lambda f: f.generation == gen and f.divider == 1, 60)
+    assert after is not None, vp.session.error
+    key = next(k for k in live.objects if k[0] == "TallBox")
+    assert live.objects[key].visibility == VIS_ALL & ~VIS_CAMERA
+    assert vp.exports["meshes"] == exports["meshes"] and live.counters.static_builds == builds
+    assert np.abs(after.rgba - before.rgba).max() > 0.05  # the box is gone from the picture
+    ob.visible_camera = True
+    evaluate()
+    assert live.objects[key].visibility == VIS_ALL or vp.session.wait(
+        lambda f: live.objects[key].visibility == VIS_ALL, 30) is not None
+
+
+@blender_only
 def test_blender_geometry_edit_reexports_that_object(blender_viewport):
     vp = blender_viewport
     exports = dict(vp.exports)

@@ -57,19 +57,34 @@ def _is_rendered(inst) -> bool:
     return True
 
 
-#: Cycles's per-object ray visibility (Object > Visibility) and the shadow catcher, with the
-#: value at which DRT renders the object the same
-_RAY_VISIBILITY = (("visible_camera", True, "camera"), ("visible_diffuse", True, "diffuse"),
-                   ("visible_glossy", True, "glossy"), ("visible_transmission", True, "transmission"),
-                   ("visible_volume_scatter", True, "volume scatter"), ("visible_shadow", True, "shadow"),
-                   ("is_shadow_catcher", False, "shadow catcher"))
+#: Cycles's per-object ray visibility (Object > Visibility > Ray Visibility): Blender's
+#: property of each ray kind of the scene format's object "visibility" (drt.scene.RAY_VISIBILITY)
+_RAY_VISIBILITY = (("camera", "visible_camera"), ("diffuse", "visible_diffuse"),
+                   ("glossy", "visible_glossy"), ("transmission", "visible_transmission"),
+                   ("volume_scatter", "visible_volume_scatter"), ("shadow", "visible_shadow"))
+
+
+def ray_visibility(obj) -> dict | None:
+    """An object's ray visibility as the scene format's ``{ray kind: bool}``, or None when
+    every kind of ray sees it (Cycles's default: nothing exported)."""
+    vis = {kind: bool(getattr(obj, attr, True)) for kind, attr in _RAY_VISIBILITY}
+    return None if all(vis.values()) else vis
+
+
+def visibility_bits(visibility: dict | None) -> int:
+    """``ray_visibility``'s answer as the core's VIS_* bits (the viewport's live objects)."""
+    from .. import compat
+
+    core_scene = compat.core_module("scene")
+    if visibility is None:
+        return core_scene.VIS_ALL
+    return sum(1 << k for k, kind in enumerate(core_scene.RAY_VISIBILITY) if visibility[kind])
 
 
 def ignored_ray_visibility(obj) -> list[str]:
-    """The ray-visibility settings of a mesh object that DRT does not honour yet (it renders
-    every object visible to every ray): their names, [] when all are at Cycles's defaults."""
-    return [name for attr, default, name in _RAY_VISIBILITY
-            if bool(getattr(obj, attr, default)) != default]
+    """The object settings of Cycles's Visibility panel that DRT does not render yet: their
+    names, [] when none is set (the shadow catcher)."""
+    return ["shadow catcher"] if getattr(obj, "is_shadow_catcher", False) else []
 
 
 def _deform_candidate(inst, scene) -> bool:
@@ -125,7 +140,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     deform_keys: dict = {}  # instance key -> mesh index (candidates for deformation)
     lights: list[dict] = []
     infos: list[dict] = []  # Object Info per object, attached if a material reads it
-    unsupported_visibility: dict[str, list[str]] = {}  # object name -> ray settings DRT ignores
+    unsupported_visibility: dict[str, list[str]] = {}  # object name -> visibility settings DRT ignores
 
     for inst in depsgraph.object_instances:
         obj = inst.object
@@ -138,6 +153,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
         if obj.type not in MESH_LIKE_TYPES or not _is_rendered(inst):
             continue
         key = _instance_key(inst)
+        visibility = ray_visibility(obj)
         if ignored := ignored_ray_visibility(obj):
             unsupported_visibility.setdefault(obj.name, ignored)
         matrix = matrix_list(inst.matrix_world.copy())
@@ -166,6 +182,8 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
         object_index[key] = len(objects)
         objects.append({"name": _instance_name(inst, key),
                         "mesh": k, "matrix_world": matrix, "motion": None})
+        if visibility is not None:
+            objects[-1]["visibility"] = visibility
         term = shadow_terminator(obj)
         # the geometry offset acts on smooth shading only, the shading offset on any (drt.terminator)
         if term["shading_offset"] > 0.0 or (f"mesh{k}.normals" in arrays and term["geometry_offset"] > 0.0):
@@ -185,7 +203,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     if unsupported_visibility:
         named = "; ".join(f"'{n}' ({', '.join(v)})" for n, v in sorted(unsupported_visibility.items())[:8])
         more = len(unsupported_visibility) - 8
-        warnings.append("ray visibility is not supported yet: rendered as visible to every ray: "
+        warnings.append("not rendered yet (the objects render as plain ones): "
                         + named + (f" and {more} more" if more > 0 else ""))
     warnings += mats.warnings
     if mats.reads_object_info():

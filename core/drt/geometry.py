@@ -23,7 +23,7 @@ import numpy as np
 from .kernels import kernel
 
 from .motion import RigidMotion, invert_linear
-from .scene import Scene
+from .scene import VIS_ALL, Scene
 from .vecmath import transform_rows
 
 
@@ -55,6 +55,9 @@ class SceneGeometry:
     #: object carries Object Info (a material program reads it), else None
     object_of: np.ndarray | None = None
     object_info: np.ndarray | None = None
+    #: (T_all,) uint8 VIS_* bits of the rays that see each triangle (drt.scene.RAY_VISIBILITY);
+    #: None when every object is visible to every ray
+    visibility: np.ndarray | None = None
     #: per-corner attributes material programs read, (T_all, 3, 3) float32 by name ("generated",
     #: "object_coords"); only those some mesh has (zeros on the other meshes' triangles)
     corner_attrs: dict = field(default_factory=dict)
@@ -231,6 +234,9 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         geom.terminator_shading = np.concatenate(shade_static + shade_moving)
     if any(t.any() for t in term_static):  # moving meshes: no offset (drt.terminator)
         geom.terminator = np.concatenate(term_static + [np.zeros(offset - geom.static_count, np.float32)])
+    if any(o.visibility != VIS_ALL for o in scene.objects):
+        per_object = np.array([o.visibility for o in scene.objects], np.uint8)
+        geom.visibility = per_object[cat(obj_static + obj_moving, np.zeros(0, np.int32))]
     if any(o.info is not None for o in scene.objects):
         geom.object_of = cat(obj_static + obj_moving, np.zeros(0, np.int32))
         geom.object_info = np.array([np.concatenate([np.asarray(o.matrix, np.float64)[:3, 3],

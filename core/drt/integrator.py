@@ -36,7 +36,7 @@ from .path_stages import (D_BOUNCE0, D_LENS, D_PIXEL, D_TIME, DIMS_PER_BOUNCE,  
                           MAX_SAMPLE_RADIANCE, RR_START_BOUNCE, SHADOW_EPSILON)
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
-from .scene import RenderSettings
+from .scene import VIS_ALL, VIS_SHADOW, RenderSettings
 from .terminator import shading_multipliers, terminator_arrays
 from .trace import Tracer
 from .volumes.media import STACK_SIZE, MediumData, build_medium_data
@@ -154,7 +154,14 @@ class Integrator:
             material=np.ascontiguousarray(geom.material, dtype=np.int32),
             normals=np.ascontiguousarray(normals, dtype=np.float32),
             has_normals=np.ascontiguousarray(geom.has_normals, dtype=bool),
-            terminator=term_cut, corners=term_corners, shading_mult=shading_multipliers(geom))
+            terminator=term_cut, corners=term_corners, shading_mult=shading_multipliers(geom),
+            visibility=(np.ascontiguousarray(geom.visibility, dtype=np.uint8) if geom.visibility is not None
+                        else np.zeros(0, np.uint8)))
+        # objects some rays do not see (Cycles's ray visibility): those rays pass them, each
+        # crossing a loop pass (or, for shadow rays, a round of closest hits) of its own
+        vis, path_bits = self.surfaces.visibility, VIS_ALL & ~VIS_SHADOW
+        self.unseen_by_paths = bool(np.any((vis & path_bits) != path_bits))
+        self.unseen_by_shadows = bool(np.any((vis & VIS_SHADOW) == 0))
         # participating media (drt.volumes): a disabled MediumData costs the kernels one flag test
         if media is None:
             media = build_medium_data([], None)
@@ -238,6 +245,33 @@ class Integrator:
         paths, shadow = ws
         return (stages.Paths(*(a[:n] for a in paths)), stages.ShadowRays(*(a[:n_shadow] for a in shadow)))
 
+    def _skip_unseen(self, paths, live, hits) -> None:
+        """Rows whose hit is on an object their kind of ray does not see (Cycles's ray
+        visibility) are traced on from just past it, as if it were not there (``hits``
+        patched in place, ``t`` still measured from the ray's origin), up to VOLUME_BOUNDS_MAX
+        objects deep: then the row misses. Before ``shade``, so that it has no code for this."""
+        rows = np.empty(live, np.int64)
+        o_next, tmax_next, t_done = np.empty((live, 3)), np.empty(live), np.empty(live)
+        sss_on = self.sss is not None
+        for round_ in range(stages.VOLUME_BOUNDS_MAX + 1):
+            n = stages.unseen_hits(self.surfaces.visibility, paths, live, sss_on, hits.prim, hits.p, hits.ng,
+                                   rows, o_next, tmax_next, t_done)
+            if n == 0:
+                return
+            r = rows[:n].copy()
+            if round_ == stages.VOLUME_BOUNDS_MAX:
+                hits.prim[r] = -1  # still crossing: give up, as a volume boundary
+                hits.t[r] = np.inf
+                return
+            new = self._hit_arrays(self.tracer.intersect(o_next[:n], paths.d[r], paths.tau[r], tmax_next[:n]))
+            hits.prim[r] = new.prim
+            hits.t[r] = t_done[:n] + new.t
+            hits.b1[r], hits.b2[r] = new.b1, new.b2
+            hits.p[r], hits.ng[r] = new.p, new.ng
+            if hits.moving.shape[0]:
+                hits.moving[r] = new.moving
+                hits.normal_xform[r] = new.normal_xform
+
     def _shadows_through(self, shadow, count, radiance, md, regs, point):
         """Shadow rays in a scene with media or transparent surfaces: closest hits, repeatedly,
         so that rays attenuate by exp(−∫σt) and by the transparent colour of the surfaces they
@@ -251,12 +285,15 @@ class Integrator:
         n_active = count
         o, d, tmax = shadow.o[:count], shadow.d[:count], shadow.tmax[:count]
         rounds = stages.VOLUME_BOUNDS_MAX if self.media.enabled else int(self.s.transparent_bounces) + 1
+        if self.unseen_by_shadows:
+            rounds += stages.VOLUME_BOUNDS_MAX
         for _ in range(rounds):
             if n_active == 0:
                 break
             rows = active[:n_active]
             hits = self.tracer.intersect(o[rows], d[rows], shadow.tau[:count][rows], tmax[rows])
-            n_active = shadow_step(self.media_arg, self.surfaces.material, active, n_active, hits.prim, hits.t,
+            n_active = shadow_step(self.media_arg, self.surfaces.material, self.surfaces.visibility, active,
+                                   n_active, hits.prim, hits.t,
                                    hits.ng, o, d, tmax, shadow.vstack, trans, blocked,
                                    self.transparent, md, self.programs_arg, regs, point, hits.b1, hits.b2)
         blocked[active[:n_active]] = True  # still crossing boundaries: give up (as Cycles)
@@ -287,11 +324,13 @@ class Integrator:
                 break
             hits = self.tracer.intersect(paths.o[:live], paths.d[:live], paths.tau[:live], paths.tmax[:live])
             hit_arrays = self._hit_arrays(hits)
+            if self.unseen_by_paths:
+                self._skip_unseen(paths, live, hit_arrays)
             if self.sss is not None:
                 self.sss.patch_hits(paths, live, hit_arrays)
             live, n_shadow = stages.shade(sd, md, self.programs_arg, regs, point, ld, self.surfaces, self.stage_settings, depth_i, live,
                                           paths, hit_arrays, out, shadow, self.media_arg)
-            if n_shadow and (vd.enabled or self.transparent.shape[0]):
+            if n_shadow and (vd.enabled or self.transparent.shape[0] or self.unseen_by_shadows):
                 self._shadows_through(shadow, n_shadow, out.radiance, md, regs, point)
             elif n_shadow:
                 blocked = self.tracer.occluded(shadow.o[:n_shadow], shadow.d[:n_shadow],

@@ -53,7 +53,7 @@ from .motion import RigidMotion
 from .render import RenderContext, _emissive_triangles, render, settle_abandoned_batches, textured_emission_in
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
-from .scene import MAX_TRANSFORM_ENTRY, CameraSpec, MeshData, RenderSettings, Scene, SceneError
+from .scene import MAX_TRANSFORM_ENTRY, VIS_ALL, CameraSpec, MeshData, RenderSettings, Scene, SceneError
 # The tracer's per-object pieces: a moving object's Embree scene + transform, and its culling
 # box. LiveScene keeps them across edits (a moved object is one new transform), so it builds
 # the Tracer from parts instead of from a SceneGeometry.
@@ -80,6 +80,7 @@ class LiveObject:
     mesh: MeshData
     matrix: np.ndarray
     instance: bool = False
+    visibility: int = VIS_ALL  # VIS_* bits of the rays that see it (drt.scene.RAY_VISIBILITY)
 
 
 @dataclass
@@ -176,13 +177,13 @@ class LiveScene:
         self.set_world(world_color)
 
     # ------------------------------------------------------------------ edits
-    def set_object(self, key, name: str, mesh: MeshData, matrix) -> None:
+    def set_object(self, key, name: str, mesh: MeshData, matrix, visibility: int = VIS_ALL) -> None:
         """Add or replace an object (new geometry: its BVH is rebuilt)."""
         m = _matrix(matrix)
         old = self.objects.get(key)
         if old is not None:
             self.remove_object(key)
-        obj = LiveObject(str(name), mesh, m)
+        obj = LiveObject(str(name), mesh, m, visibility=int(visibility))
         obj.instance = self._wants_instance(obj, moving=False)
         self.objects[key] = obj
         if obj.instance:
@@ -215,6 +216,11 @@ class LiveScene:
             obj.instance = True
             self._tables_dirty = True
         self._static_dirty = True
+
+    def set_visibility(self, key, visibility: int) -> None:
+        """Change which rays see an object (no BVH rebuild: the next render's per-triangle
+        visibility is gathered from the objects)."""
+        self.objects[key].visibility = int(visibility)
 
     def remove_object(self, key) -> None:
         obj = self.objects.pop(key, None)
@@ -497,6 +503,13 @@ class LiveScene:
                              normals=normals if has_normals.any() else None,
                              has_normals=has_normals, uvs=uvs, triangle_count=offset,
                              corner_attrs=self._attr_tables)
+        if any(o.visibility != VIS_ALL for o in self.objects.values()):
+            # in the triangle order of the static set (_flatten_static) and the instances
+            parts = [np.full(len(o.mesh.triangles), o.visibility, np.uint8) for o in self.objects.values()
+                     if not o.instance and len(o.mesh.triangles)]
+            parts += [np.full(len(self._instances[k][1].triangles), self.objects[k].visibility, np.uint8)
+                      for k in keys]
+            geom.visibility = np.concatenate(parts)
         lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
         if len(pos):
             lo, hi = pos.min(axis=0).astype(np.float64), pos.max(axis=0).astype(np.float64)

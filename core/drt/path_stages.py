@@ -43,6 +43,7 @@ from .camera import camera_ray
 from .kernels import inline_kernel, kernel
 from .kernels.vec3 import add, build_frame, dot, load, mul, neg, normalize, scale, store, sub, to_local, to_world
 from .lights.common import I_VISIBLE_CAMERA
+from .scene import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_VOLUME_SCATTER
 from .lights.selection import KT_FLOOR
 from .lights import (emissive_pdf, light_sample_full, shape_emission, shape_intersect, sun_emission,
                      sun_in_cone, world_pdf, world_radiance)
@@ -134,6 +135,7 @@ Surfaces = namedtuple("Surfaces", [
     "terminator",     # (T,) float32 shadow terminator geometry offset ((0,): none; drt.terminator)
     "corners",        # (T, 3, 3) float32 world vertex positions, with ``terminator`` ((0, 3, 3): none)
     "shading_mult",   # (T,) float32 shadow terminator shading-offset multiplier ((0,): none)
+    "visibility",     # (T,) uint8 VIS_* bits of the rays that see each triangle ((0,): all see all)
 ])
 
 HitArrays = namedtuple("HitArrays", [
@@ -207,6 +209,53 @@ def continuation_probability(thr):
 @kernel
 def any_positive(c):
     return c[0] > 0.0 or c[1] > 0.0 or c[2] > 0.0
+
+
+@kernel
+def unseen_hits(visibility, paths, live, sss_on, prim, p, ng, rows, o_next, tmax_next, t_done):
+    """Rows of paths[:live] whose hit (``prim``, at ``p`` with normal ``ng``) is on a triangle
+    their kind of ray does not see (``visibility``: VIS_* bits per triangle; Cycles's ray
+    visibility): their indices go to ``rows[:n]``, and per row the origin just past the hit
+    (``o_next``), the distance left (``tmax_next``) and the distance from the ray's origin to
+    that new origin (``t_done``). A row leaving a subsurface walk is skipped (its hit is the
+    walk's exit, patched after). Returns n."""
+    n = 0
+    for i in range(live):
+        q = prim[i]
+        if q < 0:
+            continue
+        if sss_on and (paths.sss[i] == SSS_EXIT or paths.sss[i] == SSS_EXIT_FLAT):
+            continue
+        camera = paths.counts[i, 0] + (paths.sss_count[i] if sss_on else 0) == 0
+        if visibility[q] & ray_visibility(camera, paths.prev_flags[i]):
+            continue
+        d = load(paths.d, i)
+        o_past = offset_point(load(p, i), load(ng, i), d)
+        done = dot(sub(o_past, load(paths.o, i)), d)
+        rows[n] = i
+        store(o_next, n, o_past)
+        tmax_next[n] = paths.tmax[i] - done
+        t_done[n] = done
+        n += 1
+    return n
+
+
+@inline_kernel
+def ray_visibility(camera, flags):
+    """The VIS_* bits of which an object needs one for this ray to see it (Cycles's
+    path_state_ray_visibility): a camera ray (still one through transparent surfaces) camera;
+    after a transmission (``flags``: the RAY_* bits of the last scattering) transmission; after
+    a diffuse or a glossy (or singular) reflection that kind; after a volume scatter (no surface
+    bits) volume scatter or diffuse, as Cycles."""
+    if camera:
+        return VIS_CAMERA
+    if flags & RAY_TRANSMIT:
+        return VIS_TRANSMISSION
+    if flags & RAY_DIFFUSE:
+        return VIS_DIFFUSE
+    if flags & (RAY_GLOSSY | RAY_SINGULAR):
+        return VIS_GLOSSY
+    return VIS_DIFFUSE | VIS_VOLUME_SCATTER
 
 
 @inline_kernel

@@ -36,7 +36,7 @@ from .lights import EmissiveTriangles, LightSet
 from .materials import MaterialTable
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
-from .scene import Scene, SceneError
+from .scene import VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_VOLUME_SCATTER, Scene, SceneError
 from .trace import Tracer
 from .volumes.media import lights_reaching, media_for_scene, world_blocks_infinity
 
@@ -126,6 +126,11 @@ def _emissive_triangles(scene: Scene, geom, materials: MaterialTable, programs=N
         if tex is not None:
             em = np.concatenate([em, tex[0]])
             radiance = np.concatenate([radiance, tex[1]])
+    vis = getattr(geom, "visibility", None)
+    if vis is not None and len(em):
+        # as Cycles (object_usable_as_light): an object that no bounce ray sees is no light
+        keep = (vis[em] & (VIS_DIFFUSE | VIS_GLOSSY | VIS_TRANSMISSION | VIS_VOLUME_SCATTER)) != 0
+        em, radiance = em[keep], radiance[keep]
     if len(em) == 0:
         return None
     verts = geom.static_positions[geom.static_triangles[em]].astype(np.float64)

@@ -33,6 +33,11 @@ SENSOR_FITS = ("AUTO", "HORIZONTAL", "VERTICAL")
 CAMERA_TYPES = ("PERSP", "ORTHO")
 
 MAX_RESOLUTION = 65536
+#: Cycles's per-object ray visibility (Object > Visibility > Ray Visibility), as bits of
+#: ``ObjectSpec.visibility``: which rays see the object (a ray that does not passes through it)
+RAY_VISIBILITY = ("camera", "diffuse", "glossy", "transmission", "volume_scatter", "shadow")
+VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_VOLUME_SCATTER, VIS_SHADOW = (1 << k for k in range(6))
+VIS_ALL = (1 << len(RAY_VISIBILITY)) - 1
 MAX_SPP = 1 << 24
 
 
@@ -259,6 +264,8 @@ class ObjectSpec:
     #: BSDF's cosine toward the terminator (0: off). Both in [0, 1].
     terminator_geometry: float = 0.0
     terminator_shading: float = 0.0
+    #: VIS_* bits of the rays that see the object (VIS_ALL: every ray, Cycles's default)
+    visibility: int = VIS_ALL
 
 
 @dataclass
@@ -649,6 +656,21 @@ def _meshes(h: dict, arrays: dict, n_materials: int, n_attributes: int = 0) -> l
     return out
 
 
+def _visibility(o: dict, p: str) -> int:
+    """An object's ``"visibility"`` ({ray kind: bool}, kinds of RAY_VISIBILITY, absent: true)
+    as VIS_* bits."""
+    vis = _get(o, "visibility", p, None)
+    if vis is None:
+        return VIS_ALL
+    vp = f"{p}.visibility"
+    if not isinstance(vis, dict):
+        raise SceneError(vp, f"must be an object of {', '.join(RAY_VISIBILITY)} flags")
+    unknown = sorted(set(vis) - set(RAY_VISIBILITY))
+    if unknown:
+        raise SceneError(f"{vp}.{unknown[0]}", f"is not a ray kind (one of {', '.join(RAY_VISIBILITY)})")
+    return sum(1 << k for k, kind in enumerate(RAY_VISIBILITY) if _bool(vis, kind, vp, True))
+
+
 def _objects(h: dict, n_meshes: int) -> list[ObjectSpec]:
     objs = _list(h, "objects", "")
     out = []
@@ -671,7 +693,8 @@ def _objects(h: dict, n_meshes: int) -> list[ObjectSpec]:
         out.append(ObjectSpec(str(o.get("name", f"object{i}")), mesh, _matrix(o, "matrix_world", p),
                               _motion(o, "motion", p), info,
                               _number(term, "geometry_offset", tp, default=0.0, lo=0.0, hi=1.0),
-                              _number(term, "shading_offset", tp, default=0.0, lo=0.0, hi=1.0)))
+                              _number(term, "shading_offset", tp, default=0.0, lo=0.0, hi=1.0),
+                              _visibility(o, p)))
     return out
 
 

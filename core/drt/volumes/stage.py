@@ -28,6 +28,7 @@ from ..kernels import inline_kernel, kernel
 from ..kernels.vec3 import load, store
 from ..kernels.vec3 import load_col3
 from ..lights import light_sample, light_sample_full
+from ..scene import VIS_SHADOW
 from ..lights.common import AREA, I_KIND, L_COS_HALF, L_NORMAL, L_POS, L_RADIUS, L_SPOT_DIR, SPOT
 from ..sampling.sequences import sample_2d
 from .hetero import ratio_tracking, seed_of, seed_of_point, stack_is_hetero, stack_scatters, track_segment
@@ -368,7 +369,7 @@ def fill_shadow_point(point, pd, o, d, t, ng):
 
 
 @kernel
-def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, trans, blocked,
+def shadow_step(vd, material, visibility, active, count, prim, t, ng, o, d, tmax, stack, trans, blocked,
                 transparent, md, pd, regs, point, b1, b2):
     """One round of shadow rays through media and transparent surfaces: rows active[0:count]
     of the shadow arrays were traced (closest hits prim/t/ng/b1/b2, row k of the hit arrays
@@ -376,12 +377,14 @@ def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, tra
     opaque hit blocks; a transparent surface (``transparent[mat]``: alpha, Transparent BSDF)
     multiplies by its transparent colour (a textured one: its program run at the hit, with the
     shading point's Is Shadow Ray set) and the ray moves past it; a pass-through boundary
-    updates the stack and moves the ray past it; no hit: done. ``md``/``regs``/``point``: the
+    updates the stack and moves the ray past it, as does an object shadow rays do not see
+    (``visibility``: VIS_* bits per triangle, (0,): every object casts shadows); no hit: done. ``md``/``regs``/``point``: the
     thread's material workspace; ``vd`` None: the scene has no media (nothing of them is
     compiled into this variant), as ``pd`` None for a scene without programs. Returns the number of rows still active (compacted to the
     front of ``active``). A stack holding a heterogeneous medium attenuates by ratio tracking
     (drt.volumes.hetero; it writes ``point``'s coordinate rows before the hit fills them)."""
     n_next = 0
+    check_visibility = visibility.shape[0] > 0
     for k in range(count):
         s = active[k]
         p = prim[k]
@@ -402,7 +405,8 @@ def shadow_step(vd, material, active, count, prim, t, ng, o, d, tmax, stack, tra
         mat = material[p]
         dd = load(d, s)
         n = load(ng, k)
-        if vd is None or not (vd.enabled and vd.pass_through[mat]):
+        unseen = check_visibility and not (visibility[p] & VIS_SHADOW)
+        if not unseen and (vd is None or not (vd.enabled and vd.pass_through[mat])):
             if not (transparent.shape[0] and transparent[mat]):
                 blocked[s] = True
                 continue
