@@ -23,6 +23,27 @@ from addon import engine as drt_engine  # noqa: E402
 pytestmark = pytest.mark.blender
 
 
+class FakeLayout:
+    """A panel's layout that records what it draws: ``drawn`` (data, property name) and
+    ``props`` the names; a property missing from its data raises AttributeError (a typo would
+    otherwise only show in the UI)."""
+    use_property_split = use_property_decorate = active = False
+
+    def __init__(self):
+        self.drawn = []
+
+    @property
+    def props(self):
+        return [name for _, name in self.drawn]
+
+    def column(self):
+        return self
+
+    def prop(self, data, name, **_kw):
+        getattr(data, name)
+        self.drawn.append((data, name))
+
+
 def ensure_registered():
     if not hasattr(bpy.types.Scene, "drt"):
         addon.register()
@@ -111,23 +132,10 @@ def test_the_pixel_filter_and_exposure_are_cycles_film_settings(registered):
     # DRT's Film panel edits those same properties (the width hidden for a box, as in Cycles)
     from addon import ui
 
-    class Layout:
-        use_property_split = use_property_decorate = False
-
-        def __init__(self):
-            self.props = []
-
-        def column(self):
-            return self
-
-        def prop(self, data, name, **_kw):
-            getattr(data, name)  # AttributeError for a missing property
-            self.props.append((data, name))
-
     def film_panel_props():
-        panel = type("FakePanel", (), {"layout": Layout()})()
+        panel = type("FakePanel", (), {"layout": FakeLayout()})()
         ui.DRT_RENDER_PT_film.draw(panel, bpy.context)
-        return panel.layout.props
+        return panel.layout.drawn
 
     assert film_panel_props()[:2] == [(sc.cycles, "film_exposure"), (sc.cycles, "pixel_filter_type")]
     sc.cycles.pixel_filter_type = "BLACKMAN_HARRIS"
@@ -236,25 +244,12 @@ def test_denoise_panels_draw_existing_settings(registered):
     all of which exist on scene.drt (a typo would only show in the UI otherwise)."""
     from addon import ui
 
-    class Layout:
-        use_property_split = use_property_decorate = active = False
-
-        def __init__(self):
-            self.props = []
-
-        def column(self):
-            return self
-
-        def prop(self, data, name, **_kw):
-            getattr(data, name)  # AttributeError for a missing property
-            self.props.append(name)
-
     class Context:
         scene = bpy.context.scene
 
     drawn = {}
     for cls in (ui.DRT_RENDER_PT_sampling_denoise, ui.DRT_RENDER_PT_sampling_viewport_denoise):
-        layout = Layout()
+        layout = FakeLayout()
         panel = type("FakePanel", (), {"layout": layout, "switch": cls.switch, "prefix": cls.prefix,
                                        "extra": cls.extra})()
         ui._DenoisePanel.draw_header(panel, Context)
