@@ -157,8 +157,8 @@ class Integrator:
             terminator=term_cut, corners=term_corners, shading_mult=shading_multipliers(geom),
             visibility=(np.ascontiguousarray(geom.visibility, dtype=np.uint8) if geom.visibility is not None
                         else np.zeros(0, np.uint8)))
-        # objects some rays do not see (Cycles's ray visibility): those rays pass them, each
-        # crossing a loop pass (or, for shadow rays, a round of closest hits) of its own
+        # objects some rays do not see (Cycles's ray visibility): path rays pass them before
+        # shade (_skip_unseen), shadow rays in _shadows_through's rounds of closest hits
         vis, path_bits = self.surfaces.visibility, VIS_ALL & ~VIS_SHADOW
         self.unseen_by_paths = bool(np.any((vis & path_bits) != path_bits))
         self.unseen_by_shadows = bool(np.any((vis & VIS_SHADOW) == 0))
