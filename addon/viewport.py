@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import compat, denoising
-from .export import _instance_key, _instance_name, _is_rendered, ray_visibility, visibility_bits
+from .export import _instance_key, _instance_name, _is_rendered, instance_visibility, visibility_bits
 from .export.materials import MaterialExporter
 from .export.node_programs import ImageTable
 from .export.mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays
@@ -213,7 +213,7 @@ class ViewportSync:
                 continue
             key = _instance_key(inst)
             matrix = np.array(matrix_list(inst.matrix_world), dtype=np.float64)
-            visibility = visibility_bits(ray_visibility(obj))
+            visibility = visibility_bits(*instance_visibility(inst, depsgraph.view_layer))
             slots = [s.material for s in obj.material_slots] or [None]
             slot_mats = tuple(self._materials.index_of(m) for m in slots)
             mesh_key = (obj.original.name, slot_mats)

@@ -162,6 +162,27 @@ def render_tiles(cases, n, tmp_path, tag="tiles", shader=False, sun=None, shape=
     return cycles, drt, res
 
 
+def render_rgba_both(sc, path):
+    """The current scene ``sc`` rendered RGBA by Cycles (written to ``path``, an EXR) and by
+    DRT through the exporter: two (H, W, 4) float64 images, top row first. The export must
+    warn of nothing."""
+    from addon.export import export_depsgraph
+    from drt.render import render
+    from drt.scene import scene_from_dict
+
+    sc.render.filepath = str(path)
+    sc.render.image_settings.color_mode = "RGBA"
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(str(path))
+    h, w = sc.render.resolution_y, sc.render.resolution_x
+    cycles = np.array(img.pixels[:], dtype=np.float64).reshape(h, w, 4)[::-1]
+    bpy.data.images.remove(img)
+    res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
+    assert not res.warnings, res.warnings
+    drt = np.asarray(render(scene_from_dict(res.header, res.arrays), threads=1).combined, np.float64)
+    return cycles, drt
+
+
 def tile(img, k, n):
     r, c = divmod(k, n)
     return img[r * TILE:(r + 1) * TILE, c * TILE:(c + 1) * TILE]

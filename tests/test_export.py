@@ -110,13 +110,48 @@ def test_motion_blur_position(position, centre):
     assert s[1] - s[0] == pytest.approx(0.5)
 
 
-def test_hidden_and_holdout_objects_excluded(fresh):
+def test_hidden_objects_excluded_and_holdouts_kept(fresh):
+    """Hidden objects are not exported; a holdout is (it occludes, casts shadows and is seen in
+    bounces: the core cuts it out of camera hits only)."""
     mat = C.diffuse("M", (0.5, 0.5, 0.5))
     C.quad("Visible", (0, 0, 0), 1.0, mat)
     C.quad("Hidden", (0, 0, 1), 1.0, mat).hide_render = True
     C.quad("Holdout", (0, 0, 2), 1.0, mat).is_holdout = True
-    names = [o["name"] for o in export_current().header["objects"]]
-    assert names == ["Visible"]
+    objs = {o["name"]: o for o in export_current().header["objects"]}
+    assert sorted(objs) == ["Holdout", "Visible"]
+    assert objs["Holdout"]["holdout"] is True and "holdout" not in objs["Visible"]
+
+
+def test_collection_holdout_indirect_only_and_instancers_as_cycles(fresh):
+    """As Cycles's sync_object: a holdout collection makes its objects holdouts; an indirect-only
+    collection hides its objects from camera rays; an instance takes its instancer's holdout
+    flag and ray visibility (ANDed with its own)."""
+    mat = C.diffuse("M", (0.5, 0.5, 0.5))
+    scene, layer = bpy.context.scene, bpy.context.view_layer
+    cols = {}
+    for name in ("HoldCol", "IndirectCol", "Source"):
+        cols[name] = bpy.data.collections.new(name)
+        scene.collection.children.link(cols[name])
+    for name, col, z in (("InHold", "HoldCol", 0), ("InIndirect", "IndirectCol", 1), ("Src", "Source", 2)):
+        ob = C.quad(name, (0, 0, z), 1.0, mat)
+        for c in list(ob.users_collection):
+            c.objects.unlink(ob)
+        cols[col].objects.link(ob)
+    cols["Source"].objects["Src"].visible_shadow = False
+    layer.layer_collection.children["HoldCol"].holdout = True
+    layer.layer_collection.children["IndirectCol"].indirect_only = True
+    layer.layer_collection.children["Source"].exclude = True
+    inst = bpy.data.objects.new("Instancer", None)
+    inst.instance_type, inst.instance_collection = "COLLECTION", cols["Source"]
+    inst.is_holdout, inst.visible_glossy = True, False
+    scene.collection.objects.link(inst)
+    objs = {o["name"].split("@")[0]: o for o in export_current().header["objects"]}
+    assert objs["InHold"].get("holdout") is True and "visibility" not in objs["InHold"]
+    assert "holdout" not in objs["InIndirect"]
+    assert objs["InIndirect"]["visibility"]["camera"] is False
+    assert objs["Src"].get("holdout") is True
+    vis = objs["Src"]["visibility"]
+    assert vis["glossy"] is False and vis["shadow"] is False and vis["camera"] is True
 
 
 def test_ray_visibility_is_exported_and_the_shadow_catcher_warns(fresh):

@@ -448,11 +448,7 @@ def test_holdout_alpha_matches_cycles(tmp_path, transparent_film):
     colour per tile, with and without a transparent film (the holdout cuts alpha either way)."""
     pytest.importorskip("bpy")
     import bpy
-    from node_parity import node, setup_scene, tile
-
-    from addon.export import export_depsgraph
-    from drt.render import render
-    from drt.scene import scene_from_dict
+    from node_parity import node, render_rgba_both, setup_scene, tile
 
     sc = setup_scene(2)
     sc.render.film_transparent = transparent_film
@@ -498,16 +494,7 @@ def test_holdout_alpha_matches_cycles(tmp_path, transparent_film):
     ob.rotation_euler = (0.3, 0.2, 0.0)
     sc.collection.objects.link(ob)
 
-    path = str(tmp_path / "holdout.exr")
-    sc.render.filepath = path
-    sc.render.image_settings.color_mode = "RGBA"
-    bpy.ops.render.render(write_still=True)
-    img = bpy.data.images.load(path)
-    cycles = np.array(img.pixels[:], dtype=np.float64).reshape(32, 32, 4)[::-1]
-    bpy.data.images.remove(img)
-    res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
-    assert not res.warnings, res.warnings
-    drt = np.asarray(render(scene_from_dict(res.header, res.arrays), threads=1).combined, np.float64)
+    cycles, drt = render_rgba_both(sc, tmp_path / "holdout.exr")
     # tiles of 16×16 pixels; the planes (0.7 wide) leave a 2.4-pixel border of world in each
     inner = (slice(4, 12), slice(4, 12))
     expect_alpha = [0.0, 0.7, None, 0.5]

@@ -10,7 +10,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from node_parity import node, render_tiles, tile  # noqa: E402
+from node_parity import node, render_rgba_both, render_tiles, tile  # noqa: E402
 
 N = 4
 
@@ -508,6 +508,47 @@ def test_ray_visibility_matches_cycles(tmp_path, hidden):
     assert (np.abs(drt - cycles).max(axis=-1)[flat] > 2e-3).mean() < 0.02
     blue = (cycles[..., 2] > 2 * cycles[..., 0] + 0.02).sum()  # the card's blue pixels
     assert (blue == 0) == ("visible_camera" in hidden), blue
+
+
+@pytest.mark.parametrize("mask, half, film_transparent", [
+    ("object", False, False), ("object", True, True), ("collection", False, True), ("indirect_only", False, True)])
+def test_holdout_object_matches_cycles(tmp_path, mask, half, film_transparent):
+    """Object > Visibility > Mask > Holdout (or the card's collection set to Holdout): the card
+    is a hole in the image (alpha 0, no light; a 50 % Transparent card: alpha 0.5 and the ground
+    behind at half) yet casts its shadow; an Indirect Only collection hides it from the camera
+    only. RGBA pixel by pixel against Cycles."""
+    def card():
+        if not half:
+            return _diffuse_material("card", (0.2, 0.5, 0.9, 1))
+        mat = bpy.data.materials.new("card")
+        nt = mat.node_tree
+        nt.nodes.clear()
+        t = node(nt, "ShaderNodeBsdfTransparent")
+        d = node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0.2, 0.5, 0.9, 1)})
+        mix = node(nt, "ShaderNodeMixShader", {0: 0.5, 1: t.outputs[0], 2: d.outputs[0]})
+        nt.links.new(mix.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+        return mat
+    sc = _shadow_scene(card)
+    sc.render.film_transparent = film_transparent
+    ob = next(o for o in sc.objects if o.active_material and o.active_material.name.startswith("card"))
+    if mask == "object":
+        ob.is_holdout = True
+    else:
+        col = bpy.data.collections.new("cards")
+        sc.collection.children.link(col)
+        for c in list(ob.users_collection):
+            c.objects.unlink(ob)
+        col.objects.link(ob)
+        layer = bpy.context.view_layer.layer_collection.children["cards"]
+        setattr(layer, "holdout" if mask == "collection" else "indirect_only", True)
+    cycles, drt = render_rgba_both(sc, tmp_path / f"holdout_{mask}.exr")
+    hole = np.abs(cycles[..., 3] - (0.5 if half else 0.0)) < 1e-3  # the card, as Cycles cuts it
+    assert (hole.sum() > 200) == (mask != "indirect_only"), hole.sum()
+    flat = _interior(cycles, 1e-3)
+    assert flat.sum() > 300
+    assert (np.abs(drt - cycles).max(axis=-1)[flat] > 2e-3).mean() < 0.02
+    assert abs(drt[..., 3].mean() - cycles[..., 3].mean()) < 0.01, (drt[..., 3].mean(), cycles[..., 3].mean())
+    assert abs(drt[..., :3].mean() / cycles[..., :3].mean() - 1) < 0.01
 
 
 def test_is_shadow_ray_trick_removes_a_shadow_like_cycles(tmp_path):

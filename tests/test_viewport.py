@@ -425,8 +425,9 @@ def test_blender_5_1_material_edit_flags_do_not_reexport_meshes(blender_viewport
 @blender_only
 def test_blender_ray_visibility_edit_reaches_the_viewport(blender_viewport):
     """Object > Visibility > Camera off: the live object's visibility changes, without a mesh
-    export or a hierarchy rebuild, and the next frame no longer shows the box."""
-    from drt.scene import VIS_ALL, VIS_CAMERA
+    export or a hierarchy rebuild, and the next frame no longer shows the box; Mask > Holdout
+    on: the same, and the box cuts the frame's alpha."""
+    from drt.scene import VIS_ALL, VIS_CAMERA, VIS_HOLDOUT
 
     vp = blender_viewport
     live = vp.session.live
@@ -446,6 +447,16 @@ def test_blender_ray_visibility_edit_reaches_the_viewport(blender_viewport):
     evaluate()
     assert live.objects[key].visibility == VIS_ALL or vp.session.wait(
         lambda f: live.objects[key].visibility == VIS_ALL, 30) is not None
+    # Mask > Holdout: the same edit path; the box becomes a hole in the frame's alpha
+    ob.is_holdout = True
+    evaluate()
+    held = vp.session.wait(lambda f: live.objects[key].visibility == VIS_ALL | VIS_HOLDOUT
+                           and f.divider == 1, 60)
+    assert held is not None, vp.session.error
+    assert held.rgba[..., 3].min() < 0.05 < before.rgba[..., 3].min()
+    assert vp.exports["meshes"] == exports["meshes"] and live.counters.static_builds == builds
+    ob.is_holdout = False
+    evaluate()
 
 
 @blender_only

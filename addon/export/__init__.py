@@ -52,9 +52,7 @@ def _is_rendered(inst) -> bool:
         orig = obj.original
         if orig.hide_render:
             return False
-    if getattr(obj, "is_holdout", False):
-        return False
-    return True
+    return True  # (holdouts too: they occlude, cast shadows and are seen in bounces)
 
 
 #: Cycles's per-object ray visibility (Object > Visibility > Ray Visibility): Blender's
@@ -64,21 +62,38 @@ _RAY_VISIBILITY = (("camera", "visible_camera"), ("diffuse", "visible_diffuse"),
                    ("volume_scatter", "visible_volume_scatter"), ("shadow", "visible_shadow"))
 
 
-def ray_visibility(obj) -> dict | None:
-    """An object's ray visibility as the scene format's ``{ray kind: bool}``, or None when
-    every kind of ray sees it (Cycles's default: nothing exported)."""
-    vis = {kind: bool(getattr(obj, attr, True)) for kind, attr in _RAY_VISIBILITY}
-    return None if all(vis.values()) else vis
+def instance_visibility(inst, view_layer) -> tuple[dict | None, bool]:
+    """An object instance's ray visibility — the scene format's ``{ray kind: bool}``, or None
+    when every kind of ray sees it (Cycles's default: nothing exported) — and whether it is a
+    holdout, as Cycles's sync_object decides them: for an instance (of a particle system, a collection
+    instance, geometry nodes) the instancer's settings count — its ray visibility is ANDed in,
+    and its holdout / indirect-only (the object's Mask > Holdout flag, or its collection's in
+    ``view_layer``) are the instance's. An indirect-only object (not a holdout) is one camera
+    rays do not see."""
+    instanced = inst.is_instance and inst.parent is not None
+    parent = inst.parent if instanced else inst.object
+    sources = (inst.object, parent) if instanced else (parent,)
+    vis = {kind: all(bool(getattr(o, attr, True)) for o in sources) for kind, attr in _RAY_VISIBILITY}
+    orig = parent.original  # (an evaluated object answers False: the flags live on the original)
+    try:
+        holdout = bool(orig.holdout_get(view_layer=view_layer))
+        indirect_only = bool(orig.indirect_only_get(view_layer=view_layer))
+    except (TypeError, RuntimeError, ValueError):  # not in that view layer (or an old bpy)
+        holdout, indirect_only = bool(getattr(orig, "is_holdout", False)), False
+    if indirect_only and not holdout:
+        vis["camera"] = False
+    return (None if all(vis.values()) else vis), holdout
 
 
-def visibility_bits(visibility: dict | None) -> int:
-    """``ray_visibility``'s answer as the core's VIS_* bits (the viewport's live objects)."""
+def visibility_bits(visibility: dict | None, holdout: bool = False) -> int:
+    """``instance_visibility``'s answer as the core's VIS_* bits, VIS_HOLDOUT included (the
+    viewport's live objects)."""
     from .. import compat
 
     core_scene = compat.core_module("scene")
-    if visibility is None:
-        return core_scene.VIS_ALL
-    return sum(1 << k for k, kind in enumerate(core_scene.RAY_VISIBILITY) if visibility[kind])
+    bits = core_scene.VIS_ALL if visibility is None else sum(
+        1 << k for k, kind in enumerate(core_scene.RAY_VISIBILITY) if visibility[kind])
+    return bits | (core_scene.VIS_HOLDOUT if holdout else 0)
 
 
 def ignored_ray_visibility(obj) -> list[str]:
@@ -153,7 +168,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
         if obj.type not in MESH_LIKE_TYPES or not _is_rendered(inst):
             continue
         key = _instance_key(inst)
-        visibility = ray_visibility(obj)
+        visibility, holdout = instance_visibility(inst, depsgraph.view_layer)
         if ignored := ignored_ray_visibility(obj):
             unsupported_visibility.setdefault(obj.name, ignored)
         matrix = matrix_list(inst.matrix_world.copy())
@@ -184,6 +199,8 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
                         "mesh": k, "matrix_world": matrix, "motion": None})
         if visibility is not None:
             objects[-1]["visibility"] = visibility
+        if holdout:
+            objects[-1]["holdout"] = True
         term = shadow_terminator(obj)
         # the geometry offset acts on smooth shading only, the shading offset on any (drt.terminator)
         if term["shading_offset"] > 0.0 or (f"mesh{k}.normals" in arrays and term["geometry_offset"] > 0.0):

@@ -23,7 +23,7 @@ import numpy as np
 from .kernels import kernel
 
 from .motion import RigidMotion, invert_linear
-from .scene import VIS_ALL, Scene
+from .scene import VIS_ALL, VIS_HOLDOUT, Scene
 from .vecmath import transform_rows
 
 
@@ -55,8 +55,9 @@ class SceneGeometry:
     #: object carries Object Info (a material program reads it), else None
     object_of: np.ndarray | None = None
     object_info: np.ndarray | None = None
-    #: (T_all,) uint8 VIS_* bits of the rays that see each triangle (drt.scene.RAY_VISIBILITY);
-    #: None when every object is visible to every ray
+    #: (T_all,) uint8 VIS_* bits of the rays that see each triangle (drt.scene.RAY_VISIBILITY),
+    #: plus VIS_HOLDOUT on a holdout object's; None when every object is visible to every ray
+    #: and none is a holdout
     visibility: np.ndarray | None = None
     #: per-corner attributes material programs read, (T_all, 3, 3) float32 by name ("generated",
     #: "object_coords"); only those some mesh has (zeros on the other meshes' triangles)
@@ -234,8 +235,8 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         geom.terminator_shading = np.concatenate(shade_static + shade_moving)
     if any(t.any() for t in term_static):  # moving meshes: no offset (drt.terminator)
         geom.terminator = np.concatenate(term_static + [np.zeros(offset - geom.static_count, np.float32)])
-    if any(o.visibility != VIS_ALL for o in scene.objects):
-        per_object = np.array([o.visibility for o in scene.objects], np.uint8)
+    per_object = np.array([o.visibility | (VIS_HOLDOUT if o.holdout else 0) for o in scene.objects], np.uint8)
+    if np.any(per_object != VIS_ALL):
         geom.visibility = per_object[cat(obj_static + obj_moving, np.zeros(0, np.int32))]
     if any(o.info is not None for o in scene.objects):
         geom.object_of = cat(obj_static + obj_moving, np.zeros(0, np.int32))

@@ -36,7 +36,7 @@ from .path_stages import (D_BOUNCE0, D_LENS, D_PIXEL, D_TIME, DIMS_PER_BOUNCE,  
                           MAX_SAMPLE_RADIANCE, RR_START_BOUNCE, SHADOW_EPSILON)
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
-from .scene import VIS_ALL, VIS_SHADOW, RenderSettings
+from .scene import VIS_ALL, VIS_HOLDOUT, VIS_SHADOW, RenderSettings
 from .terminator import shading_multipliers, terminator_arrays
 from .trace import Tracer
 from .volumes.media import STACK_SIZE, MediumData, build_medium_data
@@ -162,6 +162,8 @@ class Integrator:
         vis, path_bits = self.surfaces.visibility, VIS_ALL & ~VIS_SHADOW
         self.unseen_by_paths = bool(np.any((vis & path_bits) != path_bits))
         self.unseen_by_shadows = bool(np.any((vis & VIS_SHADOW) == 0))
+        # holdout objects: shade's variant with their test (None: a variant without it)
+        self.holdouts_arg = vis if np.any(vis & VIS_HOLDOUT) else None
         # participating media (drt.volumes): a disabled MediumData costs the kernels one flag test
         if media is None:
             media = build_medium_data([], None)
@@ -329,7 +331,7 @@ class Integrator:
             if self.sss is not None:
                 self.sss.patch_hits(paths, live, hit_arrays)
             live, n_shadow = stages.shade(sd, md, self.programs_arg, regs, point, ld, self.surfaces, self.stage_settings, depth_i, live,
-                                          paths, hit_arrays, out, shadow, self.media_arg)
+                                          paths, hit_arrays, out, shadow, self.media_arg, self.holdouts_arg)
             if n_shadow and (vd.enabled or self.transparent.shape[0] or self.unseen_by_shadows):
                 self._shadows_through(shadow, n_shadow, out.radiance, md, regs, point)
             elif n_shadow:

@@ -80,7 +80,9 @@ class LiveObject:
     mesh: MeshData
     matrix: np.ndarray
     instance: bool = False
-    visibility: int = VIS_ALL  # VIS_* bits of the rays that see it (drt.scene.RAY_VISIBILITY)
+    #: VIS_* bits of the rays that see it (drt.scene.RAY_VISIBILITY), plus VIS_HOLDOUT if it
+    #: is a holdout (ObjectSpec.holdout)
+    visibility: int = VIS_ALL
 
 
 @dataclass
@@ -218,8 +220,9 @@ class LiveScene:
         self._static_dirty = True
 
     def set_visibility(self, key, visibility: int) -> None:
-        """Change which rays see an object (no BVH rebuild: the next render's per-triangle
-        visibility is gathered from the objects)."""
+        """Change which rays see an object and whether it is a holdout (VIS_* bits as
+        LiveObject.visibility; no BVH rebuild: the next render's per-triangle visibility is
+        gathered from the objects)."""
         self.objects[key].visibility = int(visibility)
 
     def remove_object(self, key) -> None:

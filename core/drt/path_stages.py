@@ -43,7 +43,7 @@ from .camera import camera_ray
 from .kernels import inline_kernel, kernel
 from .kernels.vec3 import add, build_frame, dot, load, mul, neg, normalize, scale, store, sub, to_local, to_world
 from .lights.common import I_VISIBLE_CAMERA
-from .scene import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_VOLUME_SCATTER
+from .scene import VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_HOLDOUT, VIS_TRANSMISSION, VIS_VOLUME_SCATTER
 from .lights.selection import KT_FLOOR
 from .lights import (emissive_pdf, light_sample_full, shape_emission, shape_intersect, sun_emission,
                      sun_in_cone, world_pdf, world_radiance)
@@ -55,7 +55,7 @@ from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N
                                        POINT_P, POINT_PATH, POINT_PATH2, POINT_SHADOW, POINT_XFORM,
                                        POINT_OBJECT_XFORM)
 from .materials.programs import eval_material
-from .materials.transparency import straight_lobe
+from .materials.transparency import straight_lobe, transparency
 from .materials.holdout import holdout_weight
 from .materials.table import (LOBE_SUBSURFACE, LOBE_TRANSLUCENT, NO_VIEW_WEIGHTS, bsdf_eval_weights,
                               layered_emission, pick_lobe_weights)
@@ -135,7 +135,8 @@ Surfaces = namedtuple("Surfaces", [
     "terminator",     # (T,) float32 shadow terminator geometry offset ((0,): none; drt.terminator)
     "corners",        # (T, 3, 3) float32 world vertex positions, with ``terminator`` ((0, 3, 3): none)
     "shading_mult",   # (T,) float32 shadow terminator shading-offset multiplier ((0,): none)
-    "visibility",     # (T,) uint8 VIS_* bits of the rays that see each triangle ((0,): all see all)
+    "visibility",     # (T,) uint8 VIS_* bits of the rays that see each triangle, with VIS_HOLDOUT
+                      # on holdout objects' ((0,): all see all, no holdout)
 ])
 
 HitArrays = namedtuple("HitArrays", [
@@ -492,7 +493,32 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
 
 
 @kernel
-def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hits, out, shadow, vd):
+def holdout_object_hit(md, mat, thr, acc, settings, paths, i, j, vd, prim, p, ng, d, t_geom, out, slot):
+    """Path i's camera ray hit a holdout object (``Surfaces.visibility`` & VIS_HOLDOUT) of
+    material ``mat`` at ``p``: Cycles's surface_shader_apply_holdout. The hit's opaque part
+    (weight 1 − the material's transparency, ``md`` already this hit's row) leaves the alpha,
+    none of its light is added (``acc``, what the segment before it brought, is stored), and
+    the camera ray goes on through the transparency only, as a transparent bounce, into row j.
+    Returns whether it does."""
+    t0, t1, t2 = transparency(md, mat)
+    out.alpha[slot] -= (max(1.0 - t0, 0.0) * thr[0] + max(1.0 - t1, 0.0) * thr[1]
+                        + max(1.0 - t2, 0.0) * thr[2]) * (1.0 / 3.0)
+    store(out.radiance, slot, add(load(out.radiance, slot), acc))
+    weight = (min(t0, 1.0), min(t1, 1.0), min(t2, 1.0))
+    if not any_positive(weight) or paths.tcount[i] + 1 > settings.transparent_bounces:
+        return False
+    copy_path(paths, i, j)
+    if vd is not None and vd.enabled:
+        stack_cross(vd, paths.vstack, j, prim, mat, d, ng)
+    store(paths.o, j, offset_point(p, ng, d))
+    paths.tmax[j] = max(paths.tmax[i] - t_geom, 0.0)
+    store(paths.throughput, j, mul(thr, weight))
+    paths.tcount[j] = paths.tcount[i] + 1
+    return True
+
+
+@kernel
+def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hits, out, shadow, vd, holdouts):
     """One bounce for paths [0, live) (see the module docstring). Returns (paths still alive,
     now compacted to the front; shadow rays queued in ``shadow``). ``pd`` holds the material
     programs (``drt.materials.programs``; no programs: zero-size arrays); when there are any,
@@ -503,6 +529,9 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
     (``drt.volumes.media.MediumData``), or None for a scene without media: every use of ``vd``
     sits under ``vd is not None``, which numba resolves when it compiles, so that variant of
     ``shade`` holds none of the media code (half of the cold compile; docs/kernels.md).
+    ``holdouts``: the per-triangle visibility bits (``surf.visibility``) of a scene with a
+    holdout object (VIS_HOLDOUT), or None: the same compile-time switch, since even the test of
+    the bit at every camera hit cost a scene without holdouts ~2.5 % (cutout, one thread).
 
     Camera rays and sample dimensions go by the path's bounce count, which equals ``depth_i``
     unless a path crossed volume-only boundaries (those segments are not bounces). A textured world
@@ -666,6 +695,10 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             continue
         p = load(hits.p, i)
         ng = load(hits.ng, i)
+        # a camera ray on a holdout object (Cycles's SD_OBJECT_HOLDOUT_MASK; drt.scene.ObjectSpec)
+        obj_holdout = False
+        if holdouts is not None:
+            obj_holdout = camera and (holdouts[prim] & VIS_HOLDOUT) != 0
         ns = ng if sss_state == SSS_EXIT_FLAT else shading_normal(surf, hits, i, prim, ng)
         ns_unmapped = ns
         mapped = False
@@ -678,7 +711,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             mat = md.sss_exit[0]
             wo = ns if dot(wo, ng) >= 0.0 else neg(ns)
         elif (pd is not None and pd.prog_of.shape[0] and pd.prog_of[mat] >= 0
-              and not (paths.terminate[i] and pd.emission_reg[mat] < 0 and not md.has_emission[mat])):
+              and not (paths.terminate[i] and pd.emission_reg[mat] < 0 and not md.has_emission[mat]
+                       and not obj_holdout)):
             # a textured material: this hit's parameters (a path ending here reads only the
             # emission, so a material without textured or constant emission skips its program)
             if pd.reads_point[mat]:
@@ -723,6 +757,10 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 if nl > 0.0 and math.isfinite(nl):
                     nc_wo = nm
             nc = scale(valid_specular_normal(scale(ng, side), wo, nc_wo), side)
+        if obj_holdout and not exiting:  # (a call: shade keeps no code for it inline)
+            if holdout_object_hit(md, mat, thr, acc, settings, paths, i, j, vd, prim, p, ng, d, t_geom, out, slot):
+                j += 1
+            continue
         if camera and not exiting and md.transmission_or_delta[mat]:
             # a holdout lobe (always delta) cuts a camera-visible hit out of the alpha, as
             # Cycles's integrate_surface_holdout; a full holdout ends the path

@@ -38,6 +38,9 @@ MAX_RESOLUTION = 65536
 RAY_VISIBILITY = ("camera", "diffuse", "glossy", "transmission", "volume_scatter", "shadow")
 VIS_CAMERA, VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_VOLUME_SCATTER, VIS_SHADOW = (1 << k for k in range(6))
 VIS_ALL = (1 << len(RAY_VISIBILITY)) - 1
+#: not a ray kind: the bit of a per-triangle visibility array (drt.geometry) that marks a
+#: holdout object (``ObjectSpec.holdout``), which camera rays cut out of the image
+VIS_HOLDOUT = 1 << len(RAY_VISIBILITY)
 MAX_SPP = 1 << 24
 
 
@@ -266,6 +269,10 @@ class ObjectSpec:
     terminator_shading: float = 0.0
     #: VIS_* bits of the rays that see the object (VIS_ALL: every ray, Cycles's default)
     visibility: int = VIS_ALL
+    #: Cycles's holdout (Object > Visibility > Mask > Holdout, or a holdout collection): where
+    #: a camera ray (still one through transparent surfaces) hits the object, the film's alpha
+    #: loses the hit's opaque part and no light is added; every other ray sees it as usual
+    holdout: bool = False
 
 
 @dataclass
@@ -694,7 +701,7 @@ def _objects(h: dict, n_meshes: int) -> list[ObjectSpec]:
                               _motion(o, "motion", p), info,
                               _number(term, "geometry_offset", tp, default=0.0, lo=0.0, hi=1.0),
                               _number(term, "shading_offset", tp, default=0.0, lo=0.0, hi=1.0),
-                              _visibility(o, p)))
+                              _visibility(o, p), _bool(o, "holdout", p, False)))
     return out
 
 
