@@ -192,9 +192,11 @@ def test_passes_written(tmp_path):
 
 
 def test_error_is_reported_not_raised_silently(registered):
-    """An unsupported scene must abort the render (RuntimeError here, exit 1 in blender -b)."""
+    """An unrenderable scene must abort the render (RuntimeError here, exit 1 in blender -b):
+    here a camera whose far clip lies before its near one."""
     open_scene("cornell_box")
-    bpy.context.scene.camera.data.type = "PANO"
+    cam = bpy.context.scene.camera.data
+    cam.clip_start, cam.clip_end = 10.0, 1.0
     with pytest.raises(RuntimeError, match="DRT"):
         bpy.ops.render.render()
 

@@ -110,7 +110,7 @@ def test_blender_b_failure_exits_nonzero(install):
     """An unrenderable scene must fail the farm job: exit code != 0, no image."""
     root = install[0]
     p = run(install, "-E", "DRT", "--python-expr",
-            "import bpy; bpy.context.scene.camera.data.type = 'PANO'",
+            "import bpy; c = bpy.context.scene.camera.data; c.clip_start, c.clip_end = 10.0, 1.0",
             "-o", "//bad_", "-F", "OPEN_EXR", "-f", "1")
     assert p.returncode != 0
     assert not (root / "bad_0001.exr").exists()

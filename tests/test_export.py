@@ -154,6 +154,21 @@ def test_collection_holdout_indirect_only_and_instancers_as_cycles(fresh):
     assert vis["glossy"] is False and vis["shadow"] is False and vis["camera"] is True
 
 
+def test_panoramic_camera_is_exported_and_central_cylindrical_refused(fresh):
+    """A panoramic camera exports its projection and Blender's parameters; Central Cylindrical,
+    not rendered, is an export error that names it (not a traceback)."""
+    cam = bpy.context.scene.camera.data
+    cam.type, cam.panorama_type = "PANO", "FISHEYE_EQUISOLID"
+    cam.fisheye_lens, cam.fisheye_fov = 8.0, 3.0
+    pano = export_current().header["camera"]["panorama"]
+    assert pano["type"] == "FISHEYE_EQUISOLID"
+    assert pano["fisheye_lens"] == pytest.approx(8.0) and pano["fisheye_fov"] == pytest.approx(3.0)
+    assert len(pano["polynomial"]) == 5
+    cam.panorama_type = "CENTRAL_CYLINDRICAL"
+    with pytest.raises(ExportError, match="CENTRAL_CYLINDRICAL"):
+        export_current()
+
+
 def test_ray_visibility_is_exported_and_the_shadow_catcher_warns(fresh):
     """Cycles's per-object ray visibility goes into the object's "visibility" (only when some
     ray kind is off); the shadow catcher, not rendered yet, is named in one warning."""

@@ -105,9 +105,9 @@ def film_exposure(scene) -> float:
 def camera_dict(cam_obj, matrix) -> dict:
     """Camera header from an evaluated camera object and its (camera → world) matrix."""
     cam = cam_obj.data
-    if cam.type not in ("PERSP", "ORTHO"):
-        raise ExportError(f"camera '{cam_obj.name}': type {cam.type} is not supported "
-                          "(perspective and orthographic only)")
+    if cam.type not in ("PERSP", "ORTHO", "PANO"):
+        raise ExportError(f"camera '{cam_obj.name}': type {cam.type} is not supported")
+    panorama = panorama_dict(cam_obj) if cam.type == "PANO" else None
     dof = cam.dof
     focus = float(dof.focus_distance)
     if dof.focus_object is not None:
@@ -130,7 +130,30 @@ def camera_dict(cam_obj, matrix) -> dict:
                 "fstop": float(dof.aperture_fstop), "blades": int(dof.aperture_blades),
                 "rotation": float(dof.aperture_rotation), "ratio": float(dof.aperture_ratio)},
         "motion": None,
-    }
+    } | ({"panorama": panorama} if panorama is not None else {})
+
+
+#: Blender's panorama types DRT renders (drt.panorama.PANORAMA_TYPES)
+_PANORAMA_TYPES = ("EQUIRECTANGULAR", "EQUIANGULAR_CUBEMAP_FACE", "MIRRORBALL", "FISHEYE_EQUIDISTANT",
+                   "FISHEYE_EQUISOLID", "FISHEYE_LENS_POLYNOMIAL")
+
+
+def panorama_dict(cam_obj) -> dict:
+    """A panoramic camera's ``"panorama"`` (scene format): its projection and parameters, from
+    the camera data (Blender 4+) or, before that, Cycles's camera settings."""
+    cam = cam_obj.data
+    src = cam if hasattr(cam, "panorama_type") else getattr(cam, "cycles", cam)
+    kind = getattr(src, "panorama_type", "FISHEYE_EQUISOLID")
+    if kind not in _PANORAMA_TYPES:
+        raise ExportError(f"camera '{cam_obj.name}': panorama type {kind} is not supported "
+                          f"({', '.join(t.replace('_', ' ').title() for t in _PANORAMA_TYPES)} are)")
+    out = {"type": kind}
+    for name in ("fisheye_fov", "fisheye_lens", "latitude_min", "latitude_max", "longitude_min", "longitude_max"):
+        if hasattr(src, name):
+            out[name] = float(getattr(src, name))
+    if hasattr(src, "fisheye_polynomial_k0"):
+        out["polynomial"] = [float(getattr(src, f"fisheye_polynomial_k{k}")) for k in range(5)]
+    return out
 
 
 def light_dict(obj, matrix, warnings: list) -> dict | None:

@@ -26,16 +26,17 @@ import numpy as np
 
 from .kernels import inline_kernel, kernel
 from .motion import RigidMotion, apply_rows, motion_at, static_motion_data
+from .panorama import PANO_SIZE, PANORAMA_TYPES, panorama_direction, panorama_lens, pano_parameters, to_blender_camera
 from .sampling.warps import disk_concentric, polygon
 from .scene import CameraSpec, RenderSettings
 
-PROJECTION_PERSP, PROJECTION_ORTHO = 0, 1  # CameraData.projection
+PROJECTION_PERSP, PROJECTION_ORTHO, PROJECTION_PANO = 0, 1, 2  # CameraData.projection
 
 CameraData = namedtuple("CameraData", [
     "projection", "width", "height", "plane_w", "plane_h", "shift_x", "shift_y",
     "lens_radius", "focus_distance", "blades", "rotation", "ratio", "clip_start", "clip_end",
-    "matrix", "moving", "motion", "forward"])
-CameraData.__doc__ = """The camera for the kernels.  projection: int64 (0 PERSP, 1 ORTHO); width,
+    "matrix", "moving", "motion", "forward", "pano_type", "pano"])
+CameraData.__doc__ = """The camera for the kernels.  projection: int64 (0 PERSP, 1 ORTHO, 2 PANO); width,
 height: float64 image size in pixels; plane_w, plane_h: float64 extent of the image on the plane
 at distance 1 (perspective) or in scene units (ortho); shift_x, shift_y: float64 in the same
 units; lens_radius (float64, 0 = pinhole), focus_distance (float64), blades (int64, ≥ 3 for a
@@ -43,7 +44,8 @@ polygonal aperture), rotation (float64, radians), ratio (float64): the aperture;
 clip_end: float64; matrix: (4, 4) float64 camera → (shifted) world; moving: bool; motion: a
 ``drt.motion.MotionData`` of the (shifted) camera transform over the shutter (identity if not
 moving); forward: (x, y, z) float64, the unit view axis (−Z of ``matrix``) of a camera that does
-not move."""
+not move; pano_type: int64 (drt.panorama.PANORAMA_TYPES' index), pano: (PANO_SIZE,) float64 its
+parameters (drt.panorama.pano_parameters; zeros for other projections)."""
 
 
 @kernel
@@ -62,6 +64,8 @@ def camera_ray(cd, px, py, ul0, ul1, tau):
     with aperture uniforms (ul0, ul1) at shutter fraction tau, in the shifted world frame:
     (o, d, tmax, eye, forward) — origin on the near clip plane, unit direction, distance to the
     far clip plane, the lens point the ray left from and the camera's unit view axis."""
+    if cd.projection == 2:  # PANO
+        return _panorama_ray(cd, px, py, ul0, ul1, tau)
     # (reciprocals, not divisions: a division costs ~5× a multiply, and 1/width is the same for
     # every ray of a stage, which LLVM computes once for the loop)
     x = (px * (1.0 / cd.width) - 0.5) * cd.plane_w + cd.shift_x
@@ -87,18 +91,7 @@ def camera_ray(cd, px, py, ul0, ul1, tau):
         else:
             ex, ey = 0.0, 0.0
             v = (x, y, -1.0)
-    if cd.moving:
-        r0, r1, r2, t = motion_at(cd.motion, tau)
-        fwd = (-r0[2], -r1[2], -r2[2])
-        inv_fn = 1.0 / math.sqrt(fwd[0] * fwd[0] + fwd[1] * fwd[1] + fwd[2] * fwd[2])
-        fwd = (fwd[0] * inv_fn, fwd[1] * inv_fn, fwd[2] * inv_fn)
-    else:
-        m = cd.matrix
-        r0 = (m[0, 0], m[0, 1], m[0, 2])
-        r1 = (m[1, 0], m[1, 1], m[1, 2])
-        r2 = (m[2, 0], m[2, 1], m[2, 2])
-        t = (m[0, 3], m[1, 3], m[2, 3])
-        fwd = cd.forward
+    r0, r1, r2, t, fwd = _camera_frame(cd, tau)
     el = apply_rows(r0, r1, r2, (ex, ey, 0.0))
     eye_w = (el[0] + t[0], el[1] + t[1], el[2] + t[2])
     # Everything follows from the world-space v: one square root and one division a ray. The
@@ -116,6 +109,48 @@ def camera_ray(cd, px, py, ul0, ul1, tau):
         o_w = eye_w
         tmax = np.inf
     return o_w, d_w, tmax, eye_w, fwd
+
+
+@inline_kernel
+def _camera_frame(cd, tau):
+    """The camera → (shifted) world transform at shutter fraction tau: rows r0, r1, r2 of its
+    linear part, its translation t, and the unit view axis (camera −Z) in the world."""
+    if cd.moving:
+        r0, r1, r2, t = motion_at(cd.motion, tau)
+        fwd = (-r0[2], -r1[2], -r2[2])
+        inv_fn = 1.0 / math.sqrt(fwd[0] * fwd[0] + fwd[1] * fwd[1] + fwd[2] * fwd[2])
+        return r0, r1, r2, t, (fwd[0] * inv_fn, fwd[1] * inv_fn, fwd[2] * inv_fn)
+    m = cd.matrix
+    r0 = (m[0, 0], m[0, 1], m[0, 2])
+    r1 = (m[1, 0], m[1, 1], m[1, 2])
+    r2 = (m[2, 0], m[2, 1], m[2, 2])
+    t = (m[0, 3], m[1, 3], m[2, 3])
+    return r0, r1, r2, t, cd.forward
+
+
+@inline_kernel
+def _panorama_ray(cd, px, py, ul0, ul1, tau):
+    """``camera_ray`` of a panoramic camera (drt.panorama, Cycles's camera_sample_panorama):
+    the ray leaves the lens point along the projection's direction, from clip_start along it
+    to clip_end (spherical clipping: there is no image plane), and ``forward`` is the ray's own
+    direction, so that the depth pass is the distance from the camera, as Cycles's. A position
+    the projection has no ray for: ``tmax`` −1 (the camera stage drops the sample)."""
+    r0, r1, r2, t, _ = _camera_frame(cd, tau)
+    dc = panorama_direction(cd.pano_type, cd.pano, px * (1.0 / cd.width), py * (1.0 / cd.height))
+    if dc[0] == 0.0 and dc[1] == 0.0 and dc[2] == 0.0:
+        return t, (0.0, 0.0, -1.0), -1.0, t, (0.0, 0.0, -1.0)
+    e = (0.0, 0.0, 0.0)
+    if cd.lens_radius > 0:
+        lx, ly = lens_offset(cd, ul0, ul1)
+        e, dc = panorama_lens(dc, lx, ly, cd.focus_distance)
+    el = apply_rows(r0, r1, r2, to_blender_camera(cd.pano_type, e))
+    eye_w = (el[0] + t[0], el[1] + t[1], el[2] + t[2])
+    vw = apply_rows(r0, r1, r2, to_blender_camera(cd.pano_type, dc))
+    inv_len = 1.0 / math.sqrt(vw[0] * vw[0] + vw[1] * vw[1] + vw[2] * vw[2])
+    d_w = (vw[0] * inv_len, vw[1] * inv_len, vw[2] * inv_len)
+    cs = cd.clip_start
+    o_w = (eye_w[0] + d_w[0] * cs, eye_w[1] + d_w[1] * cs, eye_w[2] + d_w[2] * cs)
+    return o_w, d_w, max(cd.clip_end - cs, 0.0), eye_w, d_w
 
 
 @kernel
@@ -181,6 +216,12 @@ class Camera:
             horizontal, sensor = True, spec.sensor_width
         else:
             horizontal, sensor = False, spec.sensor_height
+        # the sensor (mm) as the equisolid and polynomial fisheyes see it (Cycles fits it so too)
+        pano_horizontal = xa > ya if fit == "AUTO" else horizontal
+        if pano_horizontal:
+            self.sensor_mm = (sensor, sensor * ya / xa)
+        else:
+            self.sensor_mm = (sensor * xa / ya, sensor)
         # extent of the fitted side on the plane at distance 1 (perspective) or in scene units (ortho)
         fitted = spec.ortho_scale if spec.type == "ORTHO" else sensor / spec.lens
         if horizontal:
@@ -201,8 +242,10 @@ class Camera:
             m0[:3, 3] -= origin_shift
             m1[:3, 3] -= origin_shift
             self.motion = RigidMotion(m0, m1)
+        pano = spec.panorama if spec.type == "PANO" else None
+        projection = {"ORTHO": PROJECTION_ORTHO, "PANO": PROJECTION_PANO}.get(spec.type, PROJECTION_PERSP)
         self.data = CameraData(
-            projection=int(PROJECTION_ORTHO if spec.type == "ORTHO" else PROJECTION_PERSP),
+            projection=int(projection),
             width=float(w), height=float(h),
             plane_w=float(self.plane_w), plane_h=float(self.plane_h),
             shift_x=float(self.shift[0]), shift_y=float(self.shift[1]),
@@ -211,7 +254,10 @@ class Camera:
             clip_start=float(spec.clip_start), clip_end=float(spec.clip_end),
             matrix=_f64(m).copy(), moving=self.motion is not None,
             motion=self.motion.data if self.motion is not None else static_motion_data(),
-            forward=_view_axis(m))
+            forward=_view_axis(m),
+            pano_type=int(PANORAMA_TYPES.index(pano.type)) if pano is not None else 0,
+            pano=(np.array(pano_parameters(pano, *self.sensor_mm), np.float64) if pano is not None
+                  else np.zeros(PANO_SIZE)))
 
     def pixel_footprint(self) -> np.ndarray:
         """(4, 3) float64 world vectors [right abs, right rel, up abs, up rel]: one pixel's step
@@ -222,6 +268,13 @@ class Camera:
         right = m[:3, 0] / max(np.linalg.norm(m[:3, 0]), 1e-300)
         up = m[:3, 1] / max(np.linalg.norm(m[:3, 1]), 1e-300)
         px, py = cd.plane_w / cd.width, cd.plane_h / cd.height
+        if cd.projection == PROJECTION_PANO:
+            # the angle one pixel spans at the image's centre (a panorama's varies over it)
+            c = np.array([cd.width, cd.height]) * 0.5
+            rays = self.generate(np.array([c[0], c[0] + 1, c[0]]), np.array([c[1], c[1], c[1] + 1]),
+                                 np.full((3, 2), 0.5), np.zeros(3))
+            dots = np.clip(rays.d[1:] @ rays.d[0], -1.0, 1.0)
+            px, py = np.where(rays.tmax[1:] >= 0.0, np.arccos(dots), 0.0)
         ortho = cd.projection == PROJECTION_ORTHO
         z = np.zeros(3)
         return np.array([right * px if ortho else z, z if ortho else right * px,

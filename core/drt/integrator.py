@@ -309,15 +309,14 @@ class Integrator:
         buffers, out = self._outputs(n)
         sd, ld = self.sampler.data, self.lights.data
         md, regs, point = self._material_workspace()
-        stages.camera_stage(sd, self.filter.data, self.camera.data, self.stage_settings,
-                            np.ascontiguousarray(x, dtype=np.int64), np.ascontiguousarray(row, dtype=np.int64),
-                            np.ascontiguousarray(index, dtype=np.int64), paths, out)
+        live = stages.camera_stage(sd, self.filter.data, self.camera.data, self.stage_settings,
+                                   np.ascontiguousarray(x, dtype=np.int64), np.ascontiguousarray(row, dtype=np.int64),
+                                   np.ascontiguousarray(index, dtype=np.int64), paths, out)
         vd = self.media
         if vd.enabled:
             paths.vstack[:] = vd.camera_stack
             paths.vcount[:] = 0
             paths.vseg[:] = 0
-        live = n
         if self.sss is not None:
             paths.sss[:] = 0
             paths.sss_count[:] = 0

@@ -452,8 +452,11 @@ def copy_path(paths, i, j):
 @kernel
 def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
     """Primary rays for camera samples (x column from the left, row from the TOP, sample index);
-    initialises the path state and the outputs of every batch row."""
+    initialises the outputs of every batch row and the path state of the samples that have a
+    ray, compacted to the front (a panoramic camera has none outside its image: such a sample
+    carries nothing, black with alpha 1, as Cycles's). Returns how many paths there are."""
     W, H = settings.width, settings.height
+    j = 0
     for i in range(x.shape[0]):
         pixel = row[i] * W + x[i]
         idx = index[i]
@@ -464,25 +467,6 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
         px = x[i] + 0.5 + dx
         py = (H - 1 - row[i]) + 0.5 + dy  # the camera wants v from the bottom
         o, d, tmax, eye, forward = camera_ray(cd, px, py, l0, l1, tau)
-        store(paths.o, i, o)
-        store(paths.d, i, d)
-        paths.tmax[i] = tmax
-        paths.tau[i] = tau
-        store(paths.throughput, i, (1.0, 1.0, 1.0))
-        paths.prev_pdf[i] = 0.0
-        paths.prev_delta[i] = True
-        store(paths.prev_p, i, o)
-        store(paths.prev_n, i, (0.0, 0.0, 0.0))
-        store(paths.prev_wo, i, (0.0, 0.0, 0.0))
-        paths.prev_mat[i] = -1
-        for c in range(4):
-            paths.counts[i, c] = 0
-        paths.terminate[i] = False
-        paths.prev_flags[i] = 0
-        paths.tcount[i] = 0
-        paths.slot[i] = i
-        paths.pixel[i] = pixel
-        paths.index[i] = idx
         store(out.radiance, i, (0.0, 0.0, 0.0))
         out.alpha[i] = 1.0
         out.depth[i] = np.inf
@@ -490,6 +474,29 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
         store(out.albedo, i, (0.0, 0.0, 0.0))
         store(out.eye, i, eye)
         store(out.forward, i, forward)
+        if tmax < 0.0:
+            continue
+        store(paths.o, j, o)
+        store(paths.d, j, d)
+        paths.tmax[j] = tmax
+        paths.tau[j] = tau
+        store(paths.throughput, j, (1.0, 1.0, 1.0))
+        paths.prev_pdf[j] = 0.0
+        paths.prev_delta[j] = True
+        store(paths.prev_p, j, o)
+        store(paths.prev_n, j, (0.0, 0.0, 0.0))
+        store(paths.prev_wo, j, (0.0, 0.0, 0.0))
+        paths.prev_mat[j] = -1
+        for c in range(4):
+            paths.counts[j, c] = 0
+        paths.terminate[j] = False
+        paths.prev_flags[j] = 0
+        paths.tcount[j] = 0
+        paths.slot[j] = i
+        paths.pixel[j] = pixel
+        paths.index[j] = idx
+        j += 1
+    return j
 
 
 @kernel

@@ -30,7 +30,7 @@ SAMPLER_KINDS = ("SOBOL", "STRATIFIED", "RANDOM")
 DIRECT_STRATEGIES = ("MIS_POWER", "MIS_BALANCE", "LIGHT", "BSDF")
 INDIRECT_STRATEGIES = ("BSDF", "COSINE", "UNIFORM")
 SENSOR_FITS = ("AUTO", "HORIZONTAL", "VERTICAL")
-CAMERA_TYPES = ("PERSP", "ORTHO")
+CAMERA_TYPES = ("PERSP", "ORTHO", "PANO")
 
 MAX_RESOLUTION = 65536
 #: Cycles's per-object ray visibility (Object > Visibility > Ray Visibility), as bits of
@@ -234,6 +234,25 @@ class CameraSpec:
     rotation: float = 0.0
     ratio: float = 1.0
     motion: tuple[np.ndarray, np.ndarray] | None = None
+    #: the projection of a panoramic camera (type "PANO"; drt.panorama)
+    panorama: PanoramaSpec | None = None
+
+
+@dataclass
+class PanoramaSpec:
+    """Blender's panoramic camera settings (Camera > Lens with Type Panoramic; drt.panorama):
+    ``type`` one of drt.panorama.PANORAMA_TYPES; angles in radians, ``fisheye_lens`` in mm;
+    ``polynomial`` the polynomial lens's k0 … k4 (theta in radians of r in mm)."""
+
+    type: str = "FISHEYE_EQUISOLID"
+    fisheye_fov: float = math.pi
+    fisheye_lens: float = 10.5
+    latitude_min: float = -0.5 * math.pi
+    latitude_max: float = 0.5 * math.pi
+    longitude_min: float = -math.pi
+    longitude_max: float = math.pi
+    polynomial: tuple = (-1.1735143743862864e-05, -0.019988736137747765, -3.3525323033245513e-06,
+                         3.0992753181635635e-06, -2.60646473293491e-08)
 
 
 @dataclass
@@ -372,6 +391,29 @@ def _render_settings(h: dict) -> RenderSettings:
     )
 
 
+def _panorama(c: dict, p: str) -> PanoramaSpec:
+    """A panoramic camera's ``"panorama"`` object (absent fields: Blender's defaults)."""
+    from .panorama import PANORAMA_TYPES
+
+    pp = f"{p}.panorama"
+    d = _get(c, "panorama", p, {})
+    if not isinstance(d, dict):
+        raise SceneError(pp, "must be an object")
+    base = PanoramaSpec()
+    pi, half = math.pi + 1e-6, 0.5 * math.pi + 1e-6  # (Blender stores π and π/2 as float32, a bit above)
+    poly = _vector(d, "polynomial", pp, 5, default=list(base.polynomial))
+    spec = PanoramaSpec(
+        type=_enum(d, "type", pp, PANORAMA_TYPES, base.type),
+        fisheye_fov=_number(d, "fisheye_fov", pp, base.fisheye_fov, lo=0, lo_open=True, hi=2 * pi),
+        fisheye_lens=_number(d, "fisheye_lens", pp, base.fisheye_lens, lo=MIN_CAMERA_LENGTH),
+        latitude_min=_number(d, "latitude_min", pp, base.latitude_min, lo=-half, hi=half),
+        latitude_max=_number(d, "latitude_max", pp, base.latitude_max, lo=-half, hi=half),
+        longitude_min=_number(d, "longitude_min", pp, base.longitude_min, lo=-pi, hi=pi),
+        longitude_max=_number(d, "longitude_max", pp, base.longitude_max, lo=-pi, hi=pi),
+        polynomial=tuple(float(k) for k in poly))
+    return spec
+
+
 def _camera(h: dict) -> CameraSpec:
     p = "camera"
     c = _get(h, "camera", "")
@@ -396,6 +438,7 @@ def _camera(h: dict) -> CameraSpec:
         rotation=_number(dof, "rotation", dp, 0.0),
         ratio=_number(dof, "ratio", dp, 1.0, lo=0, lo_open=True),
         motion=_motion(c, "motion", p),
+        panorama=_panorama(c, p) if c.get("type") == "PANO" else None,
     )
     if cam.clip_end <= cam.clip_start:
         raise SceneError("camera.clip_end", f"must be greater than clip_start ({cam.clip_start}), got {cam.clip_end}")
