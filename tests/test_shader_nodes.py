@@ -513,6 +513,50 @@ def test_holdout_alpha_matches_cycles(tmp_path, transparent_film):
     assert world == ((0.0, 0.0) if transparent_film else (1.0, 1.0)), world
 
 
+@pytest.mark.parametrize("card", ["black_diffuse", "principled_alpha", "tinted_transparent"])
+def test_partly_transparent_surface_alpha_matches_cycles(tmp_path, card):
+    """A transparent film seen through a partly transparent card: the world takes off the alpha
+    what the camera ray still carries (Cycles's film_write_transparent, average(throughput)), so
+    Mix(Transparent, black Diffuse, 0.5) has alpha 0.5, though the transparent lobe is the only
+    one ever sampled (weight 0.5 with probability 1); a Principled Alpha 0.5 and a tinted
+    Transparent likewise, whatever their lobes' sampling probabilities. Against Cycles."""
+    pytest.importorskip("bpy")
+    import bpy
+    from node_parity import node, render_rgba_both, setup_scene
+
+    sc = setup_scene(2)
+    sc.render.film_transparent = True
+    sc.cycles.samples = sc.drt.samples = 64
+    sc.world.node_tree.nodes["Background"].inputs[1].default_value = 0.5
+    mat = bpy.data.materials.new("card")
+    nt = mat.node_tree
+    nt.nodes.clear()
+    if card == "principled_alpha":
+        out = node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": (0.8, 0.3, 0.2, 1), "Alpha": 0.5}).outputs[0]
+    else:
+        t = node(nt, "ShaderNodeBsdfTransparent",
+                 {"Color": (0.6, 0.9, 1.0, 1) if card == "tinted_transparent" else (1, 1, 1, 1)})
+        d = node(nt, "ShaderNodeBsdfDiffuse", {"Color": (0, 0, 0, 1) if card == "black_diffuse" else (0.8, 0.3, 0.2, 1)})
+        out = node(nt, "ShaderNodeMixShader", {0: 0.5, 1: t.outputs[0], 2: d.outputs[0]}).outputs[0]
+    nt.links.new(out, nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    bpy.ops.mesh.primitive_plane_add(size=1.0)
+    bpy.context.object.data.materials.append(mat)
+    light = bpy.data.lights.new("sun", "SUN")
+    light.energy, light.angle = 3.0, 0.0
+    ob = bpy.data.objects.new("sun", light)
+    ob.rotation_euler = (0.3, 0.2, 0.0)
+    sc.collection.objects.link(ob)
+    cycles, drt = render_rgba_both(sc, tmp_path / f"{card}.exr")
+    inner = (slice(10, 22), slice(10, 22))  # the card: 0.5 m of the 2 m view
+    if card != "tinted_transparent":
+        assert np.median(cycles[inner][..., 3]) == pytest.approx(0.5, abs=1e-4)
+    assert abs(drt[inner][..., 3].mean() - cycles[inner][..., 3].mean()) < 2e-3
+    assert np.abs(drt[inner][..., 3] - cycles[inner][..., 3]).max() < 0.02
+    np.testing.assert_allclose(drt[inner][..., :3].mean(axis=(0, 1)), cycles[inner][..., :3].mean(axis=(0, 1)),
+                               rtol=0.01, atol=1e-6)
+    assert drt[0, 0, 3] == cycles[0, 0, 3] == 0.0  # the world around it
+
+
 def principled_glass_sphere_scene(spp=256):
     """A rough Principled transmissive sphere (base (0.8, 0.4, 0.2), roughness 0.3, Multiscatter
     GGX) over a grey ground in a white world, full light transport (12 bounces), seen from

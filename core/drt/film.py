@@ -136,7 +136,12 @@ class Film:
 
     @property
     def combined(self) -> np.ndarray:
-        return self._image(self._mean(self.sum_rgba))
+        """(H, W, 4) float32: mean radiance and alpha. A sample's alpha is 1 less what the world
+        and holdouts took (more than 1 where a transparent lobe's sampled weight exceeds 1);
+        the pixel's mean is clamped to [0, 1], as Cycles's film_transparency_to_alpha."""
+        rgba = self._mean(self.sum_rgba)
+        rgba[:, 3] = np.clip(rgba[:, 3], 0.0, 1.0)
+        return self._image(rgba)
 
     @property
     def depth(self) -> np.ndarray:

@@ -88,7 +88,7 @@ StageSettings = namedtuple("StageSettings", [
     "max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
     "clamp_direct", "clamp_indirect",     # 0: off
     "direct", "indirect",                 # DIRECT_* / INDIRECT_* codes
-    "film_transparent",                   # camera rays that miss get alpha 0
+    "film_transparent",                   # camera rays that miss take their throughput off the alpha
     "motion",                             # anything moves: draw a shutter time per sample
     "volume_bounces",                     # scatter events a path may have in media (Cycles's)
     "transparent_bounces",                # straight pass-throughs a path may make (Cycles's)
@@ -674,7 +674,9 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
                 acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
             if camera and settings.film_transparent:
-                out.alpha[slot] = 0.0
+                # the world shows through by what the camera ray still carries (transparent
+                # surfaces and media passed): Cycles's film_write_transparent, average(throughput)
+                out.alpha[slot] -= (thr[0] + thr[1] + thr[2]) * (1.0 / 3.0)
             else:
                 le = world_emission(ld, pd, regs, point, d, paths.prev_flags[i], paths.counts[i], camera)
                 wpdf = world_pdf(ld, prev_p, prev_n, d, prev_hint)
