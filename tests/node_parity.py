@@ -125,6 +125,17 @@ def _add_shape(shape, size, loc):
                                          rotation=(math.pi, 0, 0) if shape == "back_plane" else (0, 0, 0))
 
 
+def add_sun(sc, strength, rotation):
+    """A sun lamp of ``strength`` W/m² and angle 0 (a delta light: direct light is exact),
+    turned by Euler ``rotation``, in the scene ``sc``."""
+    light = bpy.data.lights.new("sun", "SUN")
+    light.energy, light.angle = strength, 0.0
+    obj = bpy.data.objects.new("sun", light)
+    obj.rotation_euler = rotation
+    sc.collection.objects.link(obj)
+    return obj
+
+
 def render_tiles(cases, n, tmp_path, tag="tiles", shader=False, sun=None, shape="plane"):
     """Cycles and DRT images (H, W, 3), top row first, of the cases on an n×n grid. shader: the
     cases return surface shader sockets (shown as they are, not squashed); sun: (strength,
@@ -144,11 +155,7 @@ def render_tiles(cases, n, tmp_path, tag="tiles", shader=False, sun=None, shape=
         if hasattr(case, "setup"):  # a case that needs mesh data (colour attributes, ...)
             case.setup(bpy.context.object.data)
     if sun is not None:
-        light = bpy.data.lights.new("sun", "SUN")
-        light.energy, light.angle = sun[0], 0.0
-        obj = bpy.data.objects.new("sun", light)
-        obj.rotation_euler = sun[1]
-        sc.collection.objects.link(obj)
+        add_sun(sc, *sun)
     path = str(tmp_path / f"{tag}.exr")
     sc.render.filepath = path
     bpy.ops.render.render(write_still=True)

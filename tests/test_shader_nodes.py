@@ -448,7 +448,7 @@ def test_holdout_alpha_matches_cycles(tmp_path, transparent_film):
     colour per tile, with and without a transparent film (the holdout cuts alpha either way)."""
     pytest.importorskip("bpy")
     import bpy
-    from node_parity import node, render_rgba_both, setup_scene, tile
+    from node_parity import add_sun, node, render_rgba_both, setup_scene, tile
 
     sc = setup_scene(2)
     sc.render.film_transparent = transparent_film
@@ -488,11 +488,7 @@ def test_holdout_alpha_matches_cycles(tmp_path, transparent_film):
         bpy.context.object.data.materials.append(mat)
     bpy.ops.mesh.primitive_plane_add(size=0.95, location=(0.5, -0.5, 0.3))  # the card over tile 3
     bpy.context.object.data.materials.append(material("card", card))
-    light = bpy.data.lights.new("sun", "SUN")
-    light.energy, light.angle = 3.0, 0.0
-    ob = bpy.data.objects.new("sun", light)
-    ob.rotation_euler = (0.3, 0.2, 0.0)
-    sc.collection.objects.link(ob)
+    add_sun(sc, 3.0, (0.3, 0.2, 0.0))
 
     cycles, drt = render_rgba_both(sc, tmp_path / "holdout.exr")
     # tiles of 16×16 pixels; the planes (0.7 wide) leave a 2.4-pixel border of world in each
@@ -522,7 +518,7 @@ def test_partly_transparent_surface_alpha_matches_cycles(tmp_path, card):
     Transparent likewise, whatever their lobes' sampling probabilities. Against Cycles."""
     pytest.importorskip("bpy")
     import bpy
-    from node_parity import node, render_rgba_both, setup_scene
+    from node_parity import add_sun, node, render_rgba_both, setup_scene
 
     sc = setup_scene(2)
     sc.render.film_transparent = True
@@ -541,11 +537,7 @@ def test_partly_transparent_surface_alpha_matches_cycles(tmp_path, card):
     nt.links.new(out, nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
     bpy.ops.mesh.primitive_plane_add(size=1.0)
     bpy.context.object.data.materials.append(mat)
-    light = bpy.data.lights.new("sun", "SUN")
-    light.energy, light.angle = 3.0, 0.0
-    ob = bpy.data.objects.new("sun", light)
-    ob.rotation_euler = (0.3, 0.2, 0.0)
-    sc.collection.objects.link(ob)
+    add_sun(sc, 3.0, (0.3, 0.2, 0.0))
     cycles, drt = render_rgba_both(sc, tmp_path / f"{card}.exr")
     inner = (slice(10, 22), slice(10, 22))  # the card: 0.5 m of the 2 m view
     if card != "tinted_transparent":

@@ -10,7 +10,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from node_parity import node, render_rgba_both, render_tiles, tile  # noqa: E402
+from node_parity import add_sun, node, render_rgba_both, render_tiles, tile  # noqa: E402
 
 N = 4
 
@@ -412,11 +412,7 @@ def _shadow_scene(make_card_material):
     bpy.context.object.data.materials.append(ground)
     bpy.ops.mesh.primitive_plane_add(size=1.2, location=(-0.2, 0.1, 0.2))
     bpy.context.object.data.materials.append(card_material)
-    light = bpy.data.lights.new("sun", "SUN")
-    light.energy, light.angle = 3.0, 0.0
-    ob = bpy.data.objects.new("sun", light)
-    ob.rotation_euler = (0.0, 0.5, 0.0)
-    sc.collection.objects.link(ob)
+    add_sun(sc, 3.0, (0.0, 0.5, 0.0))
     return sc
 
 
