@@ -190,14 +190,19 @@ def test_ray_visibility_is_exported_and_the_shadow_catcher_warns(fresh):
     assert len(found) == 1 and "'Catcher' (shadow catcher)" in found[0] and "Card" not in found[0]
 
 
-def test_transparent_glass_is_named_in_a_warning(fresh):
-    """Film > Transparent Glass (Cycles) is not rendered yet: a transparent film with it warns."""
+def test_transparent_glass_is_exported_with_a_transparent_film(fresh):
+    """Film > Transparent Glass (Cycles) goes into the render settings as its roughness
+    threshold, only with a transparent film (without one it changes nothing), and no longer warns."""
     C.quad("Plain", (0, 0, 0), 1.0, C.diffuse("M", (0.5, 0.5, 0.5)))
     sc = bpy.context.scene
     sc.cycles.film_transparent_glass = True
-    assert not [w for w in export_current().warnings if "Transparent Glass" in w]  # opaque film
+    sc.cycles.film_transparent_roughness = 0.25
+    res = export_current()
+    assert "film_transparent_roughness" not in res.header["render"]  # opaque film
     sc.render.film_transparent = True
-    assert len([w for w in export_current().warnings if "Transparent Glass" in w]) == 1
+    res = export_current()
+    assert res.header["render"]["film_transparent_roughness"] == pytest.approx(0.25)
+    assert not [w for w in res.warnings if "Transparent Glass" in w]
 
 
 def test_no_camera_is_an_export_error():

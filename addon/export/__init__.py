@@ -143,9 +143,6 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     if scene.camera is None:
         raise ExportError("the scene has no active camera")
     warnings += missing_link_warnings(depsgraph)
-    if render["film_transparent"] and getattr(getattr(scene, "cycles", None), "film_transparent_glass", False):
-        warnings.append("Film > Transparent Glass is not supported yet: glass in front of the "
-                        "world renders opaque, as without it")
 
     meshes: list[dict] = []
     arrays: dict[str, np.ndarray] = {}

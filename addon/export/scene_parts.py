@@ -93,7 +93,17 @@ def render_settings(scene, preview: bool = False) -> dict:
     } | ({"volume_bounces": int(d.volume_bounces)} if getattr(d, "volume_bounces", 0) else {}) \
       | ({"transparent_bounces": int(d.transparent_bounces)}
          if getattr(d, "transparent_bounces", 8) != 8 else {}) \
-      | ({"exposure": exposure} if (exposure := film_exposure(scene)) != 1.0 else {})
+      | ({"exposure": exposure} if (exposure := film_exposure(scene)) != 1.0 else {}) \
+      | ({"film_transparent_roughness": glass} if (glass := transparent_glass(scene)) is not None else {})
+
+
+def transparent_glass(scene) -> float | None:
+    """Cycles's Film > Transparent Glass roughness threshold when it is on with a transparent
+    film (``scene.cycles``), else None (not exported)."""
+    cy = getattr(scene, "cycles", None)
+    if not (scene.render.film_transparent and getattr(cy, "film_transparent_glass", False)):
+        return None
+    return float(getattr(cy, "film_transparent_roughness", 0.1))
 
 
 def film_exposure(scene) -> float:

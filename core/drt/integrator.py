@@ -137,7 +137,10 @@ class Integrator:
             direct=DIRECT_STRATEGIES.index(direct), indirect=INDIRECT_STRATEGIES.index(indirect),
             film_transparent=bool(settings.film_transparent), motion=self.motion,
             volume_bounces=int(getattr(settings, "volume_bounces", 0)),
-            transparent_bounces=int(getattr(settings, "transparent_bounces", 8)))
+            transparent_bounces=int(getattr(settings, "transparent_bounces", 8)),
+            transparent_glass=(float(settings.film_transparent_roughness) ** 2  # (as alpha = roughness²)
+                               if settings.film_transparent and settings.film_transparent_roughness is not None
+                               else -1.0))
         self._workspaces = threading.local()
         self._returned_outputs = collections.deque()  # per-batch output buffers (``_outputs``)
         # material programs (textures): a thread rewrites its own copy of the material data

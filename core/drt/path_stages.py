@@ -92,6 +92,8 @@ StageSettings = namedtuple("StageSettings", [
     "motion",                             # anything moves: draw a shutter time per sample
     "volume_bounces",                     # scatter events a path may have in media (Cycles's)
     "transparent_bounces",                # straight pass-throughs a path may make (Cycles's)
+    "transparent_glass",                  # Film > Transparent Glass: the GGX alpha up to which a
+                                          # glass transmission keeps the world transparent (−1: off)
 ])
 
 Paths = namedtuple("Paths", [
@@ -122,6 +124,9 @@ Paths = namedtuple("Paths", [
 
 # how a ray left its last vertex (Cycles's ray-type flags, for the Light Path node); 0: camera
 RAY_DIFFUSE, RAY_GLOSSY, RAY_SINGULAR, RAY_TRANSMIT = 1, 2, 4, 8
+#: not a ray kind: a path whose world is still transparent after glass transmissions (Film >
+#: Transparent Glass; Cycles's PATH_RAY_TRANSPARENT_BACKGROUND beyond camera rays)
+RAY_TRANSPARENT_BG = 16
 
 Outputs = namedtuple("Outputs", ["radiance", "alpha", "depth", "normal", "albedo", "eye", "forward"])
 
@@ -500,6 +505,13 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
 
 
 @kernel
+def glass_alpha(md, mat, u_lobe, wo, nc_local, nv_local, front, view_weights):
+    """The GGX alpha of the lobe ``bsdf_sample_bump`` picked with ``u_lobe`` (its pick again)."""
+    slot, _, _ = pick_lobe_weights(md, mat, u_lobe, wo, nc_local, nv_local, front, view_weights)
+    return md.lobe_alpha[mat, slot]
+
+
+@kernel
 def holdout_object_hit(md, mat, thr, acc, settings, paths, i, j, vd, prim, p, ng, d, t_geom, out, slot):
     """Path i's camera ray hit a holdout object (``Surfaces.visibility`` & VIS_HOLDOUT) of
     material ``mat`` at ``p``: Cycles's surface_shader_apply_holdout. The hit's opaque part
@@ -567,6 +579,11 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # first hit of a camera path writes the camera outputs
         vertex = bounce + n_sss
         camera = vertex == 0  # (a camera ray stays one through transparent surfaces, as Cycles)
+        # the world and holdouts cut the alpha: on a camera ray, and past glass with Film >
+        # Transparent Glass (Cycles's PATH_RAY_TRANSPARENT_BACKGROUND)
+        see_through = camera
+        if settings.transparent_glass >= 0.0 and paths.prev_flags[i] & RAY_TRANSPARENT_BG:
+            see_through = True
         # a transparent surface passed is a vertex without a bounce too: next dimensions
         base = D_BOUNCE0 + DIMS_PER_BOUNCE * (vertex + paths.tcount[i])
         prev_hint = material_hint(md, paths.prev_mat[i], prev_n, load(paths.prev_wo, i))
@@ -673,7 +690,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 le, lpdf = sun_emission(ld, sun, prev_p, d, prev_hint)
                 w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
                 acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
-            if camera and settings.film_transparent:
+            if see_through and settings.film_transparent:
                 # the world shows through by what the camera ray still carries (transparent
                 # surfaces and media passed): Cycles's film_write_transparent, average(throughput)
                 out.alpha[slot] -= (thr[0] + thr[1] + thr[2]) * (1.0 / 3.0)
@@ -707,7 +724,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # a camera ray on a holdout object (Cycles's SD_OBJECT_HOLDOUT_MASK; drt.scene.ObjectSpec)
         obj_holdout = False
         if holdouts is not None:
-            obj_holdout = camera and (holdouts[prim] & VIS_HOLDOUT) != 0
+            obj_holdout = see_through and (holdouts[prim] & VIS_HOLDOUT) != 0
         ns = ng if sss_state == SSS_EXIT_FLAT else shading_normal(surf, hits, i, prim, ng)
         ns_unmapped = ns
         mapped = False
@@ -770,7 +787,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             if holdout_object_hit(md, mat, thr, acc, settings, paths, i, j, vd, prim, p, ng, d, t_geom, out, slot):
                 j += 1
             continue
-        if camera and not exiting and md.transmission_or_delta[mat]:
+        if see_through and not exiting and md.transmission_or_delta[mat]:
             # a holdout lobe (always delta) cuts a camera-visible hit out of the alpha, as
             # Cycles's integrate_surface_holdout; a full holdout ends the path
             h = holdout_weight(md, mat)
@@ -968,6 +985,13 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         paths.prev_flags[j] = ((RAY_SINGULAR if b_delta else (RAY_DIFFUSE if kind == LOBE_DIFFUSE or kind == LOBE_TRANSLUCENT
                                                               else RAY_GLOSSY))
                                | (0 if refl_sh else RAY_TRANSMIT))
+        if see_through and settings.transparent_glass >= 0.0 and kind == LOBE_TRANSMISSION and not refl_sh:
+            # Transparent Glass: a glass transmission no rougher than the threshold keeps the
+            # world transparent (Cycles's LABEL_TRANSMIT_TRANSPARENT; measured: roughness 0.1
+            # passes Blender's default threshold 0.1, 0.15 does not)
+            if b_delta or glass_alpha(md, mat, u_lobe, wo_l, nc_local, nv_local, front,
+                                      view_weights) <= settings.transparent_glass:
+                paths.prev_flags[j] |= RAY_TRANSPARENT_BG
         paths.counts[j, 0] = n_bounce
         paths.counts[j, 1] = n_diffuse
         paths.counts[j, 2] = n_glossy

@@ -186,6 +186,10 @@ class RenderSettings:
     pixel_aspect: tuple[float, float] = (1.0, 1.0)
     border: tuple[float, float, float, float] | None = None
     film_transparent: bool = False
+    #: Cycles's Film > Transparent Glass (with a transparent film): the world seen through
+    #: glass transmissions of roughness ≤ ``film_transparent_roughness`` is transparent too;
+    #: None: off
+    film_transparent_roughness: float | None = None
     #: Cycles's Film > Exposure: the film's radiance (not alpha, depth, normal or albedo) is
     #: multiplied by it, after clamping, as Cycles writes its passes
     exposure: float = 1.0
@@ -374,6 +378,8 @@ def _render_settings(h: dict) -> RenderSettings:
         pixel_aspect=(float(aspect[0]), float(aspect[1])),
         border=border,
         film_transparent=_bool(r, "film_transparent", p, False),
+        film_transparent_roughness=(_number(r, "film_transparent_roughness", p, 0.1, lo=0, hi=1)
+                                    if r.get("film_transparent_roughness") is not None else None),
         exposure=_number(r, "exposure", p, 1.0, lo=0, hi=2.0**32),
         filter_type=ftype,
         filter_width=fwidth,
