@@ -513,11 +513,12 @@ def glass_alpha(md, mat, u_lobe, wo, nc_local, nv_local, front, view_weights):
 
 @kernel
 def holdout_object_hit(md, mat, thr, acc, settings, paths, i, j, vd, prim, p, ng, d, t_geom, out, slot):
-    """Path i's camera ray hit a holdout object (``Surfaces.visibility`` & VIS_HOLDOUT) of
+    """Path i's see-through ray (a camera ray, or one past Transparent Glass) hit a holdout
+    object (``Surfaces.visibility`` & VIS_HOLDOUT) of
     material ``mat`` at ``p``: Cycles's surface_shader_apply_holdout. The hit's opaque part
     (weight 1 − the material's transparency, ``md`` already this hit's row) leaves the alpha,
     none of its light is added (``acc``, what the segment before it brought, is stored), and
-    the camera ray goes on through the transparency only, as a transparent bounce, into row j.
+    the ray goes on through the transparency only, as a transparent bounce, into row j.
     Returns whether it does."""
     t0, t1, t2 = transparency(md, mat)
     out.alpha[slot] -= (max(1.0 - t0, 0.0) * thr[0] + max(1.0 - t1, 0.0) * thr[1]
@@ -721,7 +722,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             continue
         p = load(hits.p, i)
         ng = load(hits.ng, i)
-        # a camera ray on a holdout object (Cycles's SD_OBJECT_HOLDOUT_MASK; drt.scene.ObjectSpec)
+        # a see-through ray on a holdout object (Cycles's SD_OBJECT_HOLDOUT_MASK; drt.scene.ObjectSpec)
         obj_holdout = False
         if holdouts is not None:
             obj_holdout = see_through and (holdouts[prim] & VIS_HOLDOUT) != 0
@@ -783,7 +784,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 if nl > 0.0 and math.isfinite(nl):
                     nc_wo = nm
             nc = scale(valid_specular_normal(scale(ng, side), wo, nc_wo), side)
-        if obj_holdout and not exiting:  # (a call: shade keeps no code for it inline)
+        if obj_holdout and not exiting:
             if holdout_object_hit(md, mat, thr, acc, settings, paths, i, j, vd, prim, p, ng, d, t_geom, out, slot):
                 j += 1
             continue
