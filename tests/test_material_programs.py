@@ -324,6 +324,73 @@ def test_converters_match_cycles(tmp_path):
     assert not res.warnings
 
 
+def _vec3(nt, uv):
+    """A 3-D vector varying over the tile (UV centred to [−1, 1]² and turned out of its plane)."""
+    return mapping(nt, centred(nt, uv), rot=(0.4, 0.2, 0.1))
+
+
+def _rgb_to_bw(nt, uv):
+    c1, _, _ = _colors(nt, uv)
+    return node(nt, "ShaderNodeRGBToBW", {"Color": c1}).outputs[0]
+
+
+def _normal_node(output):
+    def case(nt, uv):
+        n = node(nt, "ShaderNodeNormal", {"Normal": _vec3(nt, uv)})
+        n.outputs["Normal"].default_value = (0.3, -0.5, 0.8)  # normalised by the node
+        return n.outputs[output]
+    return case
+
+
+def _vector_rotate(kind, invert=False, linked_axis=False, linked_angle=True):
+    def case(nt, uv):
+        sep = node(nt, "ShaderNodeSeparateXYZ", {0: uv})
+        ins = {"Vector": _vec3(nt, uv), "Center": (0.2, -0.1, 0.3)}
+        if kind == "EULER_XYZ":
+            ins["Rotation"] = mapping(nt, uv, scale=(2.0, 1.0, 1.5), loc=(0.3, -0.4, 0.2))
+        else:
+            ins["Angle"] = node(nt, "ShaderNodeMath", {0: sep.outputs[0], 1: 5.0}, operation="MULTIPLY").outputs[0] \
+                if linked_angle else 1.1
+            ins["Axis"] = mapping(nt, uv, loc=(0.5, 0.2, 0.7)) if linked_axis else (0.3, 0.9, -0.4)
+        return node(nt, "ShaderNodeVectorRotate", ins, rotation_type=kind, invert=invert).outputs[0]
+    return case
+
+
+def _blackbody_emission(kelvin):
+    def case(nt, uv):
+        bb = node(nt, "ShaderNodeBlackbody", {"Temperature": kelvin})
+        return node(nt, "ShaderNodeEmission", {"Color": bb.outputs[0]}).outputs[0]
+    return case
+
+
+def test_converter_nodes_built_from_operations_match_cycles(tmp_path):
+    """RGB to BW, Normal and Vector Rotate (every type, inverted, linked and constant axis and
+    angle) against Cycles."""
+    cases = [_rgb_to_bw, _normal_node("Dot"), _normal_node("Normal"),
+             _vector_rotate("AXIS_ANGLE"), _vector_rotate("AXIS_ANGLE", invert=True),
+             _vector_rotate("AXIS_ANGLE", linked_axis=True), _vector_rotate("AXIS_ANGLE", linked_angle=False),
+             _vector_rotate("X_AXIS"), _vector_rotate("Y_AXIS", invert=True), _vector_rotate("Z_AXIS"),
+             _vector_rotate("EULER_XYZ"), _vector_rotate("EULER_XYZ", invert=True)]
+    names = ["rgb to bw", "normal dot", "normal normal", "rotate axis angle", "rotate axis angle inv",
+             "rotate linked axis", "rotate const angle", "rotate x", "rotate y inv", "rotate z",
+             "rotate euler", "rotate euler inv"]
+    res = _check(cases, 4, tmp_path, "converters2", names)
+    assert not res.warnings
+
+
+def test_blackbody_matches_cycles(tmp_path):
+    """The Blackbody colour across its fit's temperature ranges and both ends, as emitted
+    radiance (not squashed: compared to 1e-4 relative, Cycles's float32)."""
+    kelvins = (500.0, 900.0, 1000.0, 1300.0, 1600.0, 2500.0, 4500.0, 6500.0, 9000.0)
+    cycles, drt, res = P.render_tiles([_blackbody_emission(k) for k in kelvins], 3, tmp_path, "blackbody",
+                                      shader=True)
+    assert not res.warnings
+    for k, kelvin in enumerate(kelvins):
+        c, d = P.tile(cycles, k, 3)[8, 8], P.tile(drt, k, 3)[8, 8]
+        np.testing.assert_allclose(d, c, rtol=1e-4, atol=1e-6, err_msg=f"{kelvin} K")
+    assert cycles[..., 0].min() > 0.3  # warm to white: every tile lit
+
+
 # --- textured BSDFs under a sun (direct light only: exact, no noise) ---------------------------
 
 
@@ -532,6 +599,25 @@ def test_unsupported_texture_warns_and_falls_back(fresh):
     d = _material_dict(res, "Noisy")
     assert "program" not in d and d["lobes"][0]["color"] == pytest.approx([0.3, 0.2, 0.1])
     assert len(res.warnings) == 1 and "'Noisy'" in res.warnings[0] and "ShaderNodeTexGabor" in res.warnings[0]
+
+
+def test_blackbody_with_a_driven_temperature_warns_and_falls_back(fresh):
+    """A Blackbody whose temperature other nodes drive is not compiled: the export warns and
+    the driven socket keeps its own value, as for any node it cannot compile."""
+    from addon.export.converter_nodes import blackbody_rgb
+
+    mat, nodes, out = _mat("Fire")
+    nt = mat.node_tree
+    bb = node(nt, "ShaderNodeBlackbody", {"Temperature": 1800.0})
+    nt.links.new(nt.nodes.new("ShaderNodeObjectInfo").outputs["Random"], bb.inputs["Temperature"])
+    em = node(nt, "ShaderNodeEmission", {"Color": bb.outputs[0]})
+    em.inputs["Color"].default_value = (0.5, 0.25, 0.125, 1.0)
+    nt.links.new(em.outputs[0], out.inputs[0])
+    _plane(mat)
+    res = _export()
+    assert len(res.warnings) == 1 and "Blackbody" in res.warnings[0]
+    assert _material_dict(res, "Fire")["emission"] == pytest.approx([0.5, 0.25, 0.125])
+    assert blackbody_rgb(1800.0)[0] > blackbody_rgb(1800.0)[2] >= 0.0  # warm, clamped at 0
 
 
 def test_images_stored_once_as_bytes(fresh, tmp_path):

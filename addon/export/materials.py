@@ -132,6 +132,31 @@ def _stand_in(v, lo: float) -> float:
     return max(_representative(v, lo)[0] if isinstance(v, Value) else float(v), lo)
 
 
+def conductor_fresnel(cos_i, n, k):
+    """Unpolarised Fresnel reflectance of a conductor of complex IOR n + ik (per channel) at
+    incidence cosine ``cos_i`` (the exact formula Cycles's Physical Conductor evaluates)."""
+    c2 = cos_i * cos_i
+    s2 = 1.0 - c2
+    t0 = n * n - k * k - s2
+    a2b2 = np.sqrt(t0 * t0 + 4.0 * n * n * k * k)
+    a = np.sqrt(0.5 * (a2b2 + t0))
+    t1, t2 = a2b2 + c2, 2.0 * cos_i * a
+    rs = (t1 - t2) / (t1 + t2)
+    t3, t4 = c2 * a2b2 + s2 * s2, t2 * s2
+    return 0.5 * (rs + rs * (t3 - t4) / (t3 + t4))
+
+
+def conductor_f82(n, k):
+    """(F0, F82 tint) of the F82-tint model that meets the conductor's Fresnel at normal
+    incidence and at cos θ = 1/7, where the model's tint is defined (Cycles's
+    ``bsdf_microfacet_setup_fresnel_f82_tint``: F(1/7) = Schlick(F0, 1/7) × tint). Within
+    ~2 % of the exact Fresnel at every angle on metals' measured n, k (5 % at grazing angles
+    in gold's blue; docs/decisions.md); the tint is clamped to [0, 1] as the lobe's is."""
+    f0 = conductor_fresnel(1.0, n, k)
+    schlick_82 = f0 + (1.0 - f0) * (6.0 / 7.0) ** 5
+    return f0, np.clip(conductor_fresnel(1.0 / 7.0, n, k) / schlick_82, 0.0, 1.0)
+
+
 def _multiscatter_tint(color) -> list:
     """Fss of Cycles's Multiscatter GGX compensation (glass, glossy), in [0, 1]: the colour, or for a
     program-driven one its constant stand-in (the compensation is per material, not per hit)."""
@@ -503,6 +528,8 @@ class MaterialExporter:
             return lobes, em
         if kind == "ShaderNodeBsdfPrincipled":
             return self._principled(node, w, problems, ctx)
+        if kind == "ShaderNodeBsdfMetallic":
+            return [self._metallic(node, w, problems, ctx)], np.zeros(3)
         if kind == "ShaderNodeSubsurfaceScattering":
             col = self._color(node, "Color", problems, ctx=ctx)
             r = min(max(self._const_value(node, "Roughness", problems, 1.0, ctx), 0.0), 1.0)
@@ -523,6 +550,32 @@ class MaterialExporter:
         else:
             col = _rgb(material.diffuse_color)
         return [{"type": "DIFFUSE", "color": w * col}], np.zeros(3)
+
+    def _metallic(self, node, w, problems, ctx) -> dict:
+        """The Metallic BSDF as the Principled BSDF's METALLIC lobe (Cycles's F82 conductor:
+        F0 = the clamped Base Color, F82 tint = the clamped Edge Tint). Physical Conductor takes
+        the F82 model through the conductor's own Fresnel at normal incidence and at
+        cos θ = 1/7 (`conductor_f82`); its IOR and Extinction must be constant."""
+        rough = self._roughness(node, problems, ctx)
+        if getattr(node, "fresnel_type", "F82") == "PHYSICAL_CONDUCTOR":
+            n = _rgb(self._const_color(node, "IOR", problems, (2.757, 2.513, 2.231), ctx))
+            k = _rgb(self._const_color(node, "Extinction", problems, (3.867, 3.404, 3.009), ctx))
+            f0, tint = conductor_f82(np.maximum(n, 0.0), np.maximum(k, 0.0))
+        else:
+            base = self._color(node, "Base Color", problems, ctx=ctx)
+            f0 = clamp01(base) if isinstance(base, Value) else np.clip(base, 0.0, 1.0)
+            tint = self._color(node, "Edge Tint", problems, (1, 1, 1), ctx)
+            tint = clamp01(tint) if isinstance(tint, Value) else np.clip(tint, 0.0, 1.0)
+        if abs(self._const_value(node, "Anisotropy", problems, 0.0, ctx)) > 0:
+            problems.append(f"'{node.name}' anisotropy ignored")
+        film = node.inputs.get("Thin Film Thickness")
+        if film is not None and (resolve(film, ctx)[0] is not None or film.default_value > 0.1):
+            problems.append(f"'{node.name}' thin film (iridescence) not supported, rendered without it")
+        tint_c = np.asarray(_representative(tint, 0.0)) if isinstance(tint, Value) else tint
+        return {"type": "METALLIC", "color": w * f0, "weight": w, "roughness": rough,
+                "tint": [float(x) for x in np.broadcast_to(tint_c, 3)],
+                "multiscatter": getattr(node, "distribution", "MULTI_GGX") == "MULTI_GGX",
+                **({"tint_reg": tint} if isinstance(tint, Value) else {})}
 
     def _bsdf_normal(self, node, ctx, problems):
         """Record a BSDF's linked Normal input (a Normal Map...) as the material's shading normal.

@@ -109,6 +109,7 @@ SUPPORTED_NODES = {
     "ShaderNodeTexMagic", "ShaderNodeTexBrick", "ShaderNodeRGBCurve", "ShaderNodeVectorCurve",
     "ShaderNodeFloatCurve", "ShaderNodeVertexColor", "ShaderNodeAttribute",
     "ShaderNodeTexEnvironment", "ShaderNodeDisplacement", "ShaderNodeVectorDisplacement",
+    "ShaderNodeRGBToBW", "ShaderNodeNormal", "ShaderNodeVectorRotate", "ShaderNodeBlackbody",
 }
 
 
@@ -512,6 +513,8 @@ class ProgramBuilder:
             return res
         if k in PROCEDURAL_COMPILERS:
             return PROCEDURAL_COMPILERS[k](self, node, out, ctx)
+        if k in CONVERTER_COMPILERS:
+            return CONVERTER_COMPILERS[k](self, node, out, ctx)
         raise Unsupported(node)
 
     def _linked_or_none(self, node, key, ctx):
@@ -873,3 +876,4 @@ class ImageTable:
 
 
 from .procedural_nodes import PROCEDURAL_COMPILERS  # noqa: E402  (it imports this module's names)
+from .converter_nodes import CONVERTER_COMPILERS  # noqa: E402  (likewise)
