@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from .. import compat
+from .light_nodes import light_node_factor
 
 
 class ExportError(Exception):
@@ -169,7 +170,8 @@ def panorama_dict(cam_obj) -> dict:
 def light_dict(obj, matrix, warnings: list) -> dict | None:
     """Light header from an evaluated light object and its world matrix (None: skipped)."""
     light = obj.data
-    color = compat.light_color(light)
+    # a light's node tree (Use Nodes) scales its colour × power, folded to a constant
+    color = (np.array(compat.light_color(light)) * light_node_factor(light, warnings, obj.name)).tolist()
     scale = compat.light_power_scale(light)
     d = {"name": obj.name, "type": light.type, "matrix_world": matrix_list(matrix),
          "color": color, "visible_to_camera": bool(getattr(obj, "visible_camera", True))}
