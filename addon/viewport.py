@@ -22,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import compat, denoising
-from .export import _instance_key, _instance_name, _is_rendered, instance_visibility, visibility_bits
+from .export import (_instance_key, _instance_name, _is_rendered, instance_visibility,
+                     objects_presented_as_meshes, visibility_bits)
 from .export.materials import MaterialExporter
 from .export.node_programs import ImageTable
 from .export.mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays
@@ -207,9 +208,10 @@ class ViewportSync:
         exported: dict = {}  # mesh key -> MeshData, shared by instances of one object
         n_materials = len(self._materials.materials)
         edits = []
+        presented = objects_presented_as_meshes(depsgraph)
         for inst in depsgraph.object_instances:
             obj = inst.object
-            if obj.type not in MESH_LIKE_TYPES or not _is_rendered(inst):
+            if obj.type not in MESH_LIKE_TYPES or not _is_rendered(inst, presented):
                 continue
             key = _instance_key(inst)
             matrix = np.array(matrix_list(inst.matrix_world), dtype=np.float64)

@@ -44,10 +44,41 @@ def _instance_name(inst, key) -> str:
     return f"{inst.object.name}@{parent}." + ".".join(ids)
 
 
-def _is_rendered(inst) -> bool:
+#: object types whose evaluated geometry Blender can hand render engines as a mesh instance of
+#: the object itself (curves and text since 3.0; NURBS surfaces and metaballs by 5.0)
+MESH_PRESENTED_TYPES = frozenset({"CURVE", "SURFACE", "FONT", "META"})
+
+
+def _presents_a_mesh(inst) -> bool:
+    """Whether ``inst`` is the mesh a curve-like object's evaluated geometry presents as an
+    instance of that object (its ``parent``, whose original it shares)."""
+    if not inst.is_instance or inst.object.type != "MESH":
+        return False
+    parent = inst.parent
+    return parent is not None and parent.type in MESH_PRESENTED_TYPES and inst.object.original == parent.original
+
+
+def objects_presented_as_meshes(depsgraph) -> frozenset:
+    """Original pointers of the curve-like objects whose geometry ``depsgraph`` also presents as
+    a mesh instance. Cycles renders only that instance (its object data is a Mesh; the object's
+    own is a Curve or MetaBall): exporting the object as well rendered every curve, text,
+    surface and metaball twice, on top of each other. Older Blenders that present metaballs
+    and surfaces only as the object itself keep them. Walks the instances only when such an
+    object exists."""
+    if not any(o.type in MESH_PRESENTED_TYPES for o in depsgraph.objects):
+        return frozenset()
+    return frozenset(inst.parent.original.as_pointer() for inst in depsgraph.object_instances
+                     if _presents_a_mesh(inst))
+
+
+def _is_rendered(inst, presented: frozenset = frozenset()) -> bool:
+    """Whether an instance is rendered; ``presented`` (`objects_presented_as_meshes`): the
+    curve-like objects rendered through their mesh instance instead of themselves."""
     obj = inst.object
     if not inst.is_instance:
         if not inst.show_self:
+            return False
+        if obj.type in MESH_PRESENTED_TYPES and obj.original.as_pointer() in presented:
             return False
         orig = obj.original
         if orig.hide_render:
@@ -104,8 +135,8 @@ def ignored_ray_visibility(obj) -> list[str]:
 
 def _deform_candidate(inst, scene) -> bool:
     """Objects whose shape may change over the shutter (compared later, vertex by vertex)."""
-    if inst.is_instance:
-        return False
+    if inst.is_instance:  # the mesh of an animated curve-like object is its own geometry
+        return _presents_a_mesh(inst) and inst.parent.original.animation_data is not None
     orig = inst.object.original
     if orig.type != "MESH":
         return orig.type in MESH_LIKE_TYPES and orig.animation_data is not None
@@ -154,6 +185,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     infos: list[dict] = []  # Object Info per object, attached if a material reads it
     unsupported_visibility: dict[str, list[str]] = {}  # object name -> visibility settings DRT ignores
 
+    presented = objects_presented_as_meshes(depsgraph)
     for inst in depsgraph.object_instances:
         obj = inst.object
         if obj.type == "LIGHT":
@@ -162,7 +194,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
                 if ld is not None:
                     lights.append(ld)
             continue
-        if obj.type not in MESH_LIKE_TYPES or not _is_rendered(inst):
+        if obj.type not in MESH_LIKE_TYPES or not _is_rendered(inst, presented):
             continue
         key = _instance_key(inst)
         visibility, holdout = instance_visibility(inst, depsgraph.view_layer)
