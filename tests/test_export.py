@@ -352,3 +352,26 @@ def test_export_speed_one_million_triangles():
     dt = time.perf_counter() - t0
     assert len(res.arrays["mesh0.triangles"]) >= 1_000_000
     assert dt < 2.0, f"export took {dt:.2f} s"
+
+
+def test_geometry_without_a_primitive_warns_by_name(fresh):
+    """Hair particles, hair-curves objects and point clouds (which Cycles renders as curves and
+    spheres) are named in one warning instead of vanishing silently; empty ones (nothing to
+    render in Cycles either) are not."""
+    bpy.ops.mesh.primitive_uv_sphere_add(location=(-2, 0, 0))
+    sphere = bpy.context.object
+    sphere.name = "Furry"
+    sphere.modifiers.new("hair", "PARTICLE_SYSTEM")
+    sphere.particle_systems[0].settings.type = "HAIR"
+    sphere.particle_systems[0].settings.count = 20
+    bpy.ops.object.pointcloud_random_add(location=(2, 0, 0))
+    bpy.context.object.name = "Dust"
+    bpy.context.view_layer.objects.active = sphere
+    bpy.ops.object.curves_empty_hair_add(location=(0, 2, 0))  # no curves: nothing to render
+    bpy.ops.object.volume_add(location=(0, -2, 0))  # no grids
+    res = export_current()
+    warned = [w for w in res.warnings if w.startswith("not rendered (DRT has no curve")]
+    assert len(warned) == 1, res.warnings
+    assert "hair on 'Furry'" in warned[0] and "point cloud 'Dust'" in warned[0]
+    assert "Curves" not in warned[0] and "volume" not in warned[0]
+    assert [o["name"] for o in res.header["objects"]] == ["Furry"]  # the emitter itself renders

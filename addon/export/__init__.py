@@ -133,6 +133,32 @@ def ignored_ray_visibility(obj) -> list[str]:
     return ["shadow catcher"] if getattr(obj, "is_shadow_catcher", False) else []
 
 
+#: object types Cycles renders and DRT does not (no primitive for them), by the name the export
+#: warning gives them
+UNRENDERED_GEOMETRY_TYPES = {"CURVES": "hair curves", "POINTCLOUD": "point cloud", "VOLUME": "volume"}
+
+
+def _has_elements(obj) -> bool:
+    """Whether an evaluated hair-curves, point-cloud or volume object holds anything to render
+    (an empty one renders nothing in Cycles either)."""
+    data = obj.data
+    for attr in ("curves", "points", "grids"):
+        items = getattr(data, attr, None)
+        if items is not None:
+            try:
+                return len(items) > 0
+            except (TypeError, RuntimeError):
+                return True
+    return True
+
+
+def hair_systems(obj) -> list:
+    """The particle systems of ``obj`` that Cycles renders as hair curves (Hair type rendered as
+    Path); other render types instance objects, which the export receives as instances."""
+    return [ps for ps in getattr(obj, "particle_systems", ())
+            if ps.settings.type == "HAIR" and ps.settings.render_type == "PATH"]
+
+
 def _deform_candidate(inst, scene) -> bool:
     """Objects whose shape may change over the shutter (compared later, vertex by vertex)."""
     if inst.is_instance:  # the mesh of an animated curve-like object is its own geometry
@@ -184,6 +210,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     lights: list[dict] = []
     infos: list[dict] = []  # Object Info per object, attached if a material reads it
     unsupported_visibility: dict[str, list[str]] = {}  # object name -> visibility settings DRT ignores
+    unrendered: set[str] = set()  # geometry DRT has no primitive for (hair, points, OpenVDB)
 
     presented = objects_presented_as_meshes(depsgraph)
     for inst in depsgraph.object_instances:
@@ -195,7 +222,11 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
                     lights.append(ld)
             continue
         if obj.type not in MESH_LIKE_TYPES or not _is_rendered(inst, presented):
+            if obj.type in UNRENDERED_GEOMETRY_TYPES and _is_rendered(inst) and _has_elements(obj):
+                unrendered.add(f"{UNRENDERED_GEOMETRY_TYPES[obj.type]} '{obj.original.name}'")
             continue
+        if not inst.is_instance and inst.show_particles and hair_systems(obj):
+            unrendered.add(f"hair on '{obj.original.name}'")
         key = _instance_key(inst)
         visibility, holdout = instance_visibility(inst, depsgraph.view_layer)
         if ignored := ignored_ray_visibility(obj):
@@ -246,6 +277,10 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
             _export_motion(depsgraph, scene, frame_set, render["shutter"], camera, objects,
                            object_index, deform_keys, meshes, arrays, warnings)
 
+    if unrendered:
+        names = sorted(unrendered)
+        warnings.append("not rendered (DRT has no curve, point or OpenVDB primitive yet): "
+                        + ", ".join(names[:8]) + (f" and {len(names) - 8} more" if len(names) > 8 else ""))
     if unsupported_visibility:
         named = "; ".join(f"'{n}' ({', '.join(v)})" for n, v in sorted(unsupported_visibility.items())[:8])
         more = len(unsupported_visibility) - 8
