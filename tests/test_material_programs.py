@@ -356,6 +356,12 @@ def _vector_rotate(kind, invert=False, linked_axis=False, linked_angle=True):
     return case
 
 
+def _camera_data(output):
+    def case(nt, uv):
+        return node(nt, "ShaderNodeCameraData").outputs[output]
+    return case
+
+
 def _blackbody_emission(kelvin):
     def case(nt, uv):
         bb = node(nt, "ShaderNodeBlackbody", {"Temperature": kelvin})
@@ -364,18 +370,36 @@ def _blackbody_emission(kelvin):
 
 
 def test_converter_nodes_built_from_operations_match_cycles(tmp_path):
-    """RGB to BW, Normal and Vector Rotate (every type, inverted, linked and constant axis and
-    angle) against Cycles."""
+    """RGB to BW, Normal, Vector Rotate (every type, inverted, linked and constant axis and
+    angle) and Camera Data against Cycles."""
     cases = [_rgb_to_bw, _normal_node("Dot"), _normal_node("Normal"),
              _vector_rotate("AXIS_ANGLE"), _vector_rotate("AXIS_ANGLE", invert=True),
              _vector_rotate("AXIS_ANGLE", linked_axis=True), _vector_rotate("AXIS_ANGLE", linked_angle=False),
              _vector_rotate("X_AXIS"), _vector_rotate("Y_AXIS", invert=True), _vector_rotate("Z_AXIS"),
-             _vector_rotate("EULER_XYZ"), _vector_rotate("EULER_XYZ", invert=True)]
+             _vector_rotate("EULER_XYZ"), _vector_rotate("EULER_XYZ", invert=True),
+             _camera_data("View Vector"), _camera_data("View Z Depth"), _camera_data("View Distance")]
     names = ["rgb to bw", "normal dot", "normal normal", "rotate axis angle", "rotate axis angle inv",
              "rotate linked axis", "rotate const angle", "rotate x", "rotate y inv", "rotate z",
-             "rotate euler", "rotate euler inv"]
+             "rotate euler", "rotate euler inv", "camera view vector", "camera z depth",
+             "camera distance"]
     res = _check(cases, 4, tmp_path, "converters2", names)
     assert not res.warnings
+
+
+def test_camera_data_under_a_perspective_camera_matches_cycles(tmp_path, monkeypatch):
+    """Camera Data's outputs where the view vector varies most: a moved, turned perspective
+    camera (the grid's own camera is orthographic)."""
+    setup = P.setup_scene
+
+    def perspective(n):
+        sc = setup(n)
+        sc.camera.data.type = "PERSP"
+        sc.camera.location, sc.camera.rotation_euler = (0.2, -0.3, 2.5), (0.1, 0.05, 0.2)
+        return sc
+
+    monkeypatch.setattr(P, "setup_scene", perspective)
+    _check([_camera_data(o) for o in ("View Vector", "View Z Depth", "View Distance")], 2, tmp_path,
+           "camera_data", ["view vector", "z depth", "distance"])
 
 
 def test_blackbody_matches_cycles(tmp_path):

@@ -1,5 +1,6 @@
-"""Converter nodes built from existing program operations (no kernel of their own): RGB to BW,
-Normal, Vector Rotate and Blackbody (see docs/materials.md, "Converter nodes").
+"""Converter and input nodes built from existing program operations (no kernel of their own):
+RGB to BW, Normal, Vector Rotate, Blackbody and Camera Data (see docs/materials.md, "Converter
+nodes").
 
 Each function compiles one Blender node and returns its outputs by socket identifier, as
 ``procedural_nodes`` does. They follow Cycles's SVM nodes (``svm_node_normal``,
@@ -15,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from .. import compat
-from .node_programs import (MAPPING_TYPES, MATH_OPS, OP_MAPPING, OP_MATH, OP_VMATH, VMATH_OPS,
-                            Unsupported, Value, socket)
+from .node_programs import (MAPPING_TYPES, MATH_OPS, OP_COMPONENT, OP_MAPPING, OP_MATH, OP_VMATH,
+                            VMATH_OPS, Unsupported, Value, socket)
 
 
 def _vmath(b, op, a, bb=None, scale=None):
@@ -131,7 +132,19 @@ def blackbody(b, node, out, ctx):
     return {out.identifier: Value(b, const=blackbody_rgb(float(t.const[0])))}
 
 
+def camera_data(b, node, out, ctx):
+    """Camera Data (``svm_node_camera``): the shading point in camera space (Cycles's
+    worldtocamera, +z in front of the camera: the Texture Coordinate node's Camera output)
+    gives View Vector = its direction, View Z Depth = its z, View Distance = its length."""
+    p = b._tex_coord(node, "Camera")
+    outs = {o.name: o.identifier for o in node.outputs}
+    return {outs["View Vector"]: _vmath(b, "NORMALIZE", p),
+            outs["View Z Depth"]: b.emit(OP_COMPONENT, 2, [p]),
+            outs["View Distance"]: _vmath(b, "LENGTH", p)}
+
+
 CONVERTER_COMPILERS = {
     "ShaderNodeRGBToBW": rgb_to_bw, "ShaderNodeNormal": normal,
     "ShaderNodeVectorRotate": vector_rotate, "ShaderNodeBlackbody": blackbody,
+    "ShaderNodeCameraData": camera_data,
 }
