@@ -55,6 +55,11 @@ def _blackbody(nt, em, out):
     nt.links.new(value.outputs[0], em.inputs["Strength"])
 
 
+def _falloff(nt, em, out):  # Quadratic, Smooth 0: the light's own falloff, strength 3
+    lf = node(nt, "ShaderNodeLightFalloff", {"Strength": 3.0})
+    nt.links.new(lf.outputs["Quadratic"], em.inputs["Strength"])
+
+
 def _mixed(nt, em, out):
     red = node(nt, "ShaderNodeEmission", {"Color": (1, 0, 0, 1), "Strength": 3.0})
     mix = node(nt, "ShaderNodeMixShader", {0: 0.25, 1: em.outputs[0], 2: red.outputs[0]})
@@ -66,8 +71,8 @@ def _unlinked(nt, em, out):
         nt.links.remove(link)
 
 
-@pytest.mark.parametrize("tree", [None, _strength, _tinted, _blackbody, _mixed, _unlinked],
-                         ids=["no nodes", "strength", "tinted", "blackbody", "mixed", "unlinked"])
+@pytest.mark.parametrize("tree", [None, _strength, _tinted, _blackbody, _falloff, _mixed, _unlinked],
+                         ids=["no nodes", "strength", "tinted", "blackbody", "falloff", "mixed", "unlinked"])
 def test_light_node_tree_matches_cycles(tmp_path, tree):
     sc = _lit_plane(tree)
     cycles, drt = render_rgba_both(sc, tmp_path / "light_nodes.exr")

@@ -402,6 +402,41 @@ def test_camera_data_under_a_perspective_camera_matches_cycles(tmp_path, monkeyp
            "camera_data", ["view vector", "z depth", "distance"])
 
 
+def _light_falloff(output, smooth=0.0, linked_smooth=False):
+    def case(nt, uv):
+        sep = node(nt, "ShaderNodeSeparateXYZ", {0: uv})
+        lf = node(nt, "ShaderNodeLightFalloff", {"Strength": 2.0, "Smooth": smooth})
+        if linked_smooth:  # −0.5 … 1.5 over the tile: Cycles smooths only where it is > 0
+            sm = node(nt, "ShaderNodeMath", {0: sep.outputs[0], 1: 2.0, 2: -0.5}, operation="MULTIPLY_ADD")
+            nt.links.new(sm.outputs[0], lf.inputs["Smooth"])
+        return lf.outputs[output]
+    return case
+
+
+def test_light_falloff_matches_cycles(tmp_path, monkeypatch):
+    """Light Falloff's three outputs, with and without Smooth (constant and driven), on spheres
+    seen by a perspective camera (the ray length varies over each tile)."""
+    setup = P.setup_scene
+
+    def perspective(n):
+        sc = setup(n)
+        sc.camera.data.type = "PERSP"
+        sc.camera.location = (0.0, 0.0, 1.6)
+        return sc
+
+    monkeypatch.setattr(P, "setup_scene", perspective)
+    cases = [_light_falloff(o) for o in ("Quadratic", "Linear", "Constant")]
+    cases += [_light_falloff(o, smooth=0.7) for o in ("Quadratic", "Linear", "Constant")]
+    cases += [_light_falloff("Linear", linked_smooth=True)]
+    cycles, drt, res = P.render_tiles(cases, 3, tmp_path, "falloff", shape="sphere")
+    assert not res.warnings, res.warnings
+    lit = cycles[..., 0] > 0.0  # the spheres (the world is black)
+    for k in range(len(cases)):
+        err = np.abs(P.tile(cycles, k, 3) - P.tile(drt, k, 3)).max(axis=2)[P.tile(lit[..., None], k, 3)[..., 0]]
+        assert np.count_nonzero(err > TOL) <= 2, (k, float(err.max()))  # (sphere rims: filter jitter)
+    assert np.abs(P.tile(cycles, 1, 3) - P.tile(cycles, 2, 3)).max() > 0.05  # the outputs differ
+
+
 def test_blackbody_matches_cycles(tmp_path):
     """The Blackbody colour across its fit's temperature ranges and both ends, as emitted
     radiance (not squashed: compared to 1e-4 relative, Cycles's float32)."""

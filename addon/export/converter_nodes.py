@@ -1,6 +1,6 @@
 """Converter and input nodes built from existing program operations (no kernel of their own):
-RGB to BW, Normal, Vector Rotate, Blackbody and Camera Data (see docs/materials.md, "Converter
-nodes").
+RGB to BW, Normal, Vector Rotate, Blackbody, Camera Data and Light Falloff (see docs/materials.md,
+"Converter nodes").
 
 Each function compiles one Blender node and returns its outputs by socket identifier, as
 ``procedural_nodes`` does. They follow Cycles's SVM nodes (``svm_node_normal``,
@@ -17,7 +17,7 @@ import numpy as np
 
 from .. import compat
 from .node_programs import (MAPPING_TYPES, MATH_OPS, OP_COMPONENT, OP_MAPPING, OP_MATH, OP_VMATH,
-                            VMATH_OPS, Unsupported, Value, socket)
+                            POINT_MISC, VMATH_OPS, Unsupported, Value, socket)
 
 
 def _vmath(b, op, a, bb=None, scale=None):
@@ -143,8 +143,33 @@ def camera_data(b, node, out, ctx):
             outs["View Distance"]: _vmath(b, "LENGTH", p)}
 
 
+def light_falloff(b, node, out, ctx):
+    """Light Falloff (``svm_node_light_falloff``), with L the ray's length (Light Path's Ray
+    Length): Quadratic = Strength, Linear = Strength·L, Constant = Strength·L², each × L²/(Smooth
+    + L²) when Smooth > 0. Quadratic with a zero Smooth is the Strength itself: a constant one
+    folds (so a light's tree with it still folds, `light_nodes`)."""
+    strength = b.inp(node, "Strength", ctx, "float")
+    smooth = b.inp(node, "Smooth", ctx, "float")
+    no_smooth = smooth.is_const and not smooth.const[0] > 0.0
+    kind = next(o.name for o in node.outputs if o.identifier == out.identifier)
+    if kind == "Quadratic" and no_smooth:
+        return {out.identifier: strength}
+    length = b.point(POINT_MISC, 1)
+    squared = _math(b, "MULTIPLY", length, length)
+    value = {"Quadratic": strength, "Linear": _math(b, "MULTIPLY", strength, length),
+             "Constant": _math(b, "MULTIPLY", strength, squared)}[kind]
+    if no_smooth:
+        return {out.identifier: value}
+    smoothed = _math(b, "MULTIPLY", value, _math(b, "DIVIDE", squared, _math(b, "ADD", smooth, squared)))
+    if smooth.is_const:
+        return {out.identifier: smoothed}
+    # Cycles smooths only where Smooth > 0: value + (Smooth > 0)·(smoothed − value)
+    on = _math(b, "GREATER_THAN", smooth, Value(b, const=0.0))
+    return {out.identifier: _math(b, "ADD", value, _math(b, "MULTIPLY", on, _math(b, "SUBTRACT", smoothed, value)))}
+
+
 CONVERTER_COMPILERS = {
     "ShaderNodeRGBToBW": rgb_to_bw, "ShaderNodeNormal": normal,
     "ShaderNodeVectorRotate": vector_rotate, "ShaderNodeBlackbody": blackbody,
-    "ShaderNodeCameraData": camera_data,
+    "ShaderNodeCameraData": camera_data, "ShaderNodeLightFalloff": light_falloff,
 }

@@ -110,7 +110,7 @@ SUPPORTED_NODES = {
     "ShaderNodeFloatCurve", "ShaderNodeVertexColor", "ShaderNodeAttribute",
     "ShaderNodeTexEnvironment", "ShaderNodeDisplacement", "ShaderNodeVectorDisplacement",
     "ShaderNodeRGBToBW", "ShaderNodeNormal", "ShaderNodeVectorRotate", "ShaderNodeBlackbody",
-    "ShaderNodeCameraData",
+    "ShaderNodeCameraData", "ShaderNodeLightFalloff",
 }
 
 
