@@ -623,3 +623,44 @@ def test_cutout_scene_matches_cycles(tmp_path):
     ratio, blocks = compare(drt, cyc)
     assert np.all(np.abs(ratio - 1.0) < 0.01), ratio
     assert blocks >= 0.95, blocks
+
+
+def _pointiness_material():
+    from node_parity import squash
+
+    mat = bpy.data.materials.new("pointiness")
+    nt = mat.node_tree
+    nt.nodes.clear()
+    g = nt.nodes.new("ShaderNodeNewGeometry").outputs["Pointiness"]
+    # spread the values (~0.3–0.7) over the squash's range so that errors show
+    spread = node(nt, "ShaderNodeMath", {0: g, 1: 6.0, 2: -3.0}, operation="MULTIPLY_ADD")
+    em = node(nt, "ShaderNodeEmission", {"Color": squash(nt, spread.outputs[0])})
+    nt.links.new(em.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    return mat
+
+
+def test_pointiness_matches_cycles(tmp_path):
+    """The Geometry node's Pointiness on meshes with convex and concave vertices, a loose part
+    and duplicated vertices along split edges (welded as Cycles welds them), subdivided and
+    smooth-shaded: pixel by pixel against Cycles."""
+    from node_parity import render_rgba_both, setup_scene
+
+    sc = setup_scene(4)
+    mat = _pointiness_material()
+    bpy.ops.mesh.primitive_monkey_add(size=1.1, location=(-0.45, 0.0, -1.0), rotation=(0.6, 0.2, 0.3))
+    subd = bpy.context.object.modifiers.new("subd", "SUBSURF")
+    subd.levels = subd.render_levels = 1  # (the harness exports the viewport's levels)
+    bpy.ops.object.shade_smooth()
+    bpy.ops.mesh.primitive_cube_add(size=0.7, location=(0.55, 0.2, -1.0), rotation=(0.5, 0.4, 0.1))
+    bpy.context.object.modifiers.new("split", "EDGE_SPLIT")  # duplicated vertices on every edge
+    bpy.ops.mesh.primitive_torus_add(major_radius=0.3, minor_radius=0.1, location=(0.5, -0.6, -1.0),
+                                     rotation=(0.9, 0.0, 0.0))
+    for o in bpy.context.scene.objects:
+        if o.type == "MESH":
+            o.data.materials.append(mat)
+    cycles, drt = render_rgba_both(sc, tmp_path / "pointiness.exr")
+    covered = cycles[..., 0] > 0.01  # (the world is black)
+    assert covered.mean() > 0.15
+    err = np.abs(cycles[..., :3] - drt[..., :3]).max(axis=-1)
+    assert np.percentile(err, 99) < 2e-3, np.percentile(err, 99)
+    assert np.ptp(cycles[covered][:, 0]) > 0.2  # the values vary

@@ -6,6 +6,7 @@ Only ``foreach_get`` and numpy: no Python loop touches a vertex, corner or trian
 import numpy as np
 
 from .. import compat
+from .pointiness import mesh_pointiness
 
 # Object types whose evaluated form can be turned into a mesh with ``to_mesh()``.
 MESH_LIKE_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
@@ -25,7 +26,8 @@ def mesh_arrays(mesh, slot_materials: np.ndarray, attrs=frozenset()) -> dict | N
     optionally "normals" (T,3,3) f32 and "uvs" (T,3,2) f32}; plus, for the geometry inputs
     named in ``attrs`` (what the material programs read), "generated" and "object_coords"
     (T,3,3) f32 per corner, and "attr<I>" (T,3,3) for a named UV map "uv:<name>" with index I,
-    or the MikkTSpace tangents "tangent:<uv>" / bitangent signs "tangent_sign:<uv>" of a UV map.
+    or the MikkTSpace tangents "tangent:<uv>" / bitangent signs "tangent_sign:<uv>" of a UV map,
+    or the Geometry node's Pointiness "pointiness:" (per vertex, ``pointiness.mesh_pointiness``).
     """
     compat.prepare_mesh(mesh)
     if len(mesh.loop_triangles) == 0:
@@ -62,6 +64,9 @@ def mesh_arrays(mesh, slot_materials: np.ndarray, attrs=frozenset()) -> dict | N
                 corner = np.zeros((len(mesh.loops), 3), np.float32)
                 corner[:, :2] = compat.uv_layer_values(mesh, layer)
                 out[f"attr{idx}"] = corner[tri_corners]
+        elif name == "pointiness:" and idx is not None:  # the Geometry node's Pointiness
+            out[f"attr{idx}"] = np.ascontiguousarray(
+                np.repeat(mesh_pointiness(mesh)[tri_verts][..., None], 3, axis=-1), np.float32)
         elif idx is not None and name.split(":", 1)[0] in ("attr", "fac", "alpha"):
             values = named_attribute(mesh, name, tri_corners, tri_verts)
             if values is not None:

@@ -536,6 +536,8 @@ class ProgramBuilder:
                                                        self._linked_or_none(node, "Normal", ctx)], outputs=2)
             return {node.outputs[0].identifier: f, node.outputs[1].identifier: facing}
         if k == "ShaderNodeNewGeometry":
+            if oname == "Pointiness":  # a per-vertex attribute the export computes (pointiness.py)
+                return self.attribute("pointiness:")
             row = GEOMETRY_OUTPUTS.get(oname)
             if row is None:
                 raise Unsupported(node)
