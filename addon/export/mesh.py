@@ -6,6 +6,7 @@ Only ``foreach_get`` and numpy: no Python loop touches a vertex, corner or trian
 import numpy as np
 
 from .. import compat
+from .mesh_islands import PARAMETRIC_CORNERS, random_per_island
 from .pointiness import mesh_pointiness
 
 # Object types whose evaluated form can be turned into a mesh with ``to_mesh()``.
@@ -27,7 +28,8 @@ def mesh_arrays(mesh, slot_materials: np.ndarray, attrs=frozenset()) -> dict | N
     named in ``attrs`` (what the material programs read), "generated" and "object_coords"
     (T,3,3) f32 per corner, and "attr<I>" (T,3,3) for a named UV map "uv:<name>" with index I,
     or the MikkTSpace tangents "tangent:<uv>" / bitangent signs "tangent_sign:<uv>" of a UV map,
-    or the Geometry node's Pointiness "pointiness:" (per vertex, ``pointiness.mesh_pointiness``).
+    or the Geometry node's Pointiness "pointiness:" (per vertex, ``pointiness.mesh_pointiness``),
+    Random Per Island "random_island:" and Parametric "parametric:" (``mesh_islands``).
     """
     compat.prepare_mesh(mesh)
     if len(mesh.loop_triangles) == 0:
@@ -67,6 +69,13 @@ def mesh_arrays(mesh, slot_materials: np.ndarray, attrs=frozenset()) -> dict | N
         elif name == "pointiness:" and idx is not None:  # the Geometry node's Pointiness
             out[f"attr{idx}"] = np.ascontiguousarray(
                 np.repeat(mesh_pointiness(mesh)[tri_verts][..., None], 3, axis=-1), np.float32)
+        elif name == "random_island:" and idx is not None:  # Random Per Island, per triangle
+            out[f"attr{idx}"] = np.ascontiguousarray(
+                np.broadcast_to(random_per_island(mesh, tri_verts)[:, None, None], (len(tri_verts), 3, 3)),
+                np.float32)
+        elif name == "parametric:" and idx is not None:
+            out[f"attr{idx}"] = np.ascontiguousarray(
+                np.broadcast_to(PARAMETRIC_CORNERS, (len(tri_verts), 3, 3)), np.float32)
         elif idx is not None and name.split(":", 1)[0] in ("attr", "fac", "alpha"):
             values = named_attribute(mesh, name, tri_corners, tri_verts)
             if values is not None:

@@ -48,6 +48,9 @@ NORMAL_MAP_SPACES = ["TANGENT", "OBJECT", "WORLD", "BLENDER_OBJECT", "BLENDER_WO
 #: Geometry node outputs → (row, component or −1 for the vector)
 GEOMETRY_OUTPUTS = {"Position": (POINT_P, -1), "Normal": (POINT_N, -1), "True Normal": (POINT_NG, -1),
                     "Incoming": (POINT_I, -1), "Backfacing": (POINT_MISC, 2)}
+#: Geometry node outputs the export computes per mesh (addon/export/mesh.py) → attribute name
+MESH_ATTRIBUTE_OUTPUTS = {"Pointiness": "pointiness:", "Random Per Island": "random_island:",
+                          "Parametric": "parametric:"}
 #: Light Path node outputs → (row, component); None: always 0 for the rays DRT shades
 LIGHT_PATH_OUTPUTS = {
     "Is Camera Ray": (POINT_PATH, 0), "Is Diffuse Ray": (POINT_PATH, 1), "Is Glossy Ray": (POINT_PATH, 2),
@@ -536,8 +539,8 @@ class ProgramBuilder:
                                                        self._linked_or_none(node, "Normal", ctx)], outputs=2)
             return {node.outputs[0].identifier: f, node.outputs[1].identifier: facing}
         if k == "ShaderNodeNewGeometry":
-            if oname == "Pointiness":  # a per-vertex attribute the export computes (pointiness.py)
-                return self.attribute("pointiness:")
+            if oname in MESH_ATTRIBUTE_OUTPUTS:  # attributes the export computes per mesh
+                return self.attribute(MESH_ATTRIBUTE_OUTPUTS[oname])
             row = GEOMETRY_OUTPUTS.get(oname)
             if row is None:
                 raise Unsupported(node)
