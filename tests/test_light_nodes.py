@@ -100,3 +100,42 @@ def test_a_varying_light_tree_warns_and_uses_constant_values():
     lamp = next(lt for lt in res.header["lights"] if lt["name"] == "lamp")
     assert lamp["color"] == pytest.approx([1.0, 1.0, 1.0])  # the Strength socket's own value: 1
     assert sc.render.engine == "CYCLES"
+
+
+def test_a_portal_emits_nothing_as_in_cycles(tmp_path):
+    """An area light marked as a portal only guides Cycles's world sampling: a plane under a
+    white world with a 1 kW portal above it is as bright as the world alone makes it."""
+    sc = _lit_plane(None)
+    bpy.data.objects.remove(bpy.data.objects["lamp"])
+    sc.world.node_tree.nodes["Background"].inputs[0].default_value = (1, 1, 1, 1)
+    sc.world.node_tree.nodes["Background"].inputs[1].default_value = 1.0
+    sc.cycles.samples = sc.drt.samples = 64
+    portal = bpy.data.lights.new("portal", "AREA")
+    portal.energy, portal.size = 1000.0, 0.5
+    portal.cycles.is_portal = True
+    obj = bpy.data.objects.new("portal", portal)
+    obj.location = (0.0, 0.0, 0.5)
+    sc.collection.objects.link(obj)
+    cycles, drt = render_rgba_both(sc, tmp_path / "portal.exr")
+    c, d = cycles[..., :3].mean(), drt[..., :3].mean()
+    assert 0.9 < c < 1.1  # the world's light on a white plane (a 1 kW light would add ~100)
+    assert abs(d / c - 1) < 0.02, (c, d)
+
+
+def test_light_settings_drt_ignores_are_named():
+    """Light linking, shadow linking, a light's ray visibility and cast-shadow switch: DRT
+    renders the light plainly and says so, naming the setting."""
+    from addon.export import export_depsgraph
+
+    sc = _lit_plane(None)
+    lamp = bpy.data.objects["lamp"]
+    lamp.visible_glossy = False
+    lamp.visible_shadow = False
+    coll = bpy.data.collections.new("lit")
+    lamp.light_linking.receiver_collection = coll
+    res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
+    warned = [w for w in res.warnings if "'lamp'" in w]
+    assert len(warned) == 1, res.warnings
+    for name in ("light linking", "invisible to glossy rays", "casts no shadow"):
+        assert name in warned[0], warned[0]
+    assert len(res.header["lights"]) == 1 and sc is not None

@@ -128,9 +128,30 @@ def visibility_bits(visibility: dict | None, holdout: bool = False) -> int:
 
 
 def ignored_ray_visibility(obj) -> list[str]:
-    """The object settings of Cycles's Visibility panel that DRT does not render yet: their
-    names, [] when none is set (the shadow catcher)."""
-    return ["shadow catcher"] if getattr(obj, "is_shadow_catcher", False) else []
+    """The object settings Cycles renders and DRT does not yet: their names, [] when none is
+    set — the shadow catcher, light and shadow linking (an emitter's receiver / blocker
+    collections), Cycles's shadow caustics flags; on a light, its ray visibility other than to
+    the camera and its cast-shadow switch."""
+    # (a light object reports is_shadow_catcher True in 5.0; the setting is a geometry one)
+    names = ["shadow catcher"] if obj.type != "LIGHT" and getattr(obj, "is_shadow_catcher", False) else []
+    linking = getattr(obj, "light_linking", None)
+    if linking is not None and getattr(linking, "receiver_collection", None) is not None:
+        names.append("light linking")
+    if linking is not None and getattr(linking, "blocker_collection", None) is not None:
+        names.append("shadow linking")
+    cyc = getattr(obj, "cycles", None)
+    if getattr(cyc, "is_caustics_caster", False) or getattr(cyc, "is_caustics_receiver", False):
+        names.append("shadow caustics")
+    if obj.type == "LIGHT":
+        hidden = [kind for kind in ("diffuse", "glossy", "transmission", "volume_scatter")
+                  if not getattr(obj, f"visible_{kind}", True)]
+        if hidden:
+            names.append("invisible to " + ", ".join(k.replace("_", " ") for k in hidden) + " rays")
+        if not getattr(obj, "visible_shadow", True):
+            names.append("casts no shadow")
+        if getattr(getattr(obj.data, "cycles", None), "is_caustics_light", False):
+            names.append("shadow caustics")
+    return names
 
 
 #: object types Cycles renders and DRT does not (no primitive for them), by the name the export
@@ -220,6 +241,8 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
                 ld = light_dict(obj, inst.matrix_world.copy(), warnings)
                 if ld is not None:
                     lights.append(ld)
+                    if ignored := ignored_ray_visibility(obj):
+                        unsupported_visibility.setdefault(obj.name, ignored)
             continue
         if obj.type not in MESH_LIKE_TYPES or not _is_rendered(inst, presented):
             if obj.type in UNRENDERED_GEOMETRY_TYPES and _is_rendered(inst) and _has_elements(obj):

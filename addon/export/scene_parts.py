@@ -170,6 +170,10 @@ def panorama_dict(cam_obj) -> dict:
 def light_dict(obj, matrix, warnings: list) -> dict | None:
     """Light header from an evaluated light object and its world matrix (None: skipped)."""
     light = obj.data
+    if light.type == "AREA" and getattr(getattr(light, "cycles", None), "is_portal", False):
+        # a portal emits nothing: in Cycles it only guides the world's sampling through a
+        # window, so leaving it out changes the noise, not the image
+        return None
     # a light's node tree (Use Nodes) scales its colour × power, folded to a constant
     color = (np.array(compat.light_color(light)) * light_node_factor(light, warnings, obj.name)).tolist()
     scale = compat.light_power_scale(light)
