@@ -139,7 +139,9 @@ def ignored_ray_visibility(obj) -> list[str]:
         names.append("light linking")
     if linking is not None and getattr(linking, "blocker_collection", None) is not None:
         names.append("shadow linking")
-    cyc = getattr(obj, "cycles", None)
+    # (the original's: reading the Cycles add-on's properties on an evaluated copy leaks the
+    # property group Blender creates for it)
+    cyc = getattr(obj.original, "cycles", None)
     if getattr(cyc, "is_caustics_caster", False) or getattr(cyc, "is_caustics_receiver", False):
         names.append("shadow caustics")
     if obj.type == "LIGHT":
@@ -149,7 +151,7 @@ def ignored_ray_visibility(obj) -> list[str]:
             names.append("invisible to " + ", ".join(k.replace("_", " ") for k in hidden) + " rays")
         if not getattr(obj, "visible_shadow", True):
             names.append("casts no shadow")
-        if getattr(getattr(obj.data, "cycles", None), "is_caustics_light", False):
+        if getattr(getattr(obj.original.data, "cycles", None), "is_caustics_light", False):
             names.append("shadow caustics")
     return names
 

@@ -170,7 +170,7 @@ def panorama_dict(cam_obj) -> dict:
 def light_dict(obj, matrix, warnings: list) -> dict | None:
     """Light header from an evaluated light object and its world matrix (None: skipped)."""
     light = obj.data
-    if light.type == "AREA" and getattr(getattr(light, "cycles", None), "is_portal", False):
+    if light.type == "AREA" and getattr(getattr(getattr(obj.original, "data", None), "cycles", None), "is_portal", False):
         # a portal emits nothing: in Cycles it only guides the world's sampling through a
         # window, so leaving it out changes the noise, not the image
         return None
