@@ -332,6 +332,39 @@ def set_pass_pixels(render_pass, img: np.ndarray) -> None:
         render_pass.rect = img.reshape(-1, img.shape[-1])
 
 
+#: view-layer passes Cycles renders and DRT does not (yet): (property, name in the warning)
+_UNRENDERED_PASSES = (
+    ("use_pass_mist", "Mist"), ("use_pass_position", "Position"), ("use_pass_vector", "Vector"),
+    ("use_pass_uv", "UV"), ("use_pass_object_index", "Object Index"),
+    ("use_pass_material_index", "Material Index"),
+    ("use_pass_diffuse_direct", "Diffuse Direct"), ("use_pass_diffuse_indirect", "Diffuse Indirect"),
+    ("use_pass_glossy_direct", "Glossy Direct"), ("use_pass_glossy_indirect", "Glossy Indirect"),
+    ("use_pass_glossy_color", "Glossy Color"), ("use_pass_transmission_direct", "Transmission Direct"),
+    ("use_pass_transmission_indirect", "Transmission Indirect"),
+    ("use_pass_transmission_color", "Transmission Color"), ("use_pass_emit", "Emission"),
+    ("use_pass_environment", "Environment"), ("use_pass_shadow", "Shadow"),
+    ("use_pass_ambient_occlusion", "Ambient Occlusion"),
+    ("use_pass_cryptomatte_object", "Cryptomatte Object"),
+    ("use_pass_cryptomatte_material", "Cryptomatte Material"),
+    ("use_pass_cryptomatte_asset", "Cryptomatte Asset"),
+)
+_UNRENDERED_CYCLES_PASSES = (
+    ("use_pass_volume_direct", "Volume Direct"), ("use_pass_volume_indirect", "Volume Indirect"),
+    ("use_pass_shadow_catcher", "Shadow Catcher"),
+)
+
+
+def unrendered_passes(view_layer) -> list:
+    """Names of the passes the view layer enables that DRT does not render (they are left out
+    of the render result), AOVs and light groups included."""
+    names = [name for prop, name in _UNRENDERED_PASSES if getattr(view_layer, prop, False)]
+    cyc = getattr(view_layer, "cycles", None)
+    names += [name for prop, name in _UNRENDERED_CYCLES_PASSES if getattr(cyc, prop, False)]
+    names += [f"AOV '{a.name}'" for a in getattr(view_layer, "aovs", ())]
+    names += [f"light group '{g.name}'" for g in getattr(view_layer, "lightgroups", ())]
+    return names
+
+
 def view_layer_pass_flags(view_layer) -> dict:
     """Which of the passes DRT can fill are enabled in the view layer."""
     return {

@@ -106,6 +106,8 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         exported = export_depsgraph(depsgraph, frame_set=self.frame_set)
         for w in exported.warnings:
             self.report({"WARNING"}, f"DRT: {w}")
+        if missing := compat.unrendered_passes(depsgraph.view_layer):
+            self.report({"WARNING"}, "DRT: passes not rendered (left out of the result): " + ", ".join(missing))
         if self.cancel_requested():
             return
 

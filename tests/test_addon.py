@@ -191,6 +191,26 @@ def test_passes_written(tmp_path):
     assert np.nanmin(depth) > 1.0  # the camera is 2.9 m from the open front of the box
 
 
+def test_passes_drt_does_not_render_are_named(monkeypatch):
+    """Passes the view layer enables that DRT has no figures for (Mist, Emission, Cryptomatte,
+    AOVs…) are named in one warning instead of silently missing from the result."""
+    from addon import compat
+
+    scene = open_scene("cornell_box")
+    scene.drt.samples = 1
+    vl = scene.view_layers[0]
+    assert compat.unrendered_passes(vl) == []
+    vl.use_pass_mist = vl.use_pass_emit = vl.use_pass_cryptomatte_object = True
+    vl.aovs.add().name = "dirt"
+    reports = []
+    monkeypatch.setattr(drt_engine.DRTRenderEngine, "report", lambda self, kind, msg: reports.append(msg))
+    bpy.ops.render.render()
+    passes = [r for r in reports if "passes not rendered" in r]
+    assert len(passes) == 1, reports
+    for name in ("Mist", "Emission", "Cryptomatte Object", "AOV 'dirt'"):
+        assert name in passes[0], passes[0]
+
+
 def test_error_is_reported_not_raised_silently(registered):
     """An unrenderable scene must abort the render (RuntimeError here, exit 1 in blender -b):
     here a camera whose far clip lies before its near one."""
