@@ -79,6 +79,10 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         subclass attribute cannot override), so tests can simulate a user's cancel."""
         return bool(self.test_break())
 
+    def warn(self, msg: str) -> None:
+        """A warning in Blender's report (``report`` is an RNA function: tests replace this)."""
+        self.report({"WARNING"}, f"DRT: {msg}")
+
     def render(self, depsgraph):
         try:
             self._render(depsgraph)
@@ -107,7 +111,7 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         for w in exported.warnings:
             self.report({"WARNING"}, f"DRT: {w}")
         if missing := compat.unrendered_passes(depsgraph.view_layer):
-            self.report({"WARNING"}, "DRT: passes not rendered (left out of the result): " + ", ".join(missing))
+            self.warn("passes not rendered (left out of the result): " + ", ".join(missing))
         if self.cancel_requested():
             return
 

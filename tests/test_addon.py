@@ -203,7 +203,7 @@ def test_passes_drt_does_not_render_are_named(monkeypatch):
     vl.use_pass_mist = vl.use_pass_emit = vl.use_pass_cryptomatte_object = True
     vl.aovs.add().name = "dirt"
     reports = []
-    monkeypatch.setattr(drt_engine.DRTRenderEngine, "report", lambda self, kind, msg: reports.append(msg))
+    monkeypatch.setattr(drt_engine.DRTRenderEngine, "warn", lambda self, msg: reports.append(msg))
     bpy.ops.render.render()
     passes = [r for r in reports if "passes not rendered" in r]
     assert len(passes) == 1, reports
