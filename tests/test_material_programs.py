@@ -91,6 +91,40 @@ def test_textures_match_cycles(tmp_path):
     assert res.arrays["image0.pixels"].dtype == np.uint8
 
 
+def _projected_image(path, projection, blend=0.0, coords="Object"):
+    def case(nt, uv):
+        img = bpy.data.images.load(path, check_existing=True)
+        vec = nt.nodes.new("ShaderNodeTexCoord").outputs[coords]
+        t = node(nt, "ShaderNodeTexImage", {"Vector": vec}, image=img, interpolation="Linear",
+                 projection=projection, projection_blend=blend)
+        return t.outputs["Color"]
+    return case
+
+
+def test_image_projections_match_cycles(tmp_path):
+    """The Image Texture's Sphere, Tube and Box projections (Box at several blends), on turned
+    spheres (every normal direction, and the object-space normal the Box blends by), against
+    Cycles. Box without blend and the tube's seam switch faces abruptly: a few pixels there may
+    differ through each engine's sample jitter."""
+    path = str(tmp_path / "proj.png")
+    make_image("proj", w=16, h=12, path=path)
+    cases = [_projected_image(path, "SPHERE"), _projected_image(path, "TUBE"),
+             _projected_image(path, "SPHERE", coords="Generated"),
+             _projected_image(path, "BOX"), _projected_image(path, "BOX", 0.2),
+             _projected_image(path, "BOX", 0.6), _projected_image(path, "BOX", 1.0),
+             _projected_image(path, "BOX", 0.3, coords="Generated")]
+    cycles, drt, res = P.render_tiles(cases, 3, tmp_path, "projections", shape="sphere")
+    assert not res.warnings, res.warnings
+    lit = cycles[..., 0] + cycles[..., 1] + cycles[..., 2] > 0.0
+    bad = {}
+    for k in range(len(cases)):
+        err = np.abs(P.tile(cycles, k, 3) - P.tile(drt, k, 3)).max(axis=2)[P.tile(lit[..., None], k, 3)[..., 0]]
+        if np.count_nonzero(err > TOL) > 8:  # (seams and face switches: a line of pixels)
+            bad[k] = (np.count_nonzero(err > TOL), round(float(np.sort(err)[-9]), 4))
+    assert not bad, bad
+    assert np.abs(P.tile(cycles, 3, 3) - P.tile(cycles, 6, 3)).max() > 0.05  # the blend matters
+
+
 # --- converters ----------------------------------------------------------------------------
 
 MATH_OPS = ["ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM", "SQRT",
@@ -383,6 +417,33 @@ def test_converter_nodes_built_from_operations_match_cycles(tmp_path):
              "rotate euler", "rotate euler inv", "camera view vector", "camera z depth",
              "camera distance"]
     res = _check(cases, 4, tmp_path, "converters2", names)
+    assert not res.warnings
+
+
+def _vector_map_range(kind, clamp, steps=(3.0, 4.0, 2.0)):
+    def case(nt, uv):
+        n = node(nt, "ShaderNodeMapRange", data_type="FLOAT_VECTOR", interpolation_type=kind, clamp=clamp)
+        sock = {s.identifier: s for s in n.inputs}
+        nt.links.new(_vec3(nt, uv), sock["Vector"])
+        sock["From_Min_FLOAT3"].default_value = (-0.8, -0.5, 0.2)
+        sock["From_Max_FLOAT3"].default_value = (0.7, 0.9, 0.2)  # z: an empty range (factor 0)
+        sock["To_Min_FLOAT3"].default_value = (0.1, 0.9, -0.4)
+        sock["To_Max_FLOAT3"].default_value = (0.8, 0.2, 1.3)  # y reversed: clamps either way
+        sock["Steps_FLOAT3"].default_value = steps
+        return n.outputs["Vector"]
+    return case
+
+
+def test_vector_map_range_matches_cycles(tmp_path):
+    """Map Range on vectors: every interpolation, with and without clamping, an empty source
+    range and a reversed target one, against Cycles."""
+    cases = [_vector_map_range(k, c) for k in ("LINEAR", "STEPPED", "SMOOTHSTEP", "SMOOTHERSTEP")
+             for c in (False, True)]
+    names = [f"{k} {c}" + ("*" if k == "STEPPED" else "") for k in ("LINEAR", "STEPPED", "SMOOTHSTEP", "SMOOTHERSTEP")
+             for c in (False, True)]
+    cases.append(_vector_map_range("STEPPED", False, steps=(0.0, 2.0, 5.0)))
+    names.append("stepped zero steps*")
+    res = _check(cases, 3, tmp_path, "vector_map_range", names)
     assert not res.warnings
 
 

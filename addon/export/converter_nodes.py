@@ -168,6 +168,36 @@ def light_falloff(b, node, out, ctx):
     return {out.identifier: _math(b, "ADD", value, _math(b, "MULTIPLY", on, _math(b, "SUBTRACT", smoothed, value)))}
 
 
+def vector_map_range(b, node, out, ctx):
+    """Map Range on vectors (``svm_node_vector_map_range``), per component: factor =
+    (v − from min) / (from max − from min) (0 where the range is empty), Stepped
+    ⌊factor·(steps + 1)⌋ / steps (0 for no steps), Smooth Step 3f² − 2f³ and Smoother Step
+    6f⁵ − 15f⁴ + 10f³ of the factor clamped to [0, 1]; result = to min + factor·(to max − to min),
+    clamped between the two when the node clamps."""
+    from .node_programs import _first
+
+    def vec(name):
+        return b.input(node, _first(node.inputs, name, "VECTOR"), ctx)
+
+    v, f_min, f_max, t_min, t_max = (vec(n) for n in ("Vector", "From Min", "From Max", "To Min", "To Max"))
+    factor = _vmath(b, "DIVIDE", v - f_min, f_max - f_min)  # (VMATH DIVIDE is Cycles's safe one)
+    kind = node.interpolation_type
+    if kind == "STEPPED":
+        steps = vec("Steps")
+        factor = _vmath(b, "DIVIDE", _vmath(b, "FLOOR", factor * (steps + 1.0)), steps)
+    elif kind in ("SMOOTHSTEP", "SMOOTHERSTEP"):
+        f = _vmath(b, "MINIMUM", _vmath(b, "MAXIMUM", factor, Value(b, const=0.0)), Value(b, const=1.0))
+        if kind == "SMOOTHSTEP":
+            factor = (3.0 - f * 2.0) * (f * f)
+        else:
+            factor = f * f * f * (f * (f * 6.0 - 15.0) + 10.0)
+    result = t_min + factor * (t_max - t_min)
+    if node.clamp:
+        result = _vmath(b, "MINIMUM", _vmath(b, "MAXIMUM", result, _vmath(b, "MINIMUM", t_min, t_max)),
+                        _vmath(b, "MAXIMUM", t_min, t_max))
+    return {out.identifier: result}
+
+
 CONVERTER_COMPILERS = {
     "ShaderNodeRGBToBW": rgb_to_bw, "ShaderNodeNormal": normal,
     "ShaderNodeVectorRotate": vector_rotate, "ShaderNodeBlackbody": blackbody,

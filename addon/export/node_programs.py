@@ -25,6 +25,9 @@ import numpy as np
 OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE = 1, 2, 3, 4
 OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING = 10, 11, 12, 13
 OP_IMAGE, OP_CHECKER, OP_GRADIENT, OP_RAMP = 20, 21, 22, 23
+OP_IMAGE_BOX = 24  # Box projection (drt.materials.program_format)
+IMAGE_PROJECTION_STRIDE = 32  # OP_IMAGE's mode = projection·32 + interpolation·8 + extension
+IMAGE_PROJECTIONS = ["FLAT", "SPHERE", "TUBE", "BOX"]  # (BOX: OP_IMAGE_BOX)
 OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31, 32, 33, 34, 35
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
 OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_OBJECT_INFO = 90, 91, 92, 93, 94
@@ -35,9 +38,10 @@ OP_TEXCO_NORMAL, OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT, OP_SET_NORMAL = 98, 99
 
 def reads_object_transform(op) -> bool:
     """Whether operation row ``op`` needs the hit object's transform (objects then carry their
-    per-object data): Texture Coordinate Normal, and the object spaces of Normal Map
+    per-object data): Texture Coordinate Normal, the Image Texture's Box projection, and the
+    object spaces of Normal Map
     (Object, Blender Object), Displacement and Vector Displacement."""
-    return (op[0] == OP_TEXCO_NORMAL or (op[0] == OP_NORMAL_MAP and op[1] in (1, 3))
+    return (op[0] in (OP_TEXCO_NORMAL, OP_IMAGE_BOX) or (op[0] == OP_NORMAL_MAP and op[1] in (1, 3))
             or (op[0] == OP_DISPLACEMENT and op[1] == 1)
             or (op[0] == OP_VECTOR_DISPLACEMENT and op[1] in (0, 1)))
 OBJECT_INFO_OUTPUTS = {"Location": 0, "Color": 1, "Alpha": 2, "Object Index": 3, "Random": 4}
@@ -477,6 +481,8 @@ class ProgramBuilder:
                                    [self.inp(node, "Fac", ctx, "float")], param=off, outputs=2)
             return {"Color": col, "Alpha": alpha}
         if k == "ShaderNodeMapRange":
+            if node.data_type == "FLOAT_VECTOR":
+                return vector_map_range(self, node, out, ctx)
             if node.data_type != "FLOAT":
                 raise Unsupported(node)
             names = ["Value", "From Min", "From Max", "To Min", "To Max", "Steps"]
@@ -686,7 +692,7 @@ class ProgramBuilder:
         magenta = {"Color": Value(self, const=(1.0, 0.0, 1.0)), "Alpha": Value(self, const=1.0)}
         if image is None:  # Cycles: a missing image renders magenta (1, 0, 1), alpha 1
             return magenta
-        if node.projection != "FLAT" or image.source not in ("FILE", "GENERATED"):
+        if node.projection not in IMAGE_PROJECTIONS or image.source not in ("FILE", "GENERATED"):
             raise Unsupported(node)
         try:
             idx = self.images.index_of(image)
@@ -700,7 +706,12 @@ class ProgramBuilder:
         interp = min(INTERPOLATIONS.index(node.interpolation), 2)  # Smart: Cubic, as Cycles's CPU
         mode = interp * 8 + EXTENSIONS.index(node.extension)
         vec = self._tex_vector(node, ctx, "uv")
-        col, alpha = self.emit(OP_IMAGE, mode, [vec], param=idx, outputs=2)
+        if node.projection == "BOX":  # blends up to three planar lookups by the object normal
+            blend = Value(self, const=float(min(max(node.projection_blend, 0.0), 1.0)))
+            col, alpha = self.emit(OP_IMAGE_BOX, mode, [vec, blend], param=idx, outputs=2)
+        else:
+            mode += IMAGE_PROJECTIONS.index(node.projection) * IMAGE_PROJECTION_STRIDE
+            col, alpha = self.emit(OP_IMAGE, mode, [vec], param=idx, outputs=2)
         return {"Color": col, "Alpha": alpha}
 
     def _environment(self, node, ctx):
@@ -882,4 +893,4 @@ class ImageTable:
 
 
 from .procedural_nodes import PROCEDURAL_COMPILERS  # noqa: E402  (it imports this module's names)
-from .converter_nodes import CONVERTER_COMPILERS  # noqa: E402  (likewise)
+from .converter_nodes import CONVERTER_COMPILERS, vector_map_range  # noqa: E402  (likewise)

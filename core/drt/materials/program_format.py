@@ -35,6 +35,11 @@ RAMP_TABLE_SIZE = 256
 OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE = 1, 2, 3, 4
 OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING = 10, 11, 12, 13
 OP_IMAGE, OP_CHECKER, OP_GRADIENT, OP_RAMP = 20, 21, 22, 23
+#: Image Texture: OP_IMAGE's mode = projection (0 Flat, 1 Sphere, 2 Tube)·IMAGE_PROJECTION_STRIDE
+#: + interpolation·8 + extension; Box projection is OP_IMAGE_BOX (same mode without the
+#: projection; in0 the vector, in1 the Blend; reads the shading normal and the object transform)
+IMAGE_PROJECTION_STRIDE = 32
+OP_IMAGE_BOX = 24
 OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA, OP_BRIGHT_CONTRAST, OP_HSV = 30, 31, 32, 33, 34, 35
 OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE, OP_RGB_TO_HSV, OP_HSV_TO_RGB = 40, 41, 42, 43, 44, 45
 #: Environment Texture (the world's opcodes use 70–79): mode = projection·32 + image mode
@@ -60,7 +65,7 @@ OPCODES = PROCEDURAL_OPCODES | {OP_TEXCO_NORMAL, OP_DISPLACEMENT, OP_VECTOR_DISP
            OP_CAMERA_COORDS, OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE, OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING, OP_IMAGE,
            OP_CHECKER, OP_GRADIENT, OP_RAMP, OP_MAP_RANGE, OP_CLAMP, OP_INVERT, OP_GAMMA,
            OP_BRIGHT_CONTRAST, OP_HSV, OP_COMPONENT, OP_COMBINE, OP_TO_GRAY, OP_AVERAGE,
-           OP_RGB_TO_HSV, OP_HSV_TO_RGB, OP_ENVIRONMENT}
+           OP_RGB_TO_HSV, OP_HSV_TO_RGB, OP_ENVIRONMENT, OP_IMAGE_BOX}
 #: geometry inputs an opcode reads (the scene stores those per-corner arrays only if read)
 READS = {OP_UV: "uv", OP_GENERATED: "generated", OP_OBJECT: "object_coords"}
 OP_WIDTH = 11
@@ -168,8 +173,11 @@ def validate_program(prog, n_images: int, where: str, n_attributes: int = 0) -> 
         regs = row[2:10]
         if regs.max() >= n or regs.min() < -1 or row[2] < 0:
             raise ValueError(f"{where}.ops[{k}]: register out of range")
-        if row[0] in (OP_IMAGE, OP_ENVIRONMENT) and not 0 <= row[10] < n_images:
+        if row[0] in (OP_IMAGE, OP_ENVIRONMENT, OP_IMAGE_BOX) and not 0 <= row[10] < n_images:
             raise ValueError(f"{where}.ops[{k}]: image {int(row[10])} does not exist")
+        if row[0] == OP_IMAGE and not 0 <= row[1] < 3 * IMAGE_PROJECTION_STRIDE \
+                or row[0] == OP_IMAGE_BOX and not (0 <= row[1] < IMAGE_PROJECTION_STRIDE and row[5] >= 0):
+            raise ValueError(f"{where}.ops[{k}]: image projection, mode or inputs out of range")
         if row[0] == OP_ATTRIBUTE and not 0 <= row[10] < n_attributes:
             raise ValueError(f"{where}.ops[{k}]: attribute {int(row[10])} does not exist")
         if row[0] == OP_POINT and not (0 <= row[1] < POINT_ROWS and -1 <= row[10] <= 2):
@@ -219,7 +227,7 @@ def _reg(v, n, where):
 #: opcodes that read the shading-point rows a surface hit fills
 POINT_OPS = frozenset({OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_BUMP_OFFSET, OP_BUMP,
                        OP_CAMERA_COORDS, OP_TEXCO_NORMAL, OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT,
-                       OP_SET_NORMAL})
+                       OP_SET_NORMAL, OP_IMAGE_BOX})
 
 
 def build_program_data(materials: list[dict], table, images: list[tuple[dict, np.ndarray]],

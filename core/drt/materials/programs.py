@@ -45,7 +45,8 @@ from .program_format import (LUMINANCE, POINT_GENERATED, POINT_I, POINT_MISC, PO
                              OP_COMBINE, OP_COMPONENT, OP_GAMMA, OP_GENERATED, OP_GRADIENT,
                              OP_HSV, OP_HSV_TO_RGB, OP_IMAGE, OP_INVERT, OP_MAP_RANGE,
                              OP_ATTRIBUTE, OP_MAPPING, OP_MATH, OP_MIX, OP_OBJECT, OP_RAMP, OP_RGB_TO_HSV,
-                             OP_TO_GRAY, OP_UV, OP_VMATH, RAMP_TABLE_SIZE, OP_ENVIRONMENT,
+                             OP_TO_GRAY, OP_UV, OP_VMATH, RAMP_TABLE_SIZE, OP_ENVIRONMENT, OP_IMAGE_BOX,
+                             IMAGE_PROJECTION_STRIDE,
                              ENV_PROJECTION_STRIDE, OP_DISPLACEMENT, OP_SET_NORMAL, OP_TEXCO_NORMAL,
                              OP_VECTOR_DISPLACEMENT, POINT_OBJECT_XFORM)
 from ..sampling.spherical_maps import direction_to_uv
@@ -606,6 +607,80 @@ def _bspline(t, k):
 
 
 @kernel
+def image_projection(proj, co):
+    """(u, v) of the Image Texture's Sphere (1) and Tube (2) projections of vector ``co``
+    (Cycles's ``svm_node_tex_image_mapping``: [0, 1]³ remapped to [−1, 1]³, then
+    ``map_to_sphere`` / ``map_to_tube``); Flat (0) is (x, y)."""
+    if proj == 0:
+        return co[0], co[1]
+    x, y, z = 2.0 * (co[0] - 0.5), 2.0 * (co[1] - 0.5), 2.0 * (co[2] - 0.5)
+    if proj == 2:
+        if x * x + y * y > 0.0:
+            return (1.0 - np.arctan2(x, y) / np.pi) * 0.5, (z + 1.0) * 0.5
+        return 0.0, 0.0
+    l2 = x * x + y * y + z * z
+    if not l2 > 0.0:
+        return 0.0, 0.0
+    u = 0.0 if (x == 0.0 and y == 0.0) else 0.5 - np.arctan2(x, y) / (2.0 * np.pi)
+    c = min(max(z / np.sqrt(l2), -1.0), 1.0)
+    return u, 1.0 - np.arccos(c) / np.pi
+
+
+@kernel
+def box_weights(n, blend):
+    """The Image Texture's Box projection weights (x, y, z faces) for the object-space normal
+    ``n`` and Blend (Cycles's ``svm_node_tex_image_box``): with the normal's |components|
+    summing to 1 as barycentric coordinates of a triangle whose corners are the three faces,
+    one face near a corner, two along an edge band, three in the middle band, the bands as wide
+    as ``blend``."""
+    ax, ay, az = abs(n[0]), abs(n[1]), abs(n[2])
+    s = ax + ay + az
+    if not s > 0.0:
+        return 1.0, 0.0, 0.0
+    ax, ay, az = ax / s, ay / s, az / s
+    limit = 0.5 * (1.0 + blend)
+    if ax > limit * (ax + ay) and ax > limit * (ax + az):
+        return 1.0, 0.0, 0.0
+    if ay > limit * (ax + ay) and ay > limit * (ay + az):
+        return 0.0, 1.0, 0.0
+    if az > limit * (ax + az) and az > limit * (ay + az):
+        return 0.0, 0.0, 1.0
+    if not blend > 0.0:
+        return 1.0, 0.0, 0.0  # (Cycles: no valid choice, one side)
+    if az < (1.0 - limit) * (ay + ax):
+        wx = min(max((ax / (ax + ay) - 0.5 * (1.0 - blend)) / blend, 0.0), 1.0)
+        return wx, 1.0 - wx, 0.0
+    if ax < (1.0 - limit) * (ay + az):
+        wy = min(max((ay / (ay + az) - 0.5 * (1.0 - blend)) / blend, 0.0), 1.0)
+        return 0.0, wy, 1.0 - wy
+    if ay < (1.0 - limit) * (ax + az):
+        wx = min(max((ax / (ax + az) - 0.5 * (1.0 - blend)) / blend, 0.0), 1.0)
+        return wx, 0.0, 1.0 - wx
+    k = 2.0 * limit - 1.0
+    return (((2.0 - limit) * ax + (limit - 1.0)) / k, ((2.0 - limit) * ay + (limit - 1.0)) / k,
+            ((2.0 - limit) * az + (limit - 1.0)) / k)
+
+
+@kernel
+def image_box(img_info, img_u8, img_f32, img, mode, co, n, blend):
+    """RGBA of the Image Texture's Box projection at vector ``co`` for object-space normal
+    ``n``: up to three lookups (yz, xz, yx planes, flipped by the normal's sign so that no face
+    is mirrored, as Cycles maps them) weighted by ``box_weights``."""
+    wx, wy, wz = box_weights(n, blend)
+    r = g = b = a = 0.0
+    if wx > 0.0:
+        c = image_lookup(img_info, img_u8, img_f32, img, mode, 1.0 - co[1] if n[0] < 0.0 else co[1], co[2])
+        r, g, b, a = r + wx * c[0], g + wx * c[1], b + wx * c[2], a + wx * c[3]
+    if wy > 0.0:
+        c = image_lookup(img_info, img_u8, img_f32, img, mode, 1.0 - co[0] if n[1] > 0.0 else co[0], co[2])
+        r, g, b, a = r + wy * c[0], g + wy * c[1], b + wy * c[2], a + wy * c[3]
+    if wz > 0.0:
+        c = image_lookup(img_info, img_u8, img_f32, img, mode, 1.0 - co[1] if n[2] > 0.0 else co[1], co[0])
+        r, g, b, a = r + wz * c[0], g + wz * c[1], b + wz * c[2], a + wz * c[3]
+    return r, g, b, a
+
+
+@kernel
 def image_lookup(img_info, img_u8, img_f32, img, mode, u, v):
     """RGBA of image img at texture coordinate (u, v) (origin bottom-left), Cycles's CPU image
     interpolation: mode = interpolation·8 + extension (Closest 0 / Linear 1 / Cubic 2; REPEAT 0,
@@ -1052,9 +1127,14 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
                 _set(regs, o0, mix_blend(mode, fac[0], a, b))
         elif op == OP_MAPPING:
             _set(regs, o0, mapping(mode, _reg(regs, i0), _reg(regs, i1), _reg(regs, i2), _reg(regs, i3)))
-        elif op == OP_IMAGE:
-            v = _reg(regs, i0)
-            r, g, b, a = image_lookup(pd.img_info, pd.img_u8, pd.img_f32, param, mode, v[0], v[1])
+        elif op == OP_IMAGE:  # mode = projection·IMAGE_PROJECTION_STRIDE + interpolation·8 + extension
+            u, vv = image_projection(mode // IMAGE_PROJECTION_STRIDE, _reg(regs, i0))
+            r, g, b, a = image_lookup(pd.img_info, pd.img_u8, pd.img_f32, param, mode % IMAGE_PROJECTION_STRIDE, u, vv)
+            _set(regs, o0, (r, g, b))
+            _set1(regs, o1, a)
+        elif op == OP_IMAGE_BOX:  # in0 the vector, in1 the Blend
+            r, g, b, a = image_box(pd.img_info, pd.img_u8, pd.img_f32, param, mode, _reg(regs, i0),
+                                   world_to_object_normal(point, _row(point, POINT_N)), regs[i1, 0])
             _set(regs, o0, (r, g, b))
             _set1(regs, o1, a)
         elif op == OP_ENVIRONMENT:
