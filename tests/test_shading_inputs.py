@@ -705,3 +705,67 @@ def test_random_per_island_and_parametric_match_cycles(tmp_path):
     cap = cycles[..., 0] > 0.01
     assert np.percentile(np.abs(cycles - drt).max(axis=-1)[cap], 99) < 2e-3
     assert cycles[cap][:, 0].std() > 0.05
+
+
+def _mirrored_spheres(mat):
+    """Four turned smooth spheres with ``mat``, scaled (−1, 1, 1), (1, 1, 1), (1, −1, −1) (a
+    rotation) and (−1, −1, −1): two mirror, two do not."""
+    for loc, scale in (((-0.5, 0.5, -1), (-1, 1, 1)), ((0.5, 0.5, -1), (1, 1, 1)),
+                       ((-0.5, -0.5, -1), (1, -1, -1)), ((0.5, -0.5, -1), (-1, -1, -1))):
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.4, location=loc, segments=32, ring_count=16)
+        bpy.ops.object.shade_smooth()
+        obj = bpy.context.object
+        obj.scale, obj.rotation_euler = scale, (0.4, 0.3, 0.2)
+        obj.data.materials.append(mat)
+
+
+def _quadrant_means(img):
+    return [img[r * 32:(r + 1) * 32, c * 32:(c + 1) * 32, :3].mean() for r in (0, 1) for c in (0, 1)]
+
+
+@pytest.mark.parametrize("case", ["normal map", "backfacing", "glass"])
+def test_mirrored_objects_match_cycles(tmp_path, case):
+    """Objects whose matrix mirrors (negative determinant) turn their triangles inside out in
+    world space; DRT swaps two corners of each so that their true normal faces out as Cycles's
+    does, and flips the tangent sign the Normal Map's world-space bitangent needs. Before, such
+    objects were backfacing everywhere: a normal-mapped sphere rendered black, and glass
+    refracted as if every ray were leaving it. Per quadrant (one sphere each) against Cycles."""
+    from node_parity import add_sun, render_rgba_both, setup_scene
+
+    sc = setup_scene(4)
+    sc.cycles.samples = sc.drt.samples = 64
+    mat = bpy.data.materials.new(case)
+    nt = mat.node_tree
+    bsdf = nt.nodes["Principled BSDF"]
+    if case == "normal map":
+        bsdf.inputs["Roughness"].default_value = 0.4
+        nm = node(nt, "ShaderNodeNormalMap", {"Color": (0.7, 0.4, 0.9, 1.0)})
+        nt.links.new(nm.outputs[0], bsdf.inputs["Normal"])
+        add_sun(sc, 3.0, (0.5, 0.3, 0.2))
+    elif case == "backfacing":
+        em = node(nt, "ShaderNodeEmission", {"Strength": 1.0})
+        mix = node(nt, "ShaderNodeMix", {"Factor": nt.nodes.new("ShaderNodeNewGeometry").outputs["Backfacing"],
+                                        "A": (0.2, 0.8, 0.3, 1), "B": (0.9, 0.1, 0.1, 1)}, data_type="RGBA")
+        nt.links.new(mix.outputs["Result"], em.inputs["Color"])
+        nt.links.new(em.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    else:  # glass over a lit checker floor: the refraction shows which way the ray goes
+        bsdf.inputs["Transmission Weight"].default_value = 1.0
+        bsdf.inputs["Roughness"].default_value = 0.0
+        sc.cycles.max_bounces = sc.drt.max_bounces = 8
+        sc.cycles.transmission_bounces = sc.drt.transmission_bounces = 8
+        floor = bpy.data.materials.new("floor")
+        floor.node_tree.nodes.clear()
+        ck = node(floor.node_tree, "ShaderNodeTexChecker", {"Scale": 8.0})
+        fem = node(floor.node_tree, "ShaderNodeEmission", {"Color": ck.outputs["Color"]})
+        floor.node_tree.links.new(fem.outputs[0], floor.node_tree.nodes.new("ShaderNodeOutputMaterial").inputs[0])
+        bpy.ops.mesh.primitive_plane_add(size=2.0, location=(0, 0, -2.0))
+        bpy.context.object.data.materials.append(floor)
+    sc.world.node_tree.nodes["Background"].inputs[1].default_value = 0.3
+    _mirrored_spheres(mat)
+    cycles, drt = render_rgba_both(sc, tmp_path / "mirrored.exr")
+    c, d = _quadrant_means(cycles), _quadrant_means(drt)
+    print(case, np.round(c, 4), np.round(d, 4))
+    np.testing.assert_allclose(d, c, rtol=0.03)
+    if case == "glass":
+        err = np.abs(cycles[..., :3] - drt[..., :3]).max(axis=-1)
+        assert np.percentile(err, 90) < 0.05  # the refracted checker, pixel by pixel

@@ -688,3 +688,42 @@ def test_blender_viewport_denoise_setting_reaches_the_session(blender_viewport):
     def roughness(img):
         return float(np.abs(np.diff(img[..., :3], axis=1)).mean())
     assert roughness(f.rgba) < roughness(g.rgba)
+
+
+def _glass_cube() -> MeshData:
+    """A closed unit cube (outward counter-clockwise winding)."""
+    pos = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)], np.float64)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    tri = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))], np.int64)
+    return MeshData("cube", pos, tri, np.ones(len(tri), np.int64))
+
+
+def test_a_mirrored_object_renders_as_in_the_final_render():
+    """An object whose matrix mirrors: the viewport's static set swaps its triangles' corners as
+    the final render's geometry does, so a glass cube refracts the same way in both (before, its
+    true normal pointed inward in the viewport's world-space set)."""
+    from drt.scene import scene_from_dict
+
+    glass = {"name": "glass", "lobes": [{"type": "GLASS", "color": [1, 1, 1], "roughness": 0.0, "ior": 1.5}],
+             "emission": [0, 0, 0]}
+    mirror = np.diag([-1.0, 1.0, 1.0, 1.0]) @ np.array(
+        [[0.9, -0.3, 0.2, 0.1], [0.3, 0.9, -0.1, 0.0], [-0.2, 0.2, 0.95, -0.2], [0, 0, 0, 1]])
+    live = LiveScene(RenderSettings(width=32, height=32, spp=4, max_bounces=8), [DIFFUSE, glass], [SUN],
+                     (0.3, 0.3, 0.3))
+    live.set_object("floor", "floor", grid_mesh(4, 4.0), translate(z=-1.0))
+    live.set_object("cube", "cube", _glass_cube(), mirror)
+    got = render_live(live, top_camera(), spp=4)
+    cube, floor = _glass_cube(), grid_mesh(4, 4.0)
+    header = {"format": "drt-scene", "version": 1,
+              "render": {"resolution": [32, 32], "spp": 4, "max_bounces": 8},
+              "camera": {"type": "PERSP", "matrix_world": translate(0, 0, 3.0).tolist(), "lens": 50.0},
+              "world": {"color": [0.3, 0.3, 0.3]}, "materials": [DIFFUSE, glass], "lights": [SUN],
+              "meshes": [{"name": "floor"}, {"name": "cube"}],
+              "objects": [{"name": "floor", "mesh": 0, "matrix_world": translate(z=-1.0).tolist()},
+                          {"name": "cube", "mesh": 1, "matrix_world": mirror.tolist()}]}
+    arrays = {"mesh0.positions": floor.positions.astype(np.float32), "mesh0.triangles": floor.triangles.astype(np.int32),
+              "mesh0.material_index": np.zeros(len(floor.triangles), np.int32),
+              "mesh1.positions": cube.positions.astype(np.float32), "mesh1.triangles": cube.triangles.astype(np.int32),
+              "mesh1.material_index": np.ones(len(cube.triangles), np.int32)}
+    ref = render(scene_from_dict(header, arrays), spp=4, threads=1).combined
+    np.testing.assert_allclose(got, ref, rtol=1e-4, atol=1e-5)

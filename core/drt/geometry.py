@@ -151,7 +151,9 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     static_pos, static_tri, moving = [], [], []
     mats_static, nrm_static, hasn_static, uv_static = [], [], [], []
     mats_moving, nrm_moving, hasn_moving, uv_moving = [], [], [], []
-    order_static, order_moving = [], []  # meshes in global triangle order (for corner_attrs)
+    # meshes in global triangle order (for corner_attrs): (mesh, world matrix of a static one,
+    # corners swapped, mirrored)
+    order_static, order_moving = [], []
     obj_static, obj_moving = [], []  # object index per triangle block (Object Info)
     term_static = []  # shadow terminator geometry offset per static triangle block
     shade_static, shade_moving = [], []  # shadow terminator shading offset per triangle block
@@ -163,12 +165,13 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     any_normals = any(m.normals is not None for m in scene.meshes)
     any_uvs = any(m.uvs is not None for m in scene.meshes)
 
-    def per_tri(mesh, normals_world):
+    def per_tri(mesh, normals_world, flip):
         t = len(mesh.triangles)
-        nrm = normals_world if normals_world is not None else np.zeros((t, 3, 3), np.float32)
+        nrm = _corners(normals_world, flip) if normals_world is not None else np.zeros((t, 3, 3), np.float32)
         # no copies of arrays already of the right type: a 1M-triangle mesh's normals and UVs
         # are 60 MB, and nothing writes into the flattened arrays
-        uv = mesh.uvs.astype(np.float32, copy=False) if mesh.uvs is not None else np.zeros((t, 3, 2), np.float32)
+        uv = _corners(mesh.uvs, flip).astype(np.float32, copy=False) if mesh.uvs is not None \
+            else np.zeros((t, 3, 2), np.float32)
         return (mesh.material_index.astype(np.int32, copy=False), nrm.astype(np.float32, copy=False),
                 np.full(t, mesh.normals is not None), uv)
 
@@ -180,10 +183,12 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         if moves:
             m_open, m_close = obj.motion if obj.motion is not None else (obj.matrix, obj.matrix)
             rm = RigidMotion(_shift_matrix(m_open, shift), _shift_matrix(m_close, shift))
+            # (a moving object's true normal goes through its inverse transpose at the hit
+            # and faces out whatever the matrix: its corners stay as they are)
             moving.append(MovingMesh(obj.name, 0, mesh.positions, mesh.positions_close, mesh.triangles, rm))
-            m, n, h, u = per_tri(mesh, mesh.normals)
+            m, n, h, u = per_tri(mesh, mesh.normals, False)
             mats_moving.append(m), nrm_moving.append(n), hasn_moving.append(h), uv_moving.append(u)
-            order_moving.append((mesh, None))
+            order_moving.append((mesh, None, False, _mirrors(m_open)))
             obj_moving.append(np.full(len(mesh.triangles), oi, np.int32))
             shade_moving.append(np.full(len(mesh.triangles), obj.terminator_shading, np.float32))
             for mat in (m_open, m_close):
@@ -195,15 +200,17 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         world = np.empty((len(mesh.positions), 3), dtype=np.float32)
         _points_to_world(np.ascontiguousarray(mesh.positions), np.ascontiguousarray(m, dtype=np.float64), world, lo, hi)
         static_pos.append(world)
-        static_tri.append((mesh.triangles + v_offset).astype(np.int32, copy=False) if v_offset
-                          else mesh.triangles.astype(np.int32, copy=False))
+        flip = _mirrors(m)
+        tri = _corners(mesh.triangles, flip)
+        static_tri.append((tri + v_offset).astype(np.int32, copy=False) if v_offset
+                          else tri.astype(np.int32, copy=False))
         v_offset += len(world)
         ranges.append((t_offset, t_offset + len(mesh.triangles)))
         t_offset += len(mesh.triangles)
         nw = _transform_normals(mesh.normals, m) if mesh.normals is not None else None
-        a, b, c, d = per_tri(mesh, nw)
+        a, b, c, d = per_tri(mesh, nw, flip)
         mats_static.append(a), nrm_static.append(b), hasn_static.append(c), uv_static.append(d)
-        order_static.append((mesh, m))
+        order_static.append((mesh, m, flip, flip))
         obj_static.append(np.full(len(mesh.triangles), oi, np.int32))
         shade_static.append(np.full(len(mesh.triangles), obj.terminator_shading, np.float32))
         term_static.append(np.full(len(mesh.triangles), obj.terminator_geometry if mesh.normals is not None else 0.0,
@@ -247,23 +254,60 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     if any(isinstance(m, dict) and m.get("volume") for m in scene.materials):
         geom.object_id = cat(obj_static + obj_moving, np.zeros(0, np.int32))  # volume stack keys
     names = getattr(scene, "attributes", [])
-    tangents = {f"attr{i}" for i, a in enumerate(names) if a.startswith("tangent:")}
+    kinds = corner_attribute_kinds(names)
 
-    def attr_of(mesh, matrix, name):
+    def attr_of(mesh, matrix, swapped, mirrored, name):
         if name not in mesh.corner_attrs:
             return np.zeros((len(mesh.triangles), 3, 3), np.float32)
-        a = np.asarray(mesh.corner_attrs[name], np.float32)
-        if name in tangents and matrix is not None:  # static: world space (moving: at the hit)
-            a = _transform_tangents(a, matrix)
-        return a
+        return corner_attribute(np.asarray(mesh.corner_attrs[name], np.float32), kinds.get(name),
+                                matrix, swapped, mirrored)
 
     for name in sorted({k for m in scene.meshes for k in m.corner_attrs}):
-        geom.corner_attrs[name] = cat([attr_of(mesh, mat, name) for mesh, mat in order_static + order_moving],
+        geom.corner_attrs[name] = cat([attr_of(mesh, *rest, name) for mesh, *rest in order_static + order_moving],
                                       np.zeros((0, 3, 3), np.float32))
     if np.all(np.isfinite(lo)):
         center = 0.5 * (lo + hi)
         geom.scene_radius = float(max(np.linalg.norm(hi - center), 1e-3))
     return geom
+
+
+def corner_attribute_kinds(names) -> dict:
+    """{"attr<I>": "tangent" | "sign"} for the scene's attribute names that are Normal Map
+    tangents ("tangent:<uv>") and bitangent signs ("tangent_sign:<uv>")."""
+    kinds = {}
+    for i, a in enumerate(names):
+        if a.startswith("tangent:"):
+            kinds[f"attr{i}"] = "tangent"
+        elif a.startswith("tangent_sign:"):
+            kinds[f"attr{i}"] = "sign"
+    return kinds
+
+
+def corner_attribute(a: np.ndarray, kind, matrix, swapped: bool, mirrored: bool) -> np.ndarray:
+    """One mesh's per-corner attribute (T, 3, 3) as the flattened geometry holds it: tangents of
+    a static object (``matrix`` not None) mapped to world space, corners swapped as its
+    triangles are (`_corners`), and the bitangent sign negated for a mirroring object — the
+    Normal Map forms its bitangent as sign · N × T from vectors already mapped by the normal
+    transform, and under a mirroring matrix that cross product turns the other way
+    (M⁻ᵀa × M⁻ᵀb = M(a × b)/det M), where Cycles's object-space one keeps it."""
+    if kind == "tangent" and matrix is not None:  # static: world space (moving: at the hit)
+        a = _transform_tangents(a, matrix)
+    a = _corners(a, swapped)
+    return -a if kind == "sign" and mirrored else a
+
+
+def _mirrors(matrix) -> bool:
+    """Whether a 4×4 object matrix mirrors (its 3×3 part has a negative determinant)."""
+    return bool(np.linalg.det(np.asarray(matrix, np.float64)[:3, :3]) < 0.0)
+
+
+def _corners(a: np.ndarray, flip: bool) -> np.ndarray:
+    """A per-triangle-corner array (triangles (T, 3), or (T, 3, …) corner data) with corners 1
+    and 2 swapped when ``flip``: a mirroring object matrix turns its triangles' winding, and so
+    the true normal, inside out in world space (Cycles flips its Ng back for such objects);
+    swapping two corners of every triangle and of all its corner data turns it back without
+    changing what any point interpolates."""
+    return a[:, (0, 2, 1)] if flip else a
 
 
 def _normal_matrix(matrix) -> np.ndarray:

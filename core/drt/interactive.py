@@ -489,7 +489,8 @@ class LiveScene:
             parts = [static_tables] + [self._mesh_tables(self.objects[k].mesh, None) for k in keys]
             self._tables = tuple(np.concatenate([p[i] for p in parts]) for i in range(4))
             self._attr_tables = self._corner_attr_tables(static_attrs, len(tri),
-                                                         [self.objects[k].mesh for k in keys])
+                                                         [(self.objects[k].mesh, self.objects[k].matrix)
+                                                          for k in keys])
             self._tables_dirty = False
             self._tables_layout = layout
         elif static_changed:
@@ -523,12 +524,16 @@ class LiveScene:
         return geom, _LiveTracer(geom, static_scene, static_ng, moving_objects)
 
     @staticmethod
-    def _mesh_tables(mesh: MeshData, normals_world) -> tuple:
-        """Per-triangle (material, normals, has_normals, uvs) of one mesh."""
+    def _mesh_tables(mesh: MeshData, normals_world, swapped: bool = False) -> tuple:
+        """Per-triangle (material, normals, has_normals, uvs) of one mesh (corners 1 and 2
+        swapped when its triangles are)."""
+        from .geometry import _corners
+
         t = len(mesh.triangles)
         nrm = normals_world if normals_world is not None else (
             mesh.normals if mesh.normals is not None else np.zeros((t, 3, 3), np.float32))
         uv = mesh.uvs if mesh.uvs is not None else np.zeros((t, 3, 2), np.float32)
+        nrm, uv = _corners(np.asarray(nrm), swapped), _corners(np.asarray(uv), swapped)
         return (np.asarray(mesh.material_index, dtype=np.int32), np.asarray(nrm, dtype=np.float32),
                 np.full(t, mesh.normals is not None), np.asarray(uv, dtype=np.float32))
 
@@ -540,20 +545,24 @@ class LiveScene:
     def _corner_attr_tables(self, static_attrs: dict, n_static: int, instance_meshes: list) -> dict:
         """Global per-triangle corner attributes: the static rows, then each instance's (local:
         instance tangents are mapped at the hit like their normals)."""
+        from .geometry import _mirrors, corner_attribute, corner_attribute_kinds
+
+        kinds = corner_attribute_kinds(self.attributes)
         out = {}
         for name in self._attr_names():
             parts = [static_attrs.get(name, np.zeros((n_static, 3, 3), np.float32))]
-            parts += [np.asarray(m.corner_attrs.get(name, np.zeros((len(m.triangles), 3, 3))), np.float32)
-                      for m in instance_meshes]
+            parts += [corner_attribute(np.asarray(m.corner_attrs.get(name, np.zeros((len(m.triangles), 3, 3))),
+                                                  np.float32), kinds.get(name), None, False, _mirrors(matrix))
+                      for m, matrix in instance_meshes]
             out[name] = np.concatenate(parts)
         return out
 
     def _flatten_static(self):
         """World-space (shifted) positions and triangles of the static objects, their
         per-triangle tables and corner attributes (tangents mapped to world space)."""
-        from .geometry import _transform_tangents
+        from .geometry import _corners, _mirrors, corner_attribute, corner_attribute_kinds
 
-        tangents = {f"attr{i}" for i, a in enumerate(self.attributes) if a.startswith("tangent:")}
+        kinds = corner_attribute_kinds(self.attributes)
         names = self._attr_names()
         attr_parts: dict = {n: [] for n in names}
         pos_parts, tri_parts, tables = [], [], []
@@ -568,14 +577,15 @@ class LiveScene:
             _points_to_world(np.ascontiguousarray(mesh.positions, dtype=np.float64),
                              np.ascontiguousarray(m), world, lo, hi)
             pos_parts.append(world)
-            tri_parts.append((np.asarray(mesh.triangles) + v_offset).astype(np.int32))
+            flip = _mirrors(m)  # a mirroring matrix: corners swapped (geometry.build_geometry)
+            tri_parts.append((_corners(np.asarray(mesh.triangles), flip) + v_offset).astype(np.int32))
             v_offset += len(world)
             nw = _transform_normals(mesh.normals, m) if mesh.normals is not None else None
-            tables.append(self._mesh_tables(mesh, nw))
+            tables.append(self._mesh_tables(mesh, nw, flip))
             for n in names:
                 a = mesh.corner_attrs.get(n)
                 a = np.zeros((len(mesh.triangles), 3, 3), np.float32) if a is None else np.asarray(a, np.float32)
-                attr_parts[n].append(_transform_tangents(a, m) if n in tangents else a)
+                attr_parts[n].append(corner_attribute(a, kinds.get(n), m, flip, flip))
         pos = np.concatenate(pos_parts) if pos_parts else np.zeros((0, 3), np.float32)
         tri = np.concatenate(tri_parts) if tri_parts else np.zeros((0, 3), np.int32)
         empty = (np.zeros(0, np.int32), np.zeros((0, 3, 3), np.float32), np.zeros(0, bool),
