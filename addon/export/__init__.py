@@ -234,6 +234,7 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     infos: list[dict] = []  # Object Info per object, attached if a material reads it
     unsupported_visibility: dict[str, list[str]] = {}  # object name -> visibility settings DRT ignores
     unrendered: set[str] = set()  # geometry DRT has no primitive for (hair, points, OpenVDB)
+    checked_settings: set[str] = set()  # objects whose unrendered settings were looked at
 
     presented = objects_presented_as_meshes(depsgraph)
     for inst in depsgraph.object_instances:
@@ -254,8 +255,10 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
             unrendered.add(f"hair on '{obj.original.name}'")
         key = _instance_key(inst)
         visibility, holdout = instance_visibility(inst, depsgraph.view_layer)
-        if ignored := ignored_ray_visibility(obj):
-            unsupported_visibility.setdefault(obj.name, ignored)
+        if obj.name not in checked_settings:  # once per object: instances repeat it by the million
+            checked_settings.add(obj.name)
+            if ignored := ignored_ray_visibility(obj):
+                unsupported_visibility.setdefault(obj.name, ignored)
         matrix = matrix_list(inst.matrix_world.copy())
         slots = [s.material for s in obj.material_slots] or [None]
         slot_mats = np.array([mats.index_of(m) for m in slots], dtype=np.int32)
