@@ -418,15 +418,34 @@ def assert_within_ci(estimate_samples, expected, k: float = 4.0, atol: float = 1
             f"more than {k} standard errors ({se}) ")
 
 
+def refractable(wo, dirs, ior):
+    """(m,) bool: wi = dirs reflects, or refracts through some microfacet of a glass of ``ior``
+    seen from wo (local frame; Walter et al.: wo in front of h ∝ ±(wo + η wi), wi behind it).
+    A glass lobe's ``eval`` also transmits between the other pairs, as Cycles's does
+    (drt.materials.dielectric); sampling reaches only these."""
+    wo = np.asarray(wo, float)
+    flip = wo[2] < 0
+    eta = 1.0 / ior if flip else ior
+    s = np.array([1.0, 1.0, -1.0 if flip else 1.0])
+    wo_u = wo * s
+    wi_u = np.asarray(dirs, float) * s
+    h = wo_u + eta * wi_u
+    h *= np.where(h[:, 2:3] < 0, -1.0, 1.0)
+    return (wi_u[:, 2] > 0) | ((h @ wo_u > 0) & (np.einsum("ij,ij->i", h, wi_u) < 0))
+
+
 def material_chi_square(table, mat: int, wo: np.ndarray, n: int, rng, z_lo: float = 0.0,
-                        bins_z: int = 10, bins_phi: int = 20, refine: int = 48, coat_normal=None):
+                        bins_z: int = 10, bins_phi: int = 20, refine: int = 48, coat_normal=None,
+                        reachable=None):
     """Chi-square of a MaterialTable material's sampled directions against its own eval pdf.
 
     ``wo`` (n, 3) local-frame outgoing directions (all equal); cells are uniform in cos θ over
     [z_lo, 1] (0: the upper hemisphere; −1: the whole sphere, for transmission) × φ, expected
     counts from ``eval``'s pdf averaged over ``refine``² points per cell (dω = dz dφ).
     Returns (p-value, fraction of samples valid, expected mass in the grid, observed mass in
-    the cells too small to test). ``coat_normal``: passed to the table's sample and eval."""
+    the cells too small to test). ``coat_normal``: passed to the table's sample and eval;
+    ``reachable``: dirs (m, 3) → (m,) bool, the directions sampling can reach (``refractable``
+    for a glass lobe), the pdf counted there only."""
     s = table.sample(np.full(n, mat), wo, rng.random(n), rng.random((n, 2)), coat_normal=coat_normal)
     wi = s.wi[s.valid]
     span = 1.0 - z_lo
@@ -439,6 +458,8 @@ def material_chi_square(table, mat: int, wo: np.ndarray, n: int, rng, z_lo: floa
     r = np.sqrt(1 - Z * Z)
     dirs = np.stack([r * np.cos(P), r * np.sin(P), Z], -1).reshape(-1, 3)
     _, pdf = table.eval(np.full(len(dirs), mat), np.tile(wo[0], (len(dirs), 1)), dirs, coat_normal=coat_normal)
+    if reachable is not None:
+        pdf = pdf * reachable(dirs)
     cell = pdf.reshape(bins_z, refine, bins_phi, refine).mean(axis=(1, 3)) * (span / bins_z) \
         * (2 * np.pi / bins_phi)
     exp = cell.ravel() * n

@@ -12,7 +12,12 @@ alpha = roughness², height-correlated Smith G2 = 1 / (1 + Λ(wo) + Λ(wi))):
     transmission  f·|cos θi| = (1 − F(wo·h)) D G2 |wo·h| η² |wi·h| / (|cos θo| |wo + η wi|²)
                   with h ∝ ±(wo + η wi), h.z > 0
 
-F is the exact unpolarised dielectric Fresnel (1 at total internal reflection). The colour tints
+F is the exact unpolarised dielectric Fresnel (1 at total internal reflection). As in Cycles's
+``bsdf_microfacet_eval``, a transmission is evaluated for *every* pair of sides, with |wo·h| and
+|wi·h|, also where Walter's model has no microfacet that refracts wo into wi (wo behind h, or wi
+in front of it) and gives 0: Cycles does not test the configuration (its source says "TODO"),
+and its rough glass is lit through those pairs by next-event estimation (docs/decisions.md).
+Sampling still draws only refractions through the drawn h. The colour tints
 reflection and transmission alike (Cycles 5.0 sets ``reflection_tint = transmission_tint =
 color`` for the Glass BSDF); the functions here are colourless.
 
@@ -146,11 +151,13 @@ def dielectric_eval(wo, wi, alpha, ior, refraction_only):
         h = (-h[0], -h[1], -h[2])
     c_o = dot(wo_u, h)
     c_i = dot(wi_u, h)
-    # Microfacet must be front-facing for wo, and wi on the matching side of it.
-    if not c_o > 0.0:
-        return 0.0, 0.0
-    if not (c_i < 0.0 if is_t else c_i > 0.0):
-        return 0.0, 0.0
+    # Walter et al. require wo in front of the microfacet and a refracted wi behind it; Cycles's
+    # bsdf_microfacet_eval does not check a refraction's configuration (its "TODO: check if the
+    # refraction configuration is valid"), so pairs no microfacet can refract between still
+    # transmit there, by the same formula with |wo·h| and |wi·h|. DRT evaluates as Cycles does:
+    # next-event estimation through rough glass renders Cycles's picture (docs/decisions.md).
+    # Sampling never draws such a pair (a refraction through the drawn h lies behind it).
+    # (A reflection's h = normalize(wo + wi) is always in front of both.)
     f = fresnel(c_o, eta)
     if refraction_only:  # no Fresnel factor, but nothing refracts under TIR (Cycles)
         f = 1.0 if f >= 1.0 else 0.0
