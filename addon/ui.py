@@ -163,6 +163,11 @@ class DRT_RENDER_PT_light_paths(DRTRenderPanel, bpy.types.Panel):
         col = layout.column(align=True, heading="Clamping")
         col.prop(d, "clamp_direct")
         col.prop(d, "clamp_indirect")
+        cycles = getattr(context.scene, "cycles", None)
+        if cycles is not None and hasattr(cycles, "blur_glossy"):
+            # Cycles's own setting (addon/export/scene_parts.filter_glossy): one .blend, one picture
+            col = layout.column(heading="Caustics")
+            col.prop(cycles, "blur_glossy", text="Filter Glossy")
 
 
 class DRT_RENDER_PT_motion_blur(DRTRenderPanel, bpy.types.Panel):

@@ -582,9 +582,10 @@ def test_film_transparent_glass_matches_cycles(tmp_path, roughness):
     print(roughness, "alpha", a_c, a_d, "rgb", cycles[inner][..., :3].mean(), drt[inner][..., :3].mean())
     assert (a_c < 0.5) == (roughness < 0.1)  # transparent glass, or opaque to the film
     assert abs(a_d - a_c) < 0.01
-    if roughness == 0.0:  # (rough glass under a delta sun differs apart from the film: Cycles's
-        # Filter Glossy, on in this scene, lets the bottom face's light samples see the sun)
-        assert abs(drt[inner][..., :3].mean() / cycles[inner][..., :3].mean() - 1) < 0.02
+    # the colour too: at 0.08 and 0.3 the sun reaches the camera through Filter Glossy (1, on in
+    # both engines), the 0.08 glints too rare for 256 samples (at 4096: −1.5 %, 0.3: +1 %)
+    if roughness != 0.08:
+        assert abs(drt[inner][..., :3].mean() / cycles[inner][..., :3].mean() - 1) < (0.02 if roughness == 0 else 0.05)
 
 
 def principled_glass_sphere_scene(spp=256):
@@ -602,7 +603,7 @@ def principled_glass_sphere_scene(spp=256):
     sc.cycles.max_bounces = sc.drt.max_bounces = 12
     sc.cycles.transmission_bounces = 12
     sc.cycles.sample_clamp_indirect = 0.0
-    sc.cycles.blur_glossy = 0.0  # Cycles's Filter Glossy (a biased blur DRT does not model)
+    sc.cycles.blur_glossy = 0.0  # Filter Glossy off (DRT reads it too): the unbiased picture
     mat = bpy.data.materials.new("glass")
     nt = mat.node_tree
     nt.nodes.clear()

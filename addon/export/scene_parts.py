@@ -95,7 +95,22 @@ def render_settings(scene, preview: bool = False) -> dict:
       | ({"transparent_bounces": int(d.transparent_bounces)}
          if getattr(d, "transparent_bounces", 8) != 8 else {}) \
       | ({"exposure": exposure} if (exposure := film_exposure(scene)) != 1.0 else {}) \
-      | ({"film_transparent_roughness": glass} if (glass := transparent_glass(scene)) is not None else {})
+      | ({"film_transparent_roughness": glass} if (glass := transparent_glass(scene)) is not None else {}) \
+      | ({"filter_glossy": blur} if (blur := filter_glossy(scene)) > 0.0 else {})
+
+
+def filter_glossy(scene) -> float:
+    """Cycles's Light Paths > Caustics > Filter Glossy (``scene.cycles.blur_glossy``), which
+    widens glossy lobes after unlikely bounces (drt.path_stages.glossy_blur): the file's own
+    value, so a .blend gives Cycles's picture. Without the Cycles add-on the value the file
+    stored is read from its ID properties; a file that never had one gets Cycles's default 1."""
+    cy = getattr(scene, "cycles", None)
+    if cy is not None and hasattr(cy, "blur_glossy"):
+        value = cy.blur_glossy
+    else:
+        stored = scene.get("cycles")
+        value = stored.get("blur_glossy", 1.0) if hasattr(stored, "get") else 1.0
+    return min(max(float(value), 0.0), 10.0)
 
 
 def transparent_glass(scene) -> float | None:

@@ -32,6 +32,7 @@ from .geometry import SceneGeometry
 from .lights import LightSet
 from .lights.world_map import point_rows
 from .materials import MaterialTable
+from .materials.table import BLURRED_LOBES
 from .path_stages import (D_BOUNCE0, D_LENS, D_PIXEL, D_TIME, DIMS_PER_BOUNCE,  # noqa: F401 (re-exported)
                           MAX_SAMPLE_RADIANCE, RR_START_BOUNCE, SHADOW_EPSILON)
 from .sampling.pixel_filter import PixelFilter
@@ -51,8 +52,9 @@ _NO_XFORM = np.zeros((0, 3, 3))
 _NO_MOVING = np.zeros(0, dtype=bool)
 
 
-def _paths(n: int, sss: bool = False) -> stages.Paths:
+def _paths(n: int, sss: bool = False, blur: bool = False) -> stages.Paths:
     m = n if sss else 0  # subsurface state only in scenes with SSS
+    b = n if blur else 0  # Filter Glossy's path state only when a render filters
     return stages.Paths(
         o=np.empty((n, 3)), d=np.empty((n, 3)), tmax=np.empty(n), tau=np.empty(n),
         throughput=np.empty((n, 3)), prev_pdf=np.empty(n), prev_delta=np.empty(n, dtype=bool),
@@ -65,7 +67,7 @@ def _paths(n: int, sss: bool = False) -> stages.Paths:
         vseg=np.empty(n, dtype=np.int32),
         sss=np.zeros(m, dtype=np.int8), sss_coef=np.empty((m, 10)), sss_n=np.empty((m, 3)),
         sss_p=np.empty((m, 3)), sss_prim=np.empty(m, dtype=np.int64), sss_b=np.empty((m, 2)),
-        sss_count=np.zeros(m, dtype=np.int32), tcount=np.zeros(n, dtype=np.int32))
+        sss_count=np.zeros(m, dtype=np.int32), tcount=np.zeros(n, dtype=np.int32), min_pdf=np.empty(b))
 
 
 def _shadow_rays(n: int) -> stages.ShadowRays:
@@ -140,7 +142,12 @@ class Integrator:
             transparent_bounces=int(getattr(settings, "transparent_bounces", 8)),
             transparent_glass=(float(settings.film_transparent_roughness) ** 2  # (as alpha = roughness²)
                                if settings.film_transparent and settings.film_transparent_roughness is not None
-                               else -1.0))
+                               else -1.0),
+            filter_glossy=float(getattr(settings, "filter_glossy", 0.0)))
+        # Filter Glossy keeps a pdf per path only where it can widen a lobe: a render with it on,
+        # of a scene with a microfacet lobe (drt.materials.table.filtered_alpha)
+        self.filters_glossy = self.stage_settings.filter_glossy > 0.0 and bool(
+            np.isin(materials.data.lobe_type, BLURRED_LOBES).any())
         self._workspaces = threading.local()
         self._returned_outputs = collections.deque()  # per-batch output buffers (``_outputs``)
         # material programs (textures): a thread rewrites its own copy of the material data
@@ -246,7 +253,8 @@ class Integrator:
         # a path in a medium may queue two shadow rays per bounce (volume + surface NEE)
         n_shadow = 2 * n if self.media.enabled else n
         if ws is None or len(ws[0].slot) < n or len(ws[1].slot) < n_shadow:
-            ws = self._workspaces.arrays = (_paths(n, self.sss is not None), _shadow_rays(n_shadow))
+            ws = self._workspaces.arrays = (_paths(n, self.sss is not None, self.filters_glossy),
+                                            _shadow_rays(n_shadow))
         paths, shadow = ws
         return (stages.Paths(*(a[:n] for a in paths)), stages.ShadowRays(*(a[:n_shadow] for a in shadow)))
 

@@ -94,6 +94,7 @@ StageSettings = namedtuple("StageSettings", [
     "transparent_bounces",                # straight pass-throughs a path may make (Cycles's)
     "transparent_glass",                  # Film > Transparent Glass: the GGX alpha up to which a
                                           # glass transmission keeps the world transparent (−1: off)
+    "filter_glossy",                      # Cycles's Filter Glossy (0: off; ``glossy_blur``)
 ])
 
 Paths = namedtuple("Paths", [
@@ -120,6 +121,9 @@ Paths = namedtuple("Paths", [
                                           # dimensions: an exit is a vertex but no bounce)
     "tcount",                             # (n,) int32 transparent surfaces passed (Cycles's
                                           # transparent bounces: no bounce, own sample dims)
+    "min_pdf",                            # (n,) smallest pdf of the path's non-delta bounces
+                                          # (Cycles's min_ray_pdf, for Filter Glossy; zero-size
+                                          # when the render does not filter)
 ])
 
 # how a ray left its last vertex (Cycles's ray-type flags, for the Light Path node); 0: camera
@@ -452,6 +456,23 @@ def copy_path(paths, i, j):
         paths.sss[j] = paths.sss[i]
         paths.sss_count[j] = paths.sss_count[i]
     paths.tcount[j] = paths.tcount[i]
+    if paths.min_pdf.shape[0]:
+        paths.min_pdf[j] = paths.min_pdf[i]
+
+
+@inline_kernel
+def glossy_blur(settings, paths, i):
+    """Filter Glossy's alpha at path i's vertex (0: none): Cycles's surface_shader_prepare_closures.
+    A path that reached this vertex through an unlikely bounce (a diffuse one, a rough glossy one:
+    the smallest pdf so far, ``Paths.min_pdf``) sees its glossy lobes widened to at least
+    ½·sqrt(1 − min_pdf / Filter Glossy), which trades the fireflies of caustics for blur (a bias
+    Cycles has by default, 1.0). Camera rays and paths of delta bounces only are never blurred."""
+    if not paths.min_pdf.shape[0]:
+        return 0.0
+    blur_pdf = paths.min_pdf[i] / settings.filter_glossy
+    if not blur_pdf < 1.0:
+        return 0.0
+    return 0.5 * math.sqrt(1.0 - blur_pdf)
 
 
 @kernel
@@ -497,6 +518,8 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
         paths.terminate[j] = False
         paths.prev_flags[j] = 0
         paths.tcount[j] = 0
+        if paths.min_pdf.shape[0]:
+            paths.min_pdf[j] = np.inf
         paths.slot[j] = i
         paths.pixel[j] = pixel
         paths.index[j] = idx
@@ -679,6 +702,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             store(paths.prev_wo, j, neg(d))
             paths.prev_mat[j] = -1
             paths.prev_flags[j] = 0  # a volume scatter is none of the surface ray types
+            if paths.min_pdf.shape[0]:
+                paths.min_pdf[j] = min(paths.min_pdf[i], ph)
             paths.counts[j, 0] = n_bounce
             paths.vcount[j] = n_volume
             paths.vseg[j] = paths.vseg[i] + 1
@@ -835,12 +860,13 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # sampling, whose MIS weight is then 1
         n_wo = ns if front > 0.0 else neg(ns)
         code = hint_code(mat, silhouette or nv_local[2] < 1.0 or nc_local[2] < 1.0)
+        blur = glossy_blur(settings, paths, i)  # Filter Glossy (0: none)
 
         # --- next-event estimation
         # (a layered material's lobe weights at this wo, from the light sample's evaluation:
         # the BSDF sample below picks its lobe from them)
         view_weights = NO_VIEW_WEIGHTS
-        if direct != DIRECT_BSDF and ld.n_strategies > 0 and not md.delta_only[mat]:
+        if direct != DIRECT_BSDF and ld.n_strategies > 0 and (not md.delta_only[mat] or blur > 0.0):
             hint = material_hint(md, code, n_wo, wo)
             # (light position, selection): one jointly stratified 3-D sample, as Cycles's
             ul0, ul1, u_light_select = sample_3d(sd, pixel, idx, base + 1)
@@ -859,7 +885,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             if l_valid and lpdf > 0.0:
                 wi_l = to_local(wi, t_ax, b_ax, ns)
                 f, bpdf, view_weights = bsdf_eval_weights(md, mat, wo_l, wi_l, ns_local, nc_local, nv_local,
-                                                          front)
+                                                          front, blur)
                 f = scale(f, shading_factor(surf, prim, wi_l[2] * front))
                 # geometric and shading normals must agree on reflection vs transmission
                 same_geo = dot(wi, ng) * dot(wo, ng) > 0.0
@@ -888,7 +914,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # union of lobes but not within each lobe (glass, mixes: docs/estimators.md)
         ub0, ub1, u_lobe = sample_3d(sd, pixel, idx, base + 2)
         wi_l, weight, bpdf, kind, b_delta, b_valid = bsdf_sample_bump(md, mat, wo_l, u_lobe, ub0, ub1, ns_local,
-                                                                      nc_local, nv_local, front, view_weights)
+                                                                      nc_local, nv_local, front, view_weights, blur)
         if settings.indirect != INDIRECT_BSDF and not md.transmission_or_delta[mat]:
             # the lecture's hemisphere estimators, on wo's side of the surface
             if settings.indirect == INDIRECT_COSINE:
@@ -899,7 +925,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 bpdf = 0.5 / math.pi
             if front < 0.0:
                 wi_l = (wi_l[0], wi_l[1], -wi_l[2])
-            f, _ = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local, nc_local, nv_local, front)
+            f, _ = bsdf_eval_bump(md, mat, wo_l, wi_l, ns_local, nc_local, nv_local, front, blur)
             b_valid = bpdf > 0.0
             weight = scale(f, 1.0 / bpdf) if b_valid else (0.0, 0.0, 0.0)
             b_delta = False
@@ -979,6 +1005,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         store(paths.throughput, j, thr)
         paths.prev_pdf[j] = bpdf
         paths.prev_delta[j] = b_delta
+        if paths.min_pdf.shape[0]:  # (entering SSS is no scattering: Cycles's subsurface_bounce)
+            paths.min_pdf[j] = paths.min_pdf[i] if b_delta or entering else min(paths.min_pdf[i], bpdf)
         store(paths.prev_p, j, p)
         store(paths.prev_n, j, n_wo)
         store(paths.prev_wo, j, wo)

@@ -204,6 +204,10 @@ class RenderSettings:
     transmission_bounces: int = 12
     clamp_direct: float = 0.0
     clamp_indirect: float = 0.0
+    #: Cycles's Filter Glossy (Light Paths > Caustics): after an unlikely bounce, glossy lobes are
+    #: widened (drt.path_stages.glossy_blur), a bias that removes caustic fireflies. 0 = off,
+    #: the unbiased estimator; Cycles's default is 1.0, which the add-on exports
+    filter_glossy: float = 0.0
     shutter: tuple[float, float] | None = None
     direct: str = "MIS_POWER"  # direct-light estimator (see integrator.DIRECT_STRATEGIES)
     indirect: str = "BSDF"  # continuation sampling (integrator.INDIRECT_STRATEGIES)
@@ -388,6 +392,7 @@ def _render_settings(h: dict) -> RenderSettings:
         sampler=_enum(r, "sampler", p, SAMPLER_KINDS, "SOBOL"),
         clamp_direct=_number(r, "clamp_direct", p, 0.0, lo=0),
         clamp_indirect=_number(r, "clamp_indirect", p, 0.0, lo=0),
+        filter_glossy=_number(r, "filter_glossy", p, 0.0, lo=0, hi=10),
         shutter=shutter,
         direct=_enum(r, "direct", p, DIRECT_STRATEGIES, "MIS_POWER"),
         indirect=_enum(r, "indirect", p, INDIRECT_STRATEGIES, "BSDF"),

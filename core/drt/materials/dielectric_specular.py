@@ -192,9 +192,11 @@ def fresnel_color(cos_h, eta, f0t):
 
 
 @kernel
-def dielectric_spec_eval(wo, wi, alpha, eta, f0t, multiscatter):
+def dielectric_spec_eval(wo, wi, alpha, alpha_energy, eta, f0t, multiscatter):
     """White-weight lobe: (f·|cos θi| 3-tuple, pdf of ``glossy_sample``); alpha above the
-    singular threshold."""
+    singular threshold. ``alpha_energy``: the alpha the multiscatter compensation is read at —
+    the lobe's own, also where Filter Glossy widened ``alpha`` (Cycles fixes a closure's
+    energy_scale when it is set up, before the blur)."""
     v, p = glossy_eval(wo, wi, alpha)
     if not v > 0.0:
         return (0.0, 0.0, 0.0), p
@@ -204,7 +206,7 @@ def dielectric_spec_eval(wo, wi, alpha, eta, f0t, multiscatter):
     hn = math.sqrt(hx * hx + hy * hy + hz * hz)
     cos_h = abs(wo[0] * hx + wo[1] * hy + wo[2] * hz) / hn if hn > 0.0 else 1.0
     fc = fresnel_color(cos_h, eta, f0t)
-    k = energy_factor(alpha, eta, f0t, multiscatter, wo[2])
+    k = energy_factor(alpha_energy, eta, f0t, multiscatter, wo[2])
     return (v * fc[0] * k[0], v * fc[1] * k[1], v * fc[2] * k[2]), p
 
 
@@ -295,9 +297,9 @@ def glossy_energy(alpha, cos_o, fss):
 
 
 @kernel
-def metallic_eval(wo, wi, alpha, f0, tint, multiscatter):
+def metallic_eval(wo, wi, alpha, alpha_energy, f0, tint, multiscatter):
     """White-weight metallic lobe: (f·|cos θi| 3-tuple, pdf of ``glossy_sample``); f0 the base
-    colour (clamped to [0, 1]), tint the F82 tint."""
+    colour (clamped to [0, 1]), tint the F82 tint; ``alpha_energy`` as ``dielectric_spec_eval``'s."""
     v, p = glossy_eval(wo, wi, alpha)
     if not v > 0.0:
         return (0.0, 0.0, 0.0), p
@@ -307,7 +309,7 @@ def metallic_eval(wo, wi, alpha, f0, tint, multiscatter):
     hn = math.sqrt(hx * hx + hy * hy + hz * hz)
     cos_h = abs(wo[0] * hx + wo[1] * hy + wo[2] * hz) / hn if hn > 0.0 else 1.0
     b = (f82_b(f0[0], tint[0]), f82_b(f0[1], tint[1]), f82_b(f0[2], tint[2]))
-    k = metal_energy(alpha, f0, b, multiscatter, wo[2])
+    k = metal_energy(alpha_energy, f0, b, multiscatter, wo[2])
     return (v * f82_channel(cos_h, f0[0], b[0]) * k[0], v * f82_channel(cos_h, f0[1], b[1]) * k[1],
             v * f82_channel(cos_h, f0[2], b[2]) * k[2]), p
 

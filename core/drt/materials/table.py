@@ -102,6 +102,9 @@ SSS_RADIUS, SSS_G, SSS_IOR, SSS_METHOD, SSS_WEIGHT, SSS_ALPHA = 0, 3, 4, 5, 6, 7
 CLOSURE_WEIGHT_CUTOFF = 1e-5
 
 # BSDFSample.lobe_kind values, for Cycles's bounce counting
+#: the microfacet lobes Filter Glossy widens (``filtered_alpha``; Cycles's bsdf_blur)
+BLURRED_LOBES = (BSDF_GLOSSY, BSDF_GLASS, BSDF_DIELECTRIC_SPECULAR, BSDF_METALLIC, BSDF_REFRACTION)
+
 LOBE_NONE = 0
 LOBE_DIFFUSE = 1
 LOBE_GLOSSY = 2          # glossy reflection and glass reflection
@@ -236,7 +239,7 @@ def bsdf_eval(md, m, wo, wi):
     """md: MaterialData; m: material index; wo, wi: local unit 3-tuples. Returns (f, pdf): f the
     3-tuple Σ color_l·f_l·|cos θi| over the material's non-delta lobes, pdf = Σ p_l·pdf_l per
     unit solid angle of wi (exactly what ``bsdf_sample`` reports for a non-delta sample)."""
-    return bsdf_eval_bump(md, m, wo, wi, NO_BUMP, NO_BUMP, NO_BUMP, 1.0 if wo[2] >= 0.0 else -1.0)
+    return bsdf_eval_bump(md, m, wo, wi, NO_BUMP, NO_BUMP, NO_BUMP, 1.0 if wo[2] >= 0.0 else -1.0, 0.0)
 
 
 @kernel
@@ -305,10 +308,32 @@ def slot_cos(lobe_frame, lobe_coat, m, s, wo, nc_local, nv_local):
 
 
 @inline_kernel
-def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front):
+def bsdf_eval_bump(md, m, wo, wi, ns_local, nc_local, nv_local, front, blur):
     """``bsdf_eval`` at a normal-mapped hit (``bsdf_eval_weights`` without the lobe weights)."""
-    f, pdf, _ = bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front)
+    f, pdf, _ = bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front, blur)
     return f, pdf
+
+
+@inline_kernel
+def filtered_alpha(md, m, s, blur):
+    """(alpha, delta) of slot s as shaded at a vertex whose Filter Glossy blur is ``blur`` (a
+    GGX alpha; 0: none): Cycles's bsdf_blur widens every microfacet lobe to at least that alpha
+    (GLOSSY, GLASS, REFRACTION, the Principled's specular and metal; never diffuse-class lobes,
+    and an IOR-1 glass stays a straight pass), so a mirror or a clear glass met after a diffuse
+    bounce is evaluated and lit by next-event estimation like a rough one. Only the lobe's
+    shape changes: its multiscatter compensation, layer weights and selection weight stay
+    those of its own alpha, as Cycles computes them when it sets the closure up."""
+    a = md.lobe_alpha[m, s]
+    delta = md.lobe_delta[m, s]
+    if blur > a:
+        t = md.lobe_type[m, s]
+        if t == BSDF_GLOSSY or t == BSDF_DIELECTRIC_SPECULAR or t == BSDF_METALLIC:
+            a = blur
+            delta = a * a <= ALPHA_SQ_SINGULAR
+        elif (t == BSDF_GLASS or t == BSDF_REFRACTION) and not abs(md.lobe_ior[m, s] - 1.0) < IOR_ONE_EPS:
+            a = blur
+            delta = a * a <= ALPHA_SQ_SINGULAR
+    return a, delta
 
 
 #: ``bsdf_eval_weights``'s "no lobe weights to reuse": ``pick_lobe_view`` weighs the lobes itself
@@ -316,7 +341,7 @@ NO_VIEW_WEIGHTS = (-1.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @inline_kernel
-def bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front):
+def bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front, blur):
     """(f, pdf, view weights): ``bsdf_eval`` at a normal-mapped hit (the local frame's z is the mapped normal;
     ``ns_local`` the unmapped one in that frame, ``NO_BUMP`` when there is no map): Cycles's
     bump map correction (``bump_shadowing``) applied. ``nc_local``: the coat normal in that
@@ -325,7 +350,8 @@ def bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front):
     ``lobe_frame`` are evaluated with wo and wi in their own normal's frame, and get Cycles's
     bump side check and diffuse softening against their own normal. ``front``: ±1, the z sign of
     Cycles's N' (the shading normal on wo's geometric side) — it differs from wo's own side only
-    at a smooth silhouette, where diffuse-class lobes follow it (``facing_front``).
+    at a smooth silhouette, where diffuse-class lobes follow it (``facing_front``). ``blur``:
+    the vertex's Filter Glossy alpha (``filtered_alpha``; 0: none).
 
     The view weights are (total, w0, w1, w2, w3): a layered material's ``view_weight`` of slots
     0–3 and their sum, which this walk computes anyway for its pdf and which are the same for
@@ -363,8 +389,11 @@ def bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front):
         else:
             sel = md.lobe_select[m, s]
             uw_s = (1.0, 1.0, 1.0)  # (no lobe has a layer)
-        if md.lobe_delta[m, s]:
-            continue  # a delta lobe has no density to evaluate
+        alpha = md.lobe_alpha[m, s]
+        if md.lobe_delta[m, s] or blur > alpha:  # (Filter Glossy widens microfacet lobes)
+            alpha, delta = filtered_alpha(md, m, s, blur)
+            if delta:
+                continue  # a delta lobe has no density to evaluate
         wo = wo_main
         wi = wi_main
         g = g_diffuse
@@ -384,7 +413,7 @@ def bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front):
         elif not keep:
             continue
         if t == BSDF_DIELECTRIC_SPECULAR:
-            fc, p = dielectric_spec_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s],
+            fc, p = dielectric_spec_eval(wo, wi, alpha, md.lobe_alpha[m, s], md.lobe_ior[m, s],
                                          lobe_f0(md, m, s), md.lobe_fresnel[m, s, 3] > 0.0)
             if md.has_layers[m] and md.lobe_layer[m, s] >= 0:  # under a coat / sheen
                 fc = (fc[0] * uw_s[0], fc[1] * uw_s[1], fc[2] * uw_s[2])  # (view_weight's)
@@ -395,7 +424,7 @@ def bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             continue
         if t == BSDF_METALLIC:
             k = md.lobe_fresnel[m, s, 4]
-            fc, p = metallic_eval(wo, wi, md.lobe_alpha[m, s], metal_f0(md, m, s), lobe_f0(md, m, s),
+            fc, p = metallic_eval(wo, wi, alpha, md.lobe_alpha[m, s], metal_f0(md, m, s), lobe_f0(md, m, s),
                                   md.lobe_fresnel[m, s, 3] > 0.0)
             if md.has_layers[m] and md.lobe_layer[m, s] >= 0:
                 fc = (fc[0] * uw_s[0], fc[1] * uw_s[1], fc[2] * uw_s[2])  # (view_weight's)
@@ -408,13 +437,13 @@ def bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             v, p = diffuse_eval(facing_front(wo, front), wi)
             v *= g
         elif t == BSDF_GLOSSY:
-            v, p = glossy_eval(wo, wi, md.lobe_alpha[m, s])
+            v, p = glossy_eval(wo, wi, alpha)
             fss = (md.lobe_fresnel[m, s, 0], md.lobe_fresnel[m, s, 1], md.lobe_fresnel[m, s, 2])
             if fss[0] + fss[1] + fss[2] > 0.0:  # Multiscatter GGX: a factor per channel
                 k = glossy_energy(md.lobe_alpha[m, s], wo[2], fss)
                 c0, c1, c2 = c0 * k[0], c1 * k[1], c2 * k[2]
         elif t == BSDF_GLASS:
-            v, p = glass_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
+            v, p = glass_eval(wo, wi, alpha, md.lobe_ior[m, s])
             if md.lobe_fresnel[m, s, 3] > 0.0 and wo[2] * wi[2] > 0.0:
                 # a Principled transmission: the reflection is weighted by the lobe's
                 # scalar weight (untinted), only the refraction by its colour
@@ -427,7 +456,7 @@ def bsdf_eval_weights(md, m, wo, wi, ns_local, nc_local, nv_local, front):
             v, p = translucent_eval(facing_front(wo, front), wi)
             v *= g
         elif t == BSDF_REFRACTION:
-            v, p = refraction_eval(wo, wi, md.lobe_alpha[m, s], md.lobe_ior[m, s])
+            v, p = refraction_eval(wo, wi, alpha, md.lobe_ior[m, s])
         elif t == BSDF_SHEEN:  # diffuse-class in Cycles: softened like diffuse
             v, p = sheen_eval(sheen_facing(wo, front), wi, md.lobe_alpha[m, s])
             v *= g
@@ -732,11 +761,11 @@ def pick_lobe(md, m, u_lobe):
 def bsdf_sample(md, m, wo, u_lobe, u0, u1):
     """``bsdf_sample_bump`` without a normal map (see there)."""
     return bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, NO_BUMP, NO_BUMP, NO_BUMP, 1.0 if wo[2] >= 0.0 else -1.0,
-                            NO_VIEW_WEIGHTS)
+                            NO_VIEW_WEIGHTS, 0.0)
 
 
 @inline_kernel
-def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, front, weights):
+def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, front, weights, blur):
     """md: MaterialData; m: material index; wo: local unit 3-tuple; u_lobe in [0, 1) picks the
     lobe (and, rescaled inside the picked interval, glass's reflect/refract choice); (u0, u1) in
     [0, 1)² picks the direction. Returns (wi, weight, pdf, lobe_kind, is_delta, valid):
@@ -747,7 +776,8 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, fr
     ``nc_local``, ``nv_local`` the coat and valid-reflection normals (``bsdf_eval_bump``): a lobe
     with a ``lobe_frame`` samples wi about its own normal; ``front`` the side diffuse-class lobes
     reflect on (``bsdf_eval_bump``); ``weights`` the view weights ``bsdf_eval_weights`` returned
-    for the same (m, wo, normals, front), or ``NO_VIEW_WEIGHTS``."""
+    for the same (m, wo, normals, front), or ``NO_VIEW_WEIGHTS``; ``blur`` the vertex's Filter
+    Glossy alpha (``filtered_alpha``; 0: none)."""
     zero = (0.0, 0.0, 0.0)
     count = md.lobe_count[m]
     if count == 0 or wo[2] == 0.0:
@@ -756,9 +786,9 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, fr
     if not p_sel > 0.0:
         return zero, zero, 0.0, LOBE_NONE, False, False
     t = md.lobe_type[m, slot]
-    is_delta = md.lobe_delta[m, slot]
-    # alpha 0 makes the lobe functions take their delta path (also for glass with ior ≈ 1)
-    alpha = 0.0 if is_delta else md.lobe_alpha[m, slot]
+    alpha, is_delta = filtered_alpha(md, m, slot, blur)
+    if is_delta:  # alpha 0 makes the lobe functions take their delta path (also for glass with ior ≈ 1)
+        alpha = 0.0
     ior = md.lobe_ior[m, slot]
     refracted = False
     wo_main = wo
@@ -855,33 +885,33 @@ def bsdf_sample_bump(md, m, wo, u_lobe, u0, u1, ns_local, nc_local, nv_local, fr
         return wi, color, pdf, kind, False, True
 
     # One-sample MIS over lobes: the whole material's f and pdf at the sampled wi.
-    f, pdf = bsdf_eval_bump(md, m, wo_main, wi, ns_local, nc_local, nv_local, front)
+    f, pdf = bsdf_eval_bump(md, m, wo_main, wi, ns_local, nc_local, nv_local, front, blur)
     if not pdf > 0.0:
         return wi, zero, 0.0, LOBE_NONE, False, False
     return wi, (f[0] / pdf, f[1] / pdf, f[2] / pdf), pdf, kind, False, True
 
 
 @kernel
-def _eval_rows(md, mat, wo, wi, nc, f, pdf):
+def _eval_rows(md, mat, wo, wi, nc, blur, f, pdf):
     for i in range(mat.shape[0]):
         w_o = load(wo, i)
         fi, p = bsdf_eval_bump(md, mat[i], w_o, load(wi, i), NO_BUMP, load(nc, i), NO_BUMP,
-                               1.0 if w_o[2] >= 0.0 else -1.0)
+                               1.0 if w_o[2] >= 0.0 else -1.0, blur)
         store(f, i, fi)
         pdf[i] = p
 
 
 @kernel
-def _sample_rows(md, mat, wo, u_lobe, u2, nc, light_wi, wi, weight, pdf, kind, is_delta, valid):
+def _sample_rows(md, mat, wo, u_lobe, u2, nc, light_wi, blur, wi, weight, pdf, kind, is_delta, valid):
     for i in range(mat.shape[0]):
         w_o = load(wo, i)
         front = 1.0 if w_o[2] >= 0.0 else -1.0
         weights = NO_VIEW_WEIGHTS
         if light_wi.shape[0]:  # as shade: the light sample's evaluation first, its weights reused
             _, _, weights = bsdf_eval_weights(md, mat[i], w_o, load(light_wi, i), NO_BUMP, load(nc, i), NO_BUMP,
-                                              front)
+                                              front, blur)
         w, wt, p, k, d, ok = bsdf_sample_bump(md, mat[i], w_o, u_lobe[i], u2[i, 0], u2[i, 1], NO_BUMP,
-                                              load(nc, i), NO_BUMP, front, weights)
+                                              load(nc, i), NO_BUMP, front, weights, blur)
         store(wi, i, w)
         store(weight, i, wt)
         pdf[i] = p
@@ -1407,28 +1437,31 @@ class MaterialTable:
                                                                np.float64), (n, 3)))
 
     def eval(self, mat: np.ndarray, wo: np.ndarray,
-             wi: np.ndarray, coat_normal=None) -> tuple[np.ndarray, np.ndarray]:
+             wi: np.ndarray, coat_normal=None, blur: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """mat (n,) int; wo, wi (n, 3) local unit vectors. Returns (f·|cos θi| (n, 3) summed over
         the non-delta lobes, pdf (n,) per unit solid angle of wi, Σ p_l pdf_l, exactly what
         sample() reports for a non-delta sample). Applies ``bsdf_eval`` to each row;
         ``coat_normal``: a local unit 3-vector the lobes with a ``lobe_frame`` are shaded about
-        (``bsdf_eval_bump``'s nc_local; default the frame's z)."""
+        (``bsdf_eval_bump``'s nc_local; default the frame's z); ``blur``: a Filter Glossy
+        alpha (``filtered_alpha``; 0: none)."""
         mat = self._mat_rows(mat)
         n = mat.shape[0]
         f = np.empty((n, 3))
         pdf = np.empty(n)
-        _eval_rows(self.data, mat, vec3_rows(wo), vec3_rows(wi), self._coat_rows(coat_normal, n), f, pdf)
+        _eval_rows(self.data, mat, vec3_rows(wo), vec3_rows(wi), self._coat_rows(coat_normal, n), float(blur),
+                   f, pdf)
         return f, pdf
 
     def sample(self, mat: np.ndarray, wo: np.ndarray, u_lobe: np.ndarray,
-               u2: np.ndarray, coat_normal=None, light_wi=None) -> BSDFSample:
+               u2: np.ndarray, coat_normal=None, light_wi=None, blur: float = 0.0) -> BSDFSample:
         """mat (n,) int; wo (n, 3) local; u_lobe (n,) in [0, 1) picks the lobe (and, rescaled
         inside the picked interval, glass's reflect/refract choice); u2 (n, 2) in [0, 1)² picks
         the direction. See BSDFSample and the module docstring for weight and pdf. Applies
         ``bsdf_sample`` to each row; wi is 0 in rows where no lobe could be sampled.
         ``coat_normal`` as in ``eval``. ``light_wi`` (n, 3): as the integrator does, evaluate
         each row at this direction first (a light sample) and pick the lobe from the weights
-        that evaluation computed (``bsdf_eval_weights``): the same samples, bit for bit."""
+        that evaluation computed (``bsdf_eval_weights``): the same samples, bit for bit.
+        ``blur`` as in ``eval``."""
         mat = self._mat_rows(mat)
         n = mat.shape[0]
         wi = np.empty((n, 3))
@@ -1439,6 +1472,6 @@ class MaterialTable:
         valid = np.empty(n, bool)
         _sample_rows(self.data, mat, vec3_rows(wo), scalar_rows(u_lobe, n),
                      f64_array(u2).reshape(n, 2), self._coat_rows(coat_normal, n),
-                     _NO_ROWS if light_wi is None else vec3_rows(light_wi),
+                     _NO_ROWS if light_wi is None else vec3_rows(light_wi), float(blur),
                      wi, weight, pdf, kind, is_delta, valid)
         return BSDFSample(wi, weight, pdf, kind, is_delta, valid)
