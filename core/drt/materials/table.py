@@ -101,10 +101,10 @@ SSS_RADIUS, SSS_G, SSS_IOR, SSS_METHOD, SSS_WEIGHT, SSS_ALPHA = 0, 3, 4, 5, 6, 7
 #: lobes whose average colour is below this are dropped (Cycles's CLOSURE_WEIGHT_CUTOFF).
 CLOSURE_WEIGHT_CUTOFF = 1e-5
 
-# BSDFSample.lobe_kind values, for Cycles's bounce counting
 #: the microfacet lobes Filter Glossy widens (``filtered_alpha``; Cycles's bsdf_blur)
 BLURRED_LOBES = (BSDF_GLOSSY, BSDF_GLASS, BSDF_DIELECTRIC_SPECULAR, BSDF_METALLIC, BSDF_REFRACTION)
 
+# BSDFSample.lobe_kind values, for Cycles's bounce counting
 LOBE_NONE = 0
 LOBE_DIFFUSE = 1
 LOBE_GLOSSY = 2          # glossy reflection and glass reflection
@@ -327,10 +327,9 @@ def filtered_alpha(md, m, s, blur):
     delta = md.lobe_delta[m, s]
     if blur > a:
         t = md.lobe_type[m, s]
-        if t == BSDF_GLOSSY or t == BSDF_DIELECTRIC_SPECULAR or t == BSDF_METALLIC:
-            a = blur
-            delta = a * a <= ALPHA_SQ_SINGULAR
-        elif (t == BSDF_GLASS or t == BSDF_REFRACTION) and not abs(md.lobe_ior[m, s] - 1.0) < IOR_ONE_EPS:
+        refracting = t == BSDF_GLASS or t == BSDF_REFRACTION
+        if (t == BSDF_GLOSSY or t == BSDF_DIELECTRIC_SPECULAR or t == BSDF_METALLIC
+                or (refracting and not abs(md.lobe_ior[m, s] - 1.0) < IOR_ONE_EPS)):
             a = blur
             delta = a * a <= ALPHA_SQ_SINGULAR
     return a, delta
