@@ -168,6 +168,8 @@ class DRT_RENDER_PT_light_paths(DRTRenderPanel, bpy.types.Panel):
             # Cycles's own setting (addon/export/scene_parts.filter_glossy): one .blend, one picture
             col = layout.column(heading="Caustics")
             col.prop(cycles, "blur_glossy", text="Filter Glossy")
+            col.prop(cycles, "caustics_reflective", text="Reflective")
+            col.prop(cycles, "caustics_refractive", text="Refractive")
 
 
 class DRT_RENDER_PT_motion_blur(DRTRenderPanel, bpy.types.Panel):

@@ -216,21 +216,6 @@ def test_filter_glossy_is_cycles_setting():
         assert render_settings(sc, preview=True).get("filter_glossy") == expected
 
 
-def test_caustics_switches_warn():
-    """Cycles's Reflective / Refractive Caustics switches (off: glossy closures after a diffuse
-    bounce are dropped) are not rendered: the export says so, and only then."""
-    pytest.importorskip("bpy")
-    import bpy
-
-    from addon.export import export_depsgraph
-
-    sc = _blender_caustic_scene(None, 1)
-    assert not export_depsgraph(bpy.context.evaluated_depsgraph_get()).warnings
-    sc.cycles.caustics_refractive = False
-    warnings = export_depsgraph(bpy.context.evaluated_depsgraph_get()).warnings
-    assert len(warnings) == 1 and "Refractive Caustics off" in warnings[0], warnings
-
-
 def test_caustics_through_filter_glossy_match_cycles(tmp_path):
     """At Cycles's default Filter Glossy (1.0) the point light's caustics of a smooth glass
     ball and a smooth mirror ball (unreachable without it) light the floor in their shadows;

@@ -161,19 +161,6 @@ def ignored_ray_visibility(obj) -> list[str]:
 UNRENDERED_GEOMETRY_TYPES = {"CURVES": "hair curves", "POINTCLOUD": "point cloud", "VOLUME": "volume"}
 
 
-def caustics_switches_off(scene) -> list[str]:
-    """A warning if Cycles's Light Paths > Caustics switches drop caustics (glossy or glass
-    closures right after a diffuse bounce), which DRT does not: it renders them, blurred by
-    Filter Glossy (addon/export/scene_parts.filter_glossy)."""
-    cy = getattr(scene, "cycles", None)
-    off = [name for prop, name in (("caustics_reflective", "Reflective"), ("caustics_refractive", "Refractive"))
-           if cy is not None and not getattr(cy, prop, True)]
-    if not off:
-        return []
-    return [f"Light Paths > Caustics: {' and '.join(off)} Caustics off is not rendered; DRT renders "
-            "those caustics (Filter Glossy blurs them)"]
-
-
 def _has_elements(obj) -> bool:
     """Whether an evaluated hair-curves, point-cloud or volume object holds anything to render
     (an empty one renders nothing in Cycles either)."""
@@ -327,7 +314,6 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
         more = len(unsupported_visibility) - 8
         warnings.append("not rendered yet (the objects render as plain ones): "
                         + named + (f" and {more} more" if more > 0 else ""))
-    warnings += caustics_switches_off(scene)
     warnings += mats.warnings
     if mats.reads_object_info():
         for o, info in zip(objects, infos):

@@ -96,7 +96,25 @@ def render_settings(scene, preview: bool = False) -> dict:
          if getattr(d, "transparent_bounces", 8) != 8 else {}) \
       | ({"exposure": exposure} if (exposure := film_exposure(scene)) != 1.0 else {}) \
       | ({"film_transparent_roughness": glass} if (glass := transparent_glass(scene)) is not None else {}) \
-      | ({"filter_glossy": blur} if (blur := filter_glossy(scene)) > 0.0 else {})
+      | ({"filter_glossy": blur} if (blur := filter_glossy(scene)) > 0.0 else {}) \
+      | {f"caustics_{kind}": False for kind, on in caustics_switches(scene).items() if not on}
+
+
+def _cycles_setting(scene, name: str, default):
+    """Cycles's scene setting ``name``: from the Cycles add-on's properties, or, without the
+    add-on, the value the file stored in its ID properties (``default`` if it never had one)."""
+    cy = getattr(scene, "cycles", None)
+    if cy is not None and hasattr(cy, name):
+        return getattr(cy, name)
+    stored = scene.get("cycles")
+    return stored.get(name, default) if hasattr(stored, "get") else default
+
+
+def caustics_switches(scene) -> dict[str, bool]:
+    """Cycles's Light Paths > Caustics > Reflective / Refractive (``scene.cycles.caustics_*``,
+    on in a new file): off, a hit right after a diffuse bounce is shaded without the glossy
+    reflection / refraction closures (drt.materials.caustics)."""
+    return {kind: bool(_cycles_setting(scene, f"caustics_{kind}", True)) for kind in ("reflective", "refractive")}
 
 
 def filter_glossy(scene) -> float:
@@ -104,13 +122,7 @@ def filter_glossy(scene) -> float:
     widens glossy lobes after unlikely bounces (drt.path_stages.glossy_blur): the file's own
     value, so a .blend gives Cycles's picture. Without the Cycles add-on the value the file
     stored is read from its ID properties; a file that never had one gets Cycles's default 1."""
-    cy = getattr(scene, "cycles", None)
-    if cy is not None and hasattr(cy, "blur_glossy"):
-        value = cy.blur_glossy
-    else:
-        stored = scene.get("cycles")
-        value = stored.get("blur_glossy", 1.0) if hasattr(stored, "get") else 1.0
-    return min(max(float(value), 0.0), 10.0)
+    return min(max(float(_cycles_setting(scene, "blur_glossy", 1.0)), 0.0), 10.0)
 
 
 def transparent_glass(scene) -> float | None:

@@ -302,6 +302,9 @@ class LiveScene:
             if (settings.filter_type, settings.filter_width) != (self.settings.filter_type,
                                                                  self.settings.filter_width):
                 self._filter = None
+            if (settings.caustics_reflective, settings.caustics_refractive) != (
+                    self.settings.caustics_reflective, self.settings.caustics_refractive):
+                self._material_table = None  # (the switches' twin rows: drt.materials.caustics)
             self.settings = settings
 
     # ------------------------------------------------------------------ build
@@ -318,9 +321,9 @@ class LiveScene:
         geom, tracer = self._geometry()
         if self._material_table is None:
             try:
-                self._material_table = MaterialTable.from_scene(self._materials_or_default(),
-                                                                self.images + self.world_images,
-                                                                self.attributes)
+                self._material_table = MaterialTable.from_scene(
+                    self._materials_or_default(), self.images + self.world_images, self.attributes,
+                    (self.settings.caustics_reflective, self.settings.caustics_refractive))
             except ValueError as e:
                 raise SceneError("materials", str(e)) from None
             self.counters.material_builds += 1

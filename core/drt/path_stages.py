@@ -747,6 +747,11 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             continue
         p = load(hits.p, i)
         ng = load(hits.ng, i)
+        medium_mat = mat  # (the scene's own material: its medium, whichever row shades the hit)
+        if md.caustic_row.shape[0] and paths.prev_flags[i] & RAY_DIFFUSE and md.caustic_row[mat] >= 0:
+            # right after a diffuse bounce, with a Caustics switch off, Cycles builds the shader
+            # without the closures the switch drops: the material's twin row (materials.caustics)
+            mat = md.caustic_row[mat]
         # a see-through ray on a holdout object (Cycles's SD_OBJECT_HOLDOUT_MASK; drt.scene.ObjectSpec)
         obj_holdout = False
         if holdouts is not None:
@@ -905,7 +910,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                     if vd is not None and vd.enabled:  # the shadow ray starts in the media on wi's side
                         stack_copy(paths.vstack, i, shadow.vstack, n_shadow)
                         if not same_geo and not (lifted and same_sh):
-                            stack_cross(vd, shadow.vstack, n_shadow, prim, mat, wi, ng)
+                            stack_cross(vd, shadow.vstack, n_shadow, prim, medium_mat, wi, ng)
                     n_shadow += 1
 
         # --- continue the path by sampling the BSDF
@@ -948,7 +953,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 continue
             copy_path(paths, i, j)
             if vd is not None and vd.enabled and not refl_geo:
-                stack_cross(vd, paths.vstack, j, prim, mat, wi, ng)
+                stack_cross(vd, paths.vstack, j, prim, medium_mat, wi, ng)
             store(paths.o, j, offset_point(p, ng, wi))
             paths.tmax[j] = max(paths.tmax[i] - t_geom, 0.0)
             store(paths.throughput, j, mul(thr, weight))
@@ -994,7 +999,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         if vd is not None and vd.enabled:
             stack_copy(paths.vstack, i, paths.vstack, j)
             if not refl_geo and not entering:  # transmitted: enters or leaves the material's medium
-                stack_cross(vd, paths.vstack, j, prim, mat, wi, ng)
+                stack_cross(vd, paths.vstack, j, prim, medium_mat, wi, ng)
             paths.vcount[j] = paths.vcount[i]
             paths.vseg[j] = paths.vseg[i] + 1
         # a walk starts exactly on the surface (its first ray is pushed along wi by the walker)

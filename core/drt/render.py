@@ -184,7 +184,8 @@ def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None
     settings = replace(scene.render, **overrides)
     geom = build_geometry(scene)
     try:
-        materials = MaterialTable.from_scene(scene.materials, scene.images, scene.attributes)
+        materials = MaterialTable.from_scene(scene.materials, scene.images, scene.attributes,
+                                             (settings.caustics_reflective, settings.caustics_refractive))
     except ValueError as e:
         raise SceneError("materials", str(e)) from None
     camera = Camera(scene.camera, settings, geom.origin_shift)

@@ -208,6 +208,10 @@ class RenderSettings:
     #: widened (drt.path_stages.glossy_blur), a bias that removes caustic fireflies. 0 = off,
     #: the unbiased estimator; Cycles's default is 1.0, which the add-on exports
     filter_glossy: float = 0.0
+    #: Cycles's Light Paths > Caustics > Reflective / Refractive: off, a hit right after a diffuse
+    #: bounce is shaded without the glossy reflection / refraction lobes (drt.materials.caustics)
+    caustics_reflective: bool = True
+    caustics_refractive: bool = True
     shutter: tuple[float, float] | None = None
     direct: str = "MIS_POWER"  # direct-light estimator (see integrator.DIRECT_STRATEGIES)
     indirect: str = "BSDF"  # continuation sampling (integrator.INDIRECT_STRATEGIES)
@@ -393,6 +397,8 @@ def _render_settings(h: dict) -> RenderSettings:
         clamp_direct=_number(r, "clamp_direct", p, 0.0, lo=0),
         clamp_indirect=_number(r, "clamp_indirect", p, 0.0, lo=0),
         filter_glossy=_number(r, "filter_glossy", p, 0.0, lo=0, hi=10),
+        caustics_reflective=_bool(r, "caustics_reflective", p, True),
+        caustics_refractive=_bool(r, "caustics_refractive", p, True),
         shutter=shutter,
         direct=_enum(r, "direct", p, DIRECT_STRATEGIES, "MIS_POWER"),
         indirect=_enum(r, "indirect", p, INDIRECT_STRATEGIES, "BSDF"),

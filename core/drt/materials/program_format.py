@@ -236,9 +236,9 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
                        footprint=None, camera=None, world=None) -> ProgramData | None:
     """ProgramData for the validated ``materials`` (scene.py) and their ``MaterialTable``; None
     when no material has a program and there is no ``world`` program. Lobes are matched to
-    table slots with the table's own rule (a lobe whose colour's mean is below ``cutoff`` was
-    dropped). A validated ``world`` program is appended after the materials' programs: its
-    index is ``world_program_index(pd)``."""
+    table slots by the table's ``lobe_slot_of`` (file lobe → slot; without it by the rule that a
+    lobe whose colour's mean is below ``cutoff`` was dropped). A validated ``world`` program is
+    appended after the materials' programs: its index is ``world_program_index(pd)``."""
     if not any(m.get("program") for m in materials) and world is None:
         return None
     m_count = len(materials)
@@ -269,10 +269,13 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         data.append(prog["data"])
         op_start.append(op_start[-1] + len(ops))
         const_start.append(const_start[-1] + len(prog["constants"]))
+        slot_of = table.lobe_slot_of[i] if getattr(table, "lobe_slot_of", None) is not None else None
         slot = 0
         for j, lobe in enumerate(mat["lobes"]):
-            if np.mean(lobe["color"]) < cutoff:
+            if (j not in slot_of) if slot_of is not None else np.mean(lobe["color"]) < cutoff:
                 continue
+            if slot_of is not None:
+                slot = slot_of[j]
             color_reg[i, slot] = _reg(lobe.get("color_reg"), n, f"{where} lobe {j} color_reg")
             rough_reg[i, slot] = _reg(lobe.get("roughness_reg"), n, f"{where} lobe {j} roughness_reg")
             weight_reg[i, slot] = _reg(lobe.get("weight_reg"), n, f"{where} lobe {j} weight_reg")

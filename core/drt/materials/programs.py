@@ -1310,8 +1310,8 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
             alpha = md.lobe_alpha[m, l]
             t = md.lobe_type[m, l]
             # (as MaterialTable: Lambert (1), translucent (7), sheen (9) and velvet (10) never,
-            # glass (3) and refraction (8) also at IOR ≈ 1, a holdout (11) always)
-            md.lobe_delta[m, l] = t == 11 or (t != 1 and t != 7 and t != 9 and t != 10 and (alpha * alpha <= ALPHA_SQ_SINGULAR or (
+            # glass (3) and refraction (8) also at IOR ≈ 1, a holdout (11) and a coat tint (12) always)
+            md.lobe_delta[m, l] = t == 11 or t == 12 or (t != 1 and t != 7 and t != 9 and t != 10 and (alpha * alpha <= ALPHA_SQ_SINGULAR or (
                 (t == 3 or t == 8) and abs(md.lobe_ior[m, l] - 1.0) < IOR_ONE_EPS)))
         kr = pd.lobe_layer_reg[m, l, 0]
         if kr >= 0:  # a textured coat / sheen weight: k = the register's largest component
@@ -1336,7 +1336,7 @@ def eval_material(pd, md, regs, m, prim, b1, b2, point):
         if not md.lobe_delta[m, l]:
             delta_only = False
         t = md.lobe_type[m, l]
-        if md.lobe_delta[m, l] or t == 3 or t == 7 or t == 8:  # transmitting or delta
+        if (md.lobe_delta[m, l] and t != 12) or t == 3 or t == 7 or t == 8:  # transmitting or delta
             trans_delta = True
         a0 += md.lobe_color[m, l, 0] * md.lobe_avg[m, l, 0]
         a1 += md.lobe_color[m, l, 1] * md.lobe_avg[m, l, 1]

@@ -52,6 +52,7 @@ import numpy as np
 
 from ..kernels import inline_kernel, kernel
 from ..kernels.vec3 import build_frame, load, store, to_local, to_world
+from .caustics import TINT_ONLY, with_caustics_twins
 from .dielectric import IOR_ONE_EPS, fresnel, glass_eval, glass_sample, refraction_eval, refraction_sample
 from .diffuse import INV_PI, diffuse_eval, diffuse_sample, translucent_eval, translucent_sample
 from .dielectric_specular import (average_albedo, dielectric_spec_delta_weight, dielectric_spec_eval,
@@ -84,6 +85,8 @@ BSDF_SHEEN = 9  # Cycles's microfiber sheen (LTC), drt.materials.sheen
 BSDF_VELVET = 10  # Ashikhmin velvet (Sheen BSDF "Ashikhmin", legacy Velvet), drt.materials.sheen
 BSDF_HOLDOUT = 11  # Cycles's Holdout closure: never sampled or evaluated; its colour (a grey
 #                    weight) cuts camera-visible hits out of the film's alpha (drt.path_stages)
+BSDF_COAT_TINT = 12  # a coat Cycles drops for a Reflective Caustics switch, whose tint still
+#                      absorbs: a layer of albedo 0 (drt.materials.caustics; never in a file)
 BSDF_TYPES = {"DIFFUSE": BSDF_DIFFUSE, "GLOSSY": BSDF_GLOSSY, "GLASS": BSDF_GLASS,
               "SUBSURFACE": BSDF_SUBSURFACE, "DIELECTRIC_SPECULAR": BSDF_DIELECTRIC_SPECULAR,
               "METALLIC": BSDF_METALLIC, "TRANSLUCENT": BSDF_TRANSLUCENT,
@@ -175,6 +178,9 @@ _ONE_MINUS_EPS = math.nextafter(1.0, 0.0)
 #:   Weight)) as Cycles's sheen, FRAME_VALID (glossy-class lobes of a material that also has a
 #:   DIFFUSE lobe) the valid-reflection normal; only a hit's ``nc_local`` / ``nv_local`` ≠
 #:   NO_BUMP make them differ;
+#:   caustic_row (M,) int64: the row shading material m right after a diffuse bounce when one of
+#:   Cycles's Caustics switches is off (its twin without the lobes they drop; −1: m itself;
+#:   drt.materials.caustics), zero-size when both are on;
 #:   lobe_avg (M, L, 3) f64: per unit colour, the lobe's cosine-averaged share (the specular
 #:   layer's average albedo, 1 − its max for the lobes under it, 1 otherwise): lobe selection
 #:   and the albedo pass weigh colours by it (also per hit, in ``programs.eval_material``).
@@ -183,7 +189,7 @@ MaterialData = namedtuple("MaterialData", [
     "lobe_count", "emission", "has_emission", "albedo", "delta_only", "pure_diffuse",
     "transmission_or_delta", "has_diffuse", "summary", "lobe_sss", "sss_exit",
     "lobe_fresnel", "lobe_layer", "has_layers", "lobe_avg", "lobe_coat", "emission_layer",
-    "lobe_frame"])
+    "lobe_frame", "caustic_row"])
 
 
 #: ``ns_local`` of a surface without a bump/normal map: the shading frame's own z (also
@@ -591,9 +597,12 @@ def layer_cos(md, m, s, wo, nc_local, nv_local):
 def layer_albedo(md, m, top, cos_o, front):
     """Albedo at cos θo (``layer_cos``) of a layer lobe per unit weight: a sheen's
     ``sheen_albedo`` (cos θo clamped to 0 below N', ``front``), a specular layer's largest RGB
-    albedo (``layer_albedo_max``)."""
-    if md.lobe_type[m, top] == BSDF_SHEEN:
+    albedo (``layer_albedo_max``), a COAT_TINT's 0."""
+    t = md.lobe_type[m, top]
+    if t == BSDF_SHEEN:
         return sheen_albedo(md.lobe_alpha[m, top], cos_o if cos_o * front >= 0.0 else 0.0)
+    if t == BSDF_COAT_TINT:  # a coat the caustics switches dropped: only its tint absorbs
+        return 0.0
     return layer_albedo_max(md.lobe_alpha[m, top], md.lobe_ior[m, top], lobe_f0(md, m, top),
                             md.lobe_fresnel[m, top, 3] > 0.0, cos_o)
 
@@ -635,14 +644,14 @@ def view_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w):
     if md.lobe_layer[m, s] >= 0:
         uw, memo_top, memo_w = memo_under_weight(md, m, s, wo, nc_local, nv_local, front, memo_top, memo_w)
     c = (md.lobe_color[m, s, 0] + md.lobe_color[m, s, 1] + md.lobe_color[m, s, 2]) * (1.0 / 3.0)
-    if t == BSDF_DIELECTRIC_SPECULAR or t == BSDF_SHEEN:
+    if t == BSDF_DIELECTRIC_SPECULAR or t == BSDF_SHEEN or t == BSDF_COAT_TINT:
         cos_o = layer_cos(md, m, s, wo, nc_local, nv_local)
         a = layer_albedo(md, m, s, cos_o, front)
         f = factor_of_albedo(md, m, s, a, cos_o)
         memo_top = s
         memo_w = (uw[0] * f[0], uw[1] * f[1], uw[2] * f[2])
-        if t == BSDF_DIELECTRIC_SPECULAR:  # (a sheen's 0, where Cycles drops it, is its eval's too)
-            a = max(a, 1e-6)
+        if t == BSDF_DIELECTRIC_SPECULAR:  # (a sheen's 0, where Cycles drops it, is its eval's too;
+            a = max(a, 1e-6)  # a COAT_TINT's 0: never picked)
     elif t == BSDF_METALLIC:  # f is k × F(f0): the weight is k × Schlick's F averaged over RGB
         f0 = metal_f0(md, m, s)
         x = 1.0 - min(abs(layer_cos(md, m, s, wo, nc_local, nv_local)), 1.0)
@@ -1068,12 +1077,13 @@ class MaterialTable:
         self.lobe_count = used.sum(axis=1)
         lambert = (self.lobe_type == BSDF_DIFFUSE) | (self.lobe_type == BSDF_TRANSLUCENT) \
             | (self.lobe_type == BSDF_SHEEN) | (self.lobe_type == BSDF_VELVET)
-        # a holdout "lobe" is marked delta: never evaluated, and no reason for NEE
+        # a holdout "lobe" is marked delta: never evaluated, and no reason for NEE (so is a
+        # COAT_TINT, which only weighs the lobes under it)
         self.lobe_delta = used & ~lambert & (
             (self.lobe_alpha ** 2 <= ALPHA_SQ_SINGULAR)
             | (((self.lobe_type == BSDF_GLASS) | (self.lobe_type == BSDF_REFRACTION))
                & (np.abs(self.lobe_ior - 1.0) < IOR_ONE_EPS))
-            | (self.lobe_type == BSDF_HOLDOUT))
+            | (self.lobe_type == BSDF_HOLDOUT) | (self.lobe_type == BSDF_COAT_TINT))
         sss = used & (self.lobe_type == BSDF_SUBSURFACE)
         self.lobe_sss = np.zeros((m, n_slots, 8)) if lobe_sss is None else np.asarray(lobe_sss, np.float64)
         self.lobe_fresnel = np.zeros((m, n_slots, 5)) if lobe_fresnel is None \
@@ -1108,6 +1118,7 @@ class MaterialTable:
             eff[i, j] = sheen_average_albedo(self.lobe_alpha[i, j])
         for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_VELVET))):
             eff[i, j] = velvet_average_albedo(self.lobe_alpha[i, j])
+        eff[used & (self.lobe_type == BSDF_COAT_TINT)] = 0.0  # (reflects nothing; its tint absorbs)
         own = eff.copy()  # a layer's own average albedo (before the layers above scale it)
         for i, j in zip(*np.nonzero(used & (self.lobe_layer >= 0))):
             top, keep = self.lobe_layer[i, j], np.ones(3)
@@ -1117,8 +1128,8 @@ class MaterialTable:
                 top = self.lobe_layer[i, top]
             eff[i, j] = own[i, j] * keep if self.lobe_type[i, j] in (BSDF_DIELECTRIC_SPECULAR, BSDF_METALLIC,
                                                                        BSDF_SHEEN) else keep
-        # a holdout is no BSDF: never selected, no albedo
-        eff[used & (self.lobe_type == BSDF_HOLDOUT)] = 0.0
+        # a holdout (or a COAT_TINT) is no BSDF: never selected, no albedo
+        eff[used & ((self.lobe_type == BSDF_HOLDOUT) | (self.lobe_type == BSDF_COAT_TINT))] = 0.0
         self.lobe_effective = self.lobe_color * eff if n_slots else self.lobe_color
         w = np.where(used, self.lobe_effective.mean(axis=2), 0.0)
         for i, j in zip(*np.nonzero(used & (self.lobe_type == BSDF_GLASS) & (self.lobe_fresnel[..., 3] > 0))):
@@ -1160,8 +1171,8 @@ class MaterialTable:
             delta_only=c(~np.any(used & ~self.lobe_delta & ~sss, axis=1), np.bool_),
             pure_diffuse=c(pure_diffuse, np.bool_),
             transmission_or_delta=c(
-                np.any(used & (np.isin(self.lobe_type, TRANSMITTING) | self.lobe_delta | sss), axis=1),
-                np.bool_),
+                np.any(used & (np.isin(self.lobe_type, TRANSMITTING) | self.lobe_delta | sss)
+                       & (self.lobe_type != BSDF_COAT_TINT), axis=1), np.bool_),
             has_diffuse=c(np.any(self.lobe_type == BSDF_DIFFUSE, axis=1), np.bool_),
             summary=c(np.stack(self._summarise_lobes(used), axis=1).reshape(m, 4), np.float64),
             lobe_sss=c(self.lobe_sss.reshape(m, n_slots, 8), np.float64),
@@ -1174,6 +1185,7 @@ class MaterialTable:
             lobe_coat=c(self.lobe_coat.reshape(m, n_slots, 4), np.float64),
             emission_layer=c(self.emission_layer, np.int64),
             lobe_frame=c(np.where(used, self.lobe_frame, FRAME_SHADING).reshape(m, n_slots), np.int64),
+            caustic_row=np.zeros(0, np.int64),
         )
         self.has_subsurface = bool(sss.any())
 
@@ -1206,7 +1218,8 @@ class MaterialTable:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_scene(cls, materials: list[dict], images=(), attributes=()) -> "MaterialTable":
+    def from_scene(cls, materials: list[dict], images=(), attributes=(),
+                   caustics: tuple[bool, bool] = (True, True)) -> "MaterialTable":
         """Build from the header's ``materials`` list (scene-format.md). Raises ValueError naming
         the material and field, e.g. ``material 'Glass' lobe 1: ior must be > 0, got -1.0``.
         Roughness is Blender's (alpha = roughness²) and must lie in [0, 1]; a DIFFUSE lobe's
@@ -1215,10 +1228,18 @@ class MaterialTable:
         Materials with a (validated, ``drt.scene``) ``program`` are kept in ``program_source``
         with the scene's ``images``, for ``program_data``; their emission, which varies over
         the surface, is not a light for next-event estimation (``has_emission`` False here,
-        ``data.has_emission`` True: hits still collect it)."""
+        ``data.has_emission`` True: hits still collect it).
+
+        ``caustics``: Cycles's (Reflective, Refractive) Caustics switches. Either off: every
+        material with a lobe they drop gets a twin row after the scene's materials, shaded
+        instead of it right after a diffuse bounce (``data.caustic_row``,
+        drt.materials.caustics)."""
         if not isinstance(materials, (list, tuple)):
             raise ValueError(f"materials must be a list, got {type(materials).__name__}")
-        names, parsed, emissions, em_layers = [], [], [], []
+        names, parsed, emissions, em_layers, slots_of = [], [], [], [], []
+        twin_of = None
+        if not all(caustics):  # Cycles's Caustics switches: each affected material's twin
+            materials, twin_of = with_caustics_twins(materials, *caustics)
         for i, mat in enumerate(materials):
             if not isinstance(mat, dict):
                 raise ValueError(f"material {i}: must be an object, got {type(mat).__name__}")
@@ -1296,9 +1317,12 @@ class MaterialTable:
                 # the colour: a black glass or metal still reflects)
                 weight = max(color.mean(), fr[4]) if (kind == "GLASS" and fr[3] > 0) or kind == "METALLIC" \
                     else color.mean()
+                code = BSDF_TYPES[kind]
+                if kind == "DIELECTRIC_SPECULAR" and lobe.get(TINT_ONLY):  # (drt.materials.caustics)
+                    code, weight = BSDF_COAT_TINT, 1.0
                 if weight >= CLOSURE_WEIGHT_CUTOFF:
                     slot_of[j] = len(rows)
-                    rows.append((BSDF_TYPES[kind], color, alpha, ior, sss, fr, under, coat, frame))
+                    rows.append((code, color, alpha, ior, sss, fr, under, coat, frame))
             # Lambert lobes split off SSS channels go last: program registers address the
             # slots of the file's own lobes
             rows += extra
@@ -1308,6 +1332,7 @@ class MaterialTable:
             em_layers.append(_layer_slot(lobes, em_layer, slot_of))
             names.append(name)
             parsed.append(rows)
+            slots_of.append(slot_of)
         if any(r[0] == BSDF_SUBSURFACE for rows in parsed for r in rows):
             # SSS exit points are shaded by a white Lambert (Cycles's subsurface_shader_data_setup)
             names.append(SSS_EXIT_MATERIAL)
@@ -1335,6 +1360,10 @@ class MaterialTable:
         table = cls(names, lobe_type, lobe_color, lobe_alpha, lobe_ior, emission, lobe_sss,
                     lobe_fresnel, lobe_layer, lobe_coat, np.array(em_layers, np.int64).reshape(m),
                     lobe_frame)
+        table.lobe_slot_of = slots_of + [{0: 0}] * (m - len(slots_of))  # (file lobe → slot; the SSS exit row)
+        if twin_of is not None:
+            table.data = table.data._replace(caustic_row=np.concatenate(
+                [twin_of, np.full(m - len(twin_of), -1, np.int64)]))
         table.program_source = None
         table.images = list(images)  # a world program may read them without any material program
         for i, mat in enumerate(materials):
