@@ -334,7 +334,7 @@ def set_pass_pixels(render_pass, img: np.ndarray) -> None:
 
 #: view-layer passes Cycles renders and DRT does not (yet): (property, name in the warning)
 _UNRENDERED_PASSES = (
-    ("use_pass_mist", "Mist"), ("use_pass_position", "Position"), ("use_pass_vector", "Vector"),
+    ("use_pass_position", "Position"), ("use_pass_vector", "Vector"),
     ("use_pass_uv", "UV"), ("use_pass_object_index", "Object Index"),
     ("use_pass_material_index", "Material Index"),
     ("use_pass_diffuse_direct", "Diffuse Direct"), ("use_pass_diffuse_indirect", "Diffuse Indirect"),
@@ -371,4 +371,5 @@ def view_layer_pass_flags(view_layer) -> dict:
         "depth": bool(getattr(view_layer, "use_pass_z", False)),
         "normal": bool(getattr(view_layer, "use_pass_normal", False)),
         "albedo": bool(getattr(view_layer, "use_pass_diffuse_color", False)),
+        "mist": bool(getattr(view_layer, "use_pass_mist", False)),
     }

@@ -20,6 +20,7 @@ PASSES = (  # (Blender pass name, channels, chan_id, type, film attribute, view-
     ("Depth", 1, "Z", "VALUE", "depth", "depth"),
     ("Normal", 3, "XYZ", "VECTOR", "normal", "normal"),
     ("DiffCol", 3, "RGB", "COLOR", "albedo", "albedo"),
+    ("Mist", 1, "Z", "VALUE", "mist", "mist"),
 )
 
 
@@ -234,5 +235,8 @@ def fill_layer(layer, film, crop, wanted) -> None:
     rows, cols = crop
     _set_pass(layer, "Combined", np.nan_to_num(film.combined[rows, cols], nan=0.0))
     for name, channels, _cid, _kind, attr, _flag in wanted:
-        img = np.asarray(getattr(film, attr))[rows, cols]  # film.depth: background already 1e10
+        img = getattr(film, attr)
+        if img is None:  # (a film without the pass: film.mist of a render that did not ask for it)
+            continue
+        img = np.asarray(img)[rows, cols]  # film.depth: background already 1e10
         _set_pass(layer, name, img.reshape(img.shape[0], img.shape[1], channels))

@@ -16,6 +16,7 @@ EXTRA_PANELS = (
     "DATA_PT_EEVEE_light", "DATA_PT_area", "DATA_PT_spot", "DATA_PT_sunlight",
     "EEVEE_MATERIAL_PT_context_material", "EEVEE_MATERIAL_PT_surface", "MATERIAL_PT_preview",
     "EEVEE_WORLD_PT_surface", "WORLD_PT_context_world",
+    "EEVEE_WORLD_PT_mist",  # (World > Mist Pass: the Mist pass's start, depth and falloff)
     "RENDER_PT_color_management", "RENDER_PT_format", "RENDER_PT_frame_range",
     "VIEWLAYER_PT_layer_passes",
 )
@@ -137,6 +138,7 @@ class DRT_VIEWLAYER_PT_passes_data(bpy.types.Panel):
         col.prop(vl, "use_pass_z")
         col.prop(vl, "use_pass_normal")
         col.prop(vl, "use_pass_diffuse_color", text="Albedo (Diffuse Color)")
+        col.prop(vl, "use_pass_mist")
         cl = getattr(vl, "cycles", None)  # the Cycles add-on's view-layer settings, if enabled
         if cl is not None:
             col.prop(cl, "denoising_store_passes", text="Denoising Data")

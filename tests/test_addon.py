@@ -36,7 +36,7 @@ class FakeLayout:
     def props(self):
         return [name for _, name in self.drawn]
 
-    def column(self):
+    def column(self, **_kw):
         return self
 
     def prop(self, data, name, **_kw):
@@ -192,7 +192,7 @@ def test_passes_written(tmp_path):
 
 
 def test_passes_drt_does_not_render_are_named(monkeypatch):
-    """Passes the view layer enables that DRT has no figures for (Mist, Emission, Cryptomatte,
+    """Passes the view layer enables that DRT has no figures for (Position, Emission, Cryptomatte,
     AOVs…) are named in one warning instead of silently missing from the result."""
     from addon import compat
 
@@ -200,14 +200,14 @@ def test_passes_drt_does_not_render_are_named(monkeypatch):
     scene.drt.samples = 1
     vl = scene.view_layers[0]
     assert compat.unrendered_passes(vl) == []
-    vl.use_pass_mist = vl.use_pass_emit = vl.use_pass_cryptomatte_object = True
+    vl.use_pass_position = vl.use_pass_emit = vl.use_pass_cryptomatte_object = True
     vl.aovs.add().name = "dirt"
     reports = []
     monkeypatch.setattr(drt_engine.DRTRenderEngine, "warn", lambda self, msg: reports.append(msg))
     bpy.ops.render.render()
     passes = [r for r in reports if "passes not rendered" in r]
     assert len(passes) == 1, reports
-    for name in ("Mist", "Emission", "Cryptomatte Object", "AOV 'dirt'"):
+    for name in ("Position", "Emission", "Cryptomatte Object", "AOV 'dirt'"):
         assert name in passes[0], passes[0]
 
 

@@ -348,3 +348,24 @@ def test_caustics_switches_match_cycles(tmp_path):
         removed = [(images[(True, True)][k] - images[switches][k]).mean() for k in (0, 1)]
         print(switches, "removed: Cycles", removed[0], "DRT", removed[1])
         assert removed[0] > 0.005 and abs(removed[1] / removed[0] - 1) < 0.1, (switches, removed)
+
+
+def test_the_light_paths_and_passes_panels_show_the_switches_and_the_mist_pass():
+    """DRT's Light Paths panel edits Cycles's Caustics switches, its Data passes panel the Mist
+    pass, and Blender's World > Mist Pass panel shows for DRT."""
+    pytest.importorskip("bpy")
+    import bpy
+
+    from addon import ui
+    from test_addon import FakeLayout, ensure_registered
+
+    ensure_registered()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    drawn = {}
+    for cls in (ui.DRT_RENDER_PT_light_paths, ui.DRT_VIEWLAYER_PT_passes_data):
+        panel = type("FakePanel", (), {"layout": FakeLayout()})()
+        cls.draw(panel, bpy.context)
+        drawn[cls.__name__] = panel.layout.props
+    assert {"blur_glossy", "caustics_reflective", "caustics_refractive"} <= set(drawn["DRT_RENDER_PT_light_paths"])
+    assert "use_pass_mist" in drawn["DRT_VIEWLAYER_PT_passes_data"]
+    assert ui.ENGINE in bpy.types.EEVEE_WORLD_PT_mist.COMPAT_ENGINES

@@ -51,10 +51,12 @@ def cluster_render(address, scene, spp, **kw):
 
 def test_tiles_on_the_cluster_are_bit_identical_to_the_local_render(cluster):
     scene = small_box(64, 64)
+    scene.render = replace(scene.render, mist=(1.0, 5.0, 2.0))  # (the Mist pass travels too)
     film, stats = cluster_render(cluster.scheduler_address, scene, 16, task_seconds=0.01)
     assert stats.tasks_done == stats.tasks_total == 4 and stats.workers == 2
     local = render(scene, spp=16)
-    for name in ("sum_rgba", "sum_lum2", "sum_normal", "sum_albedo", "min_depth", "count"):
+    assert local.sum_mist is not None
+    for name in ("sum_rgba", "sum_lum2", "sum_normal", "sum_albedo", "min_depth", "count", "sum_mist"):
         assert np.array_equal(getattr(film, name), getattr(local, name)), name
     assert np.array_equal(film.combined, local.combined)
     assert film.meta["sample_count"] == 16 and film.meta["spp"] == 16

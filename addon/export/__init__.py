@@ -14,8 +14,8 @@ from .libraries import missing_link_warnings
 from .materials import MaterialExporter
 from .mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays, evaluated_positions
 from .object_info import object_info
-from .scene_parts import (ExportError, camera_dict, shadow_terminator, light_dict, matrix_list, render_settings,
-                          world_dict)
+from .scene_parts import (ExportError, camera_dict, shadow_terminator, light_dict, matrix_list, mist_settings,
+                          render_settings, world_dict)
 
 __all__ = ["ExportError", "ExportResult", "export_depsgraph"]
 
@@ -219,6 +219,8 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
     warnings: list[str] = []
     mats = MaterialExporter()
     render = render_settings(scene, preview)
+    if not preview and getattr(depsgraph.view_layer, "use_pass_mist", False):
+        render["mist"] = mist_settings(scene.world)  # (the view layer asks for the Mist pass)
 
     if scene.camera is None:
         raise ExportError("the scene has no active camera")

@@ -110,6 +110,15 @@ def _cycles_setting(scene, name: str, default):
     return stored.get(name, default) if hasattr(stored, "get") else default
 
 
+def mist_settings(world) -> dict:
+    """The world's Mist Pass settings (World > Mist Pass: start, depth in scene units, falloff),
+    which Cycles's Mist pass reads; Blender's defaults (5, 25, quadratic) without a world."""
+    ms = getattr(world, "mist_settings", None)
+    if ms is None:
+        return {"start": 5.0, "depth": 25.0, "falloff": "QUADRATIC"}
+    return {"start": float(ms.start), "depth": float(ms.depth), "falloff": str(ms.falloff)}
+
+
 def caustics_switches(scene) -> dict[str, bool]:
     """Cycles's Light Paths > Caustics > Reflective / Refractive (``scene.cycles.caustics_*``,
     on in a new file): off, a hit right after a diffuse bounce is shaded without the glossy

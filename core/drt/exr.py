@@ -1,7 +1,8 @@
 """EXR output and input through OpenEXR (scene-linear float32, top row first).
 
 Channels written: R, G, B, A (combined); Z (depth along the view axis; 1e10 where nothing was
-hit, Cycles's convention); Normal.X/Y/Z (world-space shading normal); Albedo.R/G/B; SampleCount.Y (samples taken by
+hit, Cycles's convention); Normal.X/Y/Z (world-space shading normal); Albedo.R/G/B; Mist.Y (Cycles's
+Mist pass, when the scene asks for it: ``render.mist``); SampleCount.Y (samples taken by
 each pixel); Variance.Y (variance of the pixel mean's luminance). The header carries
 ``drt:sample_offset``, ``drt:sample_count``, ``drt:seed`` and ``drt:version`` so that renders of
 disjoint sample ranges can be merged exactly (``python -m drt merge``).
@@ -39,6 +40,8 @@ def film_channels(film: Film, denoised: np.ndarray | None = None) -> dict[str, n
         ch[f"Normal.{axis}"] = film.normal[..., i]
     for i, c in enumerate("RGB"):
         ch[f"Albedo.{c}"] = film.albedo[..., i]
+    if film.mist is not None:
+        ch["Mist.Y"] = film.mist
     ch["SampleCount.Y"] = film.sample_count
     ch["Variance.Y"] = film.variance
     return {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in ch.items()}
@@ -79,6 +82,8 @@ def film_from_exr(path: str | os.PathLike) -> Film:
     film.sum_normal = np.stack([ch[f"Normal.{a}"] for a in "XYZ"], -1).reshape(-1, 3) * count[:, None]
     film.sum_albedo = np.stack([ch[f"Albedo.{c}"] for c in "RGB"], -1).reshape(-1, 3) * count[:, None]
     film.min_depth = ch["Z"].astype(np.float64).reshape(-1)
+    if "Mist.Y" in ch:  # (the pass is 1 − the mean of the samples' sums)
+        film.sum_mist = (1.0 - ch["Mist.Y"].astype(np.float64).reshape(-1)) * count
     film.count = np.rint(count).astype(np.int64)
     # recover Σ L² from the stored variance of the mean: var·(N−1) + mean² = E[L²]
     lum = rgba[:, :3] @ np.array([0.2126, 0.7152, 0.0722])

@@ -51,6 +51,12 @@ def _accumulate(pixel, radiance, alpha, depth, normal, albedo,
         count[k] += 1
 
 
+@kernel
+def _accumulate_mist(pixel, mist, sum_mist):
+    for i in range(pixel.shape[0]):
+        sum_mist[pixel[i]] += mist[i]
+
+
 def _rows3(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
 
@@ -59,7 +65,7 @@ def _rows3(a) -> np.ndarray:
 class SampleBatch:
     """What one batch of camera paths produced. pixel: (n,) flat pixel id (row-major from the
     TOP row); radiance (n,3); alpha (n,); depth (n,) (inf: nothing hit); normal (n,3) world;
-    albedo (n,3). release: None, or a callable that gives the arrays' memory back to the
+    albedo (n,3); mist (n,) or None (the Mist pass, when asked for). release: None, or a callable that gives the arrays' memory back to the
     integrator that made them, to be reused for a later batch: whoever consumes the batch
     (the render loop, once the film has added it) may call it once, and must not read the
     arrays after that."""
@@ -72,6 +78,8 @@ class SampleBatch:
     albedo: np.ndarray
     nan_count: int = 0
     release: object = field(default=None, repr=False, compare=False)
+    #: (n,) each sample's Mist sum (drt.path_stages.mist_weight), or None: no Mist pass
+    mist: np.ndarray | None = None
 
 
 @dataclass
@@ -81,7 +89,8 @@ class Film:
     ``combined`` (H, W, 4): mean RGBA (scene-linear radiance); ``depth`` (H, W): distance along
     the camera's view axis to the first hit (inf: none); ``normal`` (H, W, 3): mean world-space
     shading normal of first hits; ``albedo`` (H, W, 3); ``sample_count`` (H, W); ``variance``
-    (H, W): estimated variance of the pixel mean's luminance (σ²/N).
+    (H, W): estimated variance of the pixel mean's luminance (σ²/N); ``mist`` (H, W) Cycles's
+    Mist pass, or None for a film whose samples carried none (``sum_mist`` None).
     """
 
     width: int
@@ -93,6 +102,8 @@ class Film:
     min_depth: np.ndarray = None
     count: np.ndarray = None
     nan_samples: int = 0
+    #: Σ of the samples' Mist sums per pixel (created by the first batch that carries one)
+    sum_mist: np.ndarray = None
     meta: dict = field(default_factory=dict)
     #: radiance scale applied as samples are added (Cycles's Film > Exposure); films merged
     #: from exposed parts keep 1
@@ -116,6 +127,11 @@ class Film:
                     self.sum_rgba, self.sum_lum2, self.sum_normal, self.sum_albedo, self.min_depth,
                     self.count)
         self.nan_samples += b.nan_count
+        if b.mist is not None:
+            if self.sum_mist is None:
+                self.sum_mist = np.zeros(self.width * self.height)
+            _accumulate_mist(np.ascontiguousarray(b.pixel, dtype=np.int64),
+                             np.ascontiguousarray(b.mist, dtype=np.float64), self.sum_mist)
 
     def merge(self, other: "Film") -> None:
         """Add another film of the same size (e.g. a disjoint sample range)."""
@@ -126,6 +142,8 @@ class Film:
         self.min_depth = np.minimum(self.min_depth, other.min_depth)
         self.count += other.count
         self.nan_samples += other.nan_samples
+        if other.sum_mist is not None:
+            self.sum_mist = other.sum_mist.copy() if self.sum_mist is None else self.sum_mist + other.sum_mist
 
     def _mean(self, s: np.ndarray) -> np.ndarray:
         c = np.maximum(self.count, 1).reshape((-1,) + (1,) * (s.ndim - 1))
@@ -159,6 +177,15 @@ class Film:
     @property
     def albedo(self) -> np.ndarray:
         return self._image(self._mean(self.sum_albedo))
+
+    @property
+    def mist(self) -> np.ndarray | None:
+        """(H, W) Cycles's Mist pass: 1 − the mean of the samples' Mist sums, in [0, 1] (1 where
+        only the world is seen, 0 at opaque surfaces nearer than the mist's start); None
+        without one."""
+        if self.sum_mist is None:
+            return None
+        return self._image(np.clip(1.0 - self._mean(self.sum_mist), 0.0, 1.0))
 
     @property
     def sample_count(self) -> np.ndarray:

@@ -130,6 +130,7 @@ class Integrator:
             from .subsurface import SubsurfaceWalker
 
             self.sss = SubsurfaceWalker(geom, tracer, materials)
+        mist = getattr(settings, "mist", None) or (0.0, 0.0, 1.0)
         self.stage_settings = stages.StageSettings(
             width=int(settings.width), height=int(settings.height),
             max_bounces=int(settings.max_bounces), diffuse_bounces=int(settings.diffuse_bounces),
@@ -143,7 +144,11 @@ class Integrator:
             transparent_glass=(float(settings.film_transparent_roughness) ** 2  # (as alpha = roughness²)
                                if settings.film_transparent and settings.film_transparent_roughness is not None
                                else -1.0),
-            filter_glossy=float(getattr(settings, "filter_glossy", 0.0)))
+            filter_glossy=float(getattr(settings, "filter_glossy", 0.0)),
+            mist_start=float(mist[0]), mist_inv_depth=1.0 / mist[1] if mist[1] > 0.0 else 0.0,
+            mist_falloff=float(mist[2]), mist_ortho=getattr(getattr(camera, "spec", None), "type", "") == "ORTHO")
+        #: the Mist pass is kept only for a render that asks for it (``RenderSettings.mist``)
+        self.mist_pass = getattr(settings, "mist", None) is not None
         # Filter Glossy keeps a pdf per path only where it can widen a lobe: a render with it on,
         # of a scene with a microfacet lobe (drt.materials.table.filtered_alpha)
         self.filters_glossy = self.stage_settings.filter_glossy > 0.0 and bool(
@@ -240,7 +245,8 @@ class Integrator:
             except IndexError:
                 buffers = stages.Outputs(radiance=np.empty((n, 3)), alpha=np.empty(n), depth=np.empty(n),
                                          normal=np.empty((n, 3)), albedo=np.empty((n, 3)),
-                                         eye=np.empty((n, 3)), forward=np.empty((n, 3)))
+                                         eye=np.empty((n, 3)), forward=np.empty((n, 3)),
+                                         mist=np.empty(n if self.mist_pass else 0))
                 break
             if buffers.alpha.shape[0] >= n:
                 break  # (a smaller one is dropped; a new set of this batch's size replaces it)
@@ -357,9 +363,11 @@ class Integrator:
         good = np.all(np.isfinite(radiance) & (np.abs(radiance) <= MAX_SAMPLE_RADIANCE), axis=1)
         pixel = (np.asarray(row, dtype=np.int64) * self.s.width + np.asarray(x, dtype=np.int64))
         alpha, depth, normal, albedo = out.alpha, out.depth, out.normal, out.albedo
+        mist = out.mist if self.mist_pass else None
         nan_count = int(n - good.sum())
         if nan_count:
             pixel, radiance, alpha, depth = pixel[good], radiance[good], alpha[good], depth[good]
             normal, albedo = normal[good], albedo[good]
-        return SampleBatch(pixel, radiance, alpha, depth, normal, albedo, nan_count,
+            mist = mist[good] if mist is not None else None
+        return SampleBatch(pixel, radiance, alpha, depth, normal, albedo, nan_count, mist=mist,
                            release=functools.partial(self._returned_outputs.append, buffers))

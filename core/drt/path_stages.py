@@ -95,6 +95,9 @@ StageSettings = namedtuple("StageSettings", [
     "transparent_glass",                  # Film > Transparent Glass: the GGX alpha up to which a
                                           # glass transmission keeps the world transparent (−1: off)
     "filter_glossy",                      # Cycles's Filter Glossy (0: off; ``glossy_blur``)
+    "mist_start", "mist_inv_depth",       # the Mist pass: (distance − start) · inv_depth, ^falloff,
+    "mist_falloff", "mist_ortho",         # distance along the view axis for an orthographic camera
+                                          # (``mist_weight``; read only where ``Outputs.mist`` has rows)
 ])
 
 Paths = namedtuple("Paths", [
@@ -132,7 +135,7 @@ RAY_DIFFUSE, RAY_GLOSSY, RAY_SINGULAR, RAY_TRANSMIT = 1, 2, 4, 8
 #: Transparent Glass; Cycles's PATH_RAY_TRANSPARENT_BACKGROUND beyond camera rays)
 RAY_TRANSPARENT_BG = 16
 
-Outputs = namedtuple("Outputs", ["radiance", "alpha", "depth", "normal", "albedo", "eye", "forward"])
+Outputs = namedtuple("Outputs", ["radiance", "alpha", "depth", "normal", "albedo", "eye", "forward", "mist"])
 
 ShadowRays = namedtuple("ShadowRays", ["o", "d", "tmax", "tau", "contrib", "slot",
                                        "vstack"])  # (n, STACK_SIZE): the media the ray starts in
@@ -500,6 +503,8 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
         store(out.albedo, i, (0.0, 0.0, 0.0))
         store(out.eye, i, eye)
         store(out.forward, i, forward)
+        if out.mist.shape[0]:
+            out.mist[i] = 0.0
         if tmax < 0.0:
             continue
         store(paths.o, j, o)
@@ -532,6 +537,30 @@ def glass_alpha(md, mat, u_lobe, wo, nc_local, nv_local, front, view_weights):
     """The GGX alpha of the lobe ``bsdf_sample_bump`` picked with ``u_lobe`` (its pick again)."""
     slot, _, _ = pick_lobe_weights(md, mat, u_lobe, wo, nc_local, nv_local, front, view_weights)
     return md.lobe_alpha[mat, slot]
+
+
+@kernel
+def mist_weight(settings, md, m, thr, p, eye, forward):
+    """What a see-through hit (a camera ray, or one past transparency or Transparent Glass) at
+    ``p`` adds to its sample's Mist sum, as Cycles's film_write_data_passes: (1 − mist) ×
+    average(throughput × alpha), mist = clamp((distance − start) / depth, 0, 1) ^ falloff, the
+    distance from the lens point ``eye`` (along the view axis ``forward`` for an orthographic
+    camera), alpha = 1 − the material's transparency (this hit's row). The pass is 1 − the
+    pixel's mean of these sums: 1 where only the world is seen."""
+    v = sub(p, eye)
+    dist = abs(dot(v, forward)) if settings.mist_ortho else math.sqrt(dot(v, v))
+    mist = min(max((dist - settings.mist_start) * settings.mist_inv_depth, 0.0), 1.0)
+    f = settings.mist_falloff
+    if f == 2.0:
+        mist = mist * mist
+    elif f == 0.5:
+        mist = math.sqrt(mist)
+    elif f != 1.0:
+        mist = mist ** f
+    t = transparency(md, m)
+    a = (thr[0] * min(max(1.0 - t[0], 0.0), 1.0) + thr[1] * min(max(1.0 - t[1], 0.0), 1.0)
+         + thr[2] * min(max(1.0 - t[2], 0.0), 1.0)) * (1.0 / 3.0)
+    return (1.0 - mist) * a
 
 
 @kernel
@@ -814,6 +843,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 if nl > 0.0 and math.isfinite(nl):
                     nc_wo = nm
             nc = scale(valid_specular_normal(scale(ng, side), wo, nc_wo), side)
+        if out.mist.shape[0] and see_through and not exiting:
+            out.mist[slot] += mist_weight(settings, md, mat, thr, p, load(out.eye, slot), load(out.forward, slot))
         if obj_holdout and not exiting:
             if holdout_object_hit(md, mat, thr, acc, settings, paths, i, j, vd, prim, p, ng, d, t_geom, out, slot):
                 j += 1

@@ -212,6 +212,9 @@ class RenderSettings:
     #: bounce is shaded without the glossy reflection / refraction lobes (drt.materials.caustics)
     caustics_reflective: bool = True
     caustics_refractive: bool = True
+    #: Cycles's Mist pass, wanted: (start, depth, falloff exponent) of the world's Mist Pass
+    #: settings (falloff 2 quadratic, 1 linear, 0.5 inverse quadratic); None: no Mist pass
+    mist: tuple[float, float, float] | None = None
     shutter: tuple[float, float] | None = None
     direct: str = "MIS_POWER"  # direct-light estimator (see integrator.DIRECT_STRATEGIES)
     indirect: str = "BSDF"  # continuation sampling (integrator.INDIRECT_STRATEGIES)
@@ -346,6 +349,21 @@ class Scene:
 # --------------------------------------------------------------------------- sections
 
 
+#: the world's Mist Pass falloff (Blender's enum) → Cycles's exponent
+MIST_FALLOFF = {"QUADRATIC": 2.0, "LINEAR": 1.0, "INVERSE_QUADRATIC": 0.5}
+
+
+def _mist(r: dict, path: str):
+    """``render.mist``: {"start": ≥ 0, "depth": ≥ 0 (scene units), "falloff": a MIST_FALLOFF key}
+    → (start, depth, exponent), or None when absent."""
+    m = _get(r, "mist", path, None)
+    if m is None:
+        return None
+    p = _join(path, "mist")
+    falloff = _enum(m, "falloff", p, tuple(MIST_FALLOFF), "QUADRATIC")
+    return (_number(m, "start", p, 5.0, lo=0), _number(m, "depth", p, 25.0, lo=0), MIST_FALLOFF[falloff])
+
+
 def _render_settings(h: dict) -> RenderSettings:
     p = "render"
     r = _get(h, "render", "")
@@ -399,6 +417,7 @@ def _render_settings(h: dict) -> RenderSettings:
         filter_glossy=_number(r, "filter_glossy", p, 0.0, lo=0, hi=10),
         caustics_reflective=_bool(r, "caustics_reflective", p, True),
         caustics_refractive=_bool(r, "caustics_refractive", p, True),
+        mist=_mist(r, p),
         shutter=shutter,
         direct=_enum(r, "direct", p, DIRECT_STRATEGIES, "MIS_POWER"),
         indirect=_enum(r, "indirect", p, INDIRECT_STRATEGIES, "BSDF"),

@@ -210,6 +210,10 @@ def _add_part(film: Film, part: dict) -> None:
         dst[rows, cols] += part[name].reshape((h, w) + ((ch,) if ch else ()))
     md = film.min_depth.reshape(film.height, film.width)
     md[rows, cols] = np.minimum(md[rows, cols], part["min_depth"].reshape(h, w))
+    if part.get("sum_mist") is not None:  # (the Mist pass, when the scene asks for it)
+        if film.sum_mist is None:
+            film.sum_mist = np.zeros(film.width * film.height)
+        film.sum_mist.reshape(film.height, film.width)[rows, cols] += part["sum_mist"].reshape(h, w)
     film.nan_samples += int(part["nan_samples"])
 
 
