@@ -19,7 +19,7 @@ from drt.materials.table import BSDF_COAT_TINT, BSDFSample, MaterialTable
 from drt.render import render
 from drt.scene import SceneError, scene_from_dict
 from scene_builders import with_render
-from test_filter_glossy import _blender_caustic_scene, _caustic_scene
+from test_filter_glossy import _blender_caustic_scene, _caustic_scene, add_low_point_light
 
 _FIELDS = [f.name for f in dataclasses.fields(BSDFSample)]
 SWITCHES = [(False, True), (True, False), (False, False)]
@@ -315,11 +315,7 @@ def _blender_principled_scene(spp, switches):
     bpy.ops.mesh.primitive_plane_add(size=2.0, location=(0.9, 0, -0.2), rotation=(0, math.pi / 2, 0))
     bpy.context.object.data.materials.append(principled("wall", **{
         "Base Color": (0.8, 0.2, 0.1, 1), "Roughness": 0.3, "Coat Weight": 0.5, "Coat Tint": (0.3, 0.5, 1.0, 1)}))
-    lamp = bpy.data.lights.new("p", "POINT")
-    lamp.energy, lamp.shadow_soft_size = 60.0, 0.0
-    obj = bpy.data.objects.new("p", lamp)
-    obj.location = (-0.8, 0.0, 0.0)
-    sc.collection.objects.link(obj)
+    add_low_point_light(sc)
     return sc
 
 

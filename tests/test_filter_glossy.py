@@ -190,12 +190,19 @@ def _blender_caustic_scene(blur_glossy, spp):
         bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(0, y, -0.5), segments=48, ring_count=24)
         bpy.ops.object.shade_smooth()
         bpy.context.object.data.materials.append(mat)
+    add_low_point_light(sc)
+    return sc
+
+
+def add_low_point_light(sc):
+    """The caustic scenes' light: a 60 W point (radius 0) low on the left of node_parity's view."""
+    import bpy
+
     lamp = bpy.data.lights.new("p", "POINT")
     lamp.energy, lamp.shadow_soft_size = 60.0, 0.0
     obj = bpy.data.objects.new("p", lamp)
     obj.location = (-0.8, 0.0, 0.0)
     sc.collection.objects.link(obj)
-    return sc
 
 
 def test_filter_glossy_is_cycles_setting():
