@@ -65,10 +65,10 @@ def _rows3(a) -> np.ndarray:
 class SampleBatch:
     """What one batch of camera paths produced. pixel: (n,) flat pixel id (row-major from the
     TOP row); radiance (n,3); alpha (n,); depth (n,) (inf: nothing hit); normal (n,3) world;
-    albedo (n,3); mist (n,) or None (the Mist pass, when asked for). release: None, or a callable that gives the arrays' memory back to the
-    integrator that made them, to be reused for a later batch: whoever consumes the batch
-    (the render loop, once the film has added it) may call it once, and must not read the
-    arrays after that."""
+    albedo (n,3); mist (n,) or None (the Mist pass, when asked for). release: None, or a
+    callable that gives the arrays' memory back to the integrator that made them, to be reused
+    for a later batch: whoever consumes the batch (the render loop, once the film has added
+    it) may call it once, and must not read the arrays after that."""
 
     pixel: np.ndarray
     radiance: np.ndarray

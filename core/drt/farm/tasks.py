@@ -95,8 +95,8 @@ def render_task(scene, scene_key: str, settings: dict, tile, sample_offset: int,
     "adaptive_min_samples"} (None: the scene's). tile: (x0, y0, x1, y1) pixels, rows from the
     top, end exclusive. Returns {"tile", "sample_offset", "sample_count", "sum_rgba" (n, 4),
     "sum_lum2" (n,), "sum_normal" (n, 3), "sum_albedo" (n, 3), "min_depth" (n,), "count"
-    (n,), "sum_mist" ((n,) or None: no Mist pass), "nan_samples", "camera_paths", "rays", "seconds", "meta"} with n the tile's pixels,
-    row-major from its top row. One thread per task: Dask runs one task per worker thread.
+    (n,), "sum_mist" ((n,) or None: no Mist pass), "nan_samples", "camera_paths", "rays",
+    "seconds", "meta"} with n the tile's pixels, row-major from its top row. One thread per task: Dask runs one task per worker thread.
     """
     from ..render import render
 

@@ -97,7 +97,8 @@ def caustics_twin(material: dict, reflective: bool, refractive: bool) -> dict | 
     return {**material, "name": f"{material.get('name', '')} (caustics)", "lobes": twin}
 
 
-def with_caustics_twins(materials: list[dict], reflective: bool, refractive: bool) -> tuple[list[dict], np.ndarray]:
+def with_caustics_twins(materials: list[dict], reflective: bool,
+                        refractive: bool) -> tuple[list[dict], np.ndarray]:
     """(materials followed by their twins, twin row per material (−1: none; (M,) int64, M the
     length of the extended list))."""
     out = list(materials)
