@@ -162,6 +162,24 @@ def test_twins_are_made_only_where_a_switch_drops_something():
     assert [m["name"] for m in out] == ["d", "m", "r", "m (caustics)"] and twin_of.tolist() == [-1, 3, -1, -1]
 
 
+@pytest.mark.parametrize("bad", [
+    {"name": "x", "lobes": [{"type": "GLOSSY", "roughness": 0.2}]},  # no colour
+    {"name": "x", "lobes": ["glossy"]},
+    {"name": "x", "lobes": [{"type": "DIELECTRIC_SPECULAR", "color": [1, 1, 1], "roughness": 0.2, "ior": 1.5,
+                             "coat_tint": "blue"}]},
+    {"name": "x", "lobes": [{"type": "GLASS", "color": [1, 1, 1], "roughness": 0.0, "ior": "glass"}]},
+])
+def test_a_bad_material_fails_the_same_way_with_the_switches_off(bad):
+    """The twins are read off the scene's descriptions before the table checks them: a bad one
+    gets no twin, and the table's own error (naming the material and field) as with the
+    switches on."""
+    with pytest.raises(ValueError) as on:
+        MaterialTable.from_scene([bad])
+    with pytest.raises(ValueError) as off:
+        MaterialTable.from_scene([bad], caustics=(False, False))
+    assert str(off.value) == str(on.value)
+
+
 def test_a_textured_twin_keeps_its_program_on_the_lobes_it_keeps():
     """A Principled whose diffuse colour is textured: the twin runs the same program, its
     textured colour lands on the twin's Lambert slot (the specular slot before it is gone)."""

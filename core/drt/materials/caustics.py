@@ -52,13 +52,27 @@ _WEIGHT_REG = "weight_reg"
 
 def _tinted(lobe: dict) -> bool:
     """A coat whose tint absorbs (a non-white ``coat_tint`` or a textured one)."""
-    return "coat_tint_reg" in lobe or any(float(c) != 1.0 for c in lobe.get("coat_tint", (1.0, 1.0, 1.0)))
+    return "coat_tint_reg" in lobe or bool(np.any(np.asarray(lobe.get("coat_tint", 1.0), np.float64) != 1.0))
 
 
 def _straight(lobe: dict) -> bool:
     """An IOR-1 GLASS lobe: the Transparent BSDF or a Principled Alpha (drt.materials.transparency),
     which no switch drops (nor does Cycles drop its Transparent closure)."""
     return "ior_reg" not in lobe and abs(float(lobe.get("ior", 1.5)) - 1.0) < IOR_ONE_EPS
+
+
+def _well_formed(material) -> bool:
+    """Whether a twin can be read off ``material``: anything else is left to the material
+    table, which names what is wrong with it (a twin is never built from a bad description)."""
+    try:
+        lobes = material["lobes"]
+        for lobe in lobes:
+            _tinted(lobe)
+            _straight(lobe)
+            np.mean(np.asarray(lobe["color"], np.float64))
+        return isinstance(lobes, (list, tuple))
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return False
 
 
 def twin_lobe(lobe: dict, reflective: bool, refractive: bool) -> dict:
@@ -90,7 +104,9 @@ def twin_lobe(lobe: dict, reflective: bool, refractive: bool) -> dict:
 def caustics_twin(material: dict, reflective: bool, refractive: bool) -> dict | None:
     """The twin of one material (scene-format.md's material object), or None when the switches
     drop nothing of it."""
-    lobes = material.get("lobes", [])
+    if not _well_formed(material):
+        return None
+    lobes = material["lobes"]
     twin = [twin_lobe(lobe, reflective, refractive) for lobe in lobes]
     if all(a is b for a, b in zip(twin, lobes)):
         return None
