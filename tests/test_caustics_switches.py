@@ -192,7 +192,7 @@ def test_a_textured_twin_keeps_its_program_on_the_lobes_it_keeps():
                      {"type": "DIFFUSE", "color": [1, 1, 1], "layer": 0, "color_reg": 1}]}
     t = MaterialTable.from_scene([mat], caustics=(False, True))
     twin = int(t.data.caustic_row[0])
-    pd = build_program_data(t.program_source[0], t, [], None, None, None, 1e-5)
+    pd = build_program_data(t.program_source[0], t, [], None, None, None)
     assert pd.prog_of[twin] >= 0
     assert pd.lobe_color_reg[0].tolist()[:2] == [-1, 1] and pd.lobe_rough_reg[0, 0] == 0
     assert pd.lobe_color_reg[twin, 0] == 1 and pd.lobe_rough_reg[twin, 0] == -1

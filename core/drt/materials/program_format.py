@@ -231,13 +231,13 @@ POINT_OPS = frozenset({OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_
 
 
 def build_program_data(materials: list[dict], table, images: list[tuple[dict, np.ndarray]],
-                       uv, generated, objco, cutoff: float, attrs=None, origin=None,
+                       uv, generated, objco, attrs=None, origin=None,
                        object_of=None, object_info=None, positions=None, triangles=None,
                        footprint=None, camera=None, world=None) -> ProgramData | None:
     """ProgramData for the validated ``materials`` (scene.py) and their ``MaterialTable``; None
     when no material has a program and there is no ``world`` program. Lobes are matched to
-    table slots by the table's ``lobe_slot_of`` (file lobe → slot; without it by the rule that a
-    lobe whose colour's mean is below ``cutoff`` was dropped). A validated ``world`` program is
+    table slots by the table's ``lobe_slot_of`` (file lobe → slot; the lobes it dropped have
+    none, so no register of theirs is read). A validated ``world`` program is
     appended after the materials' programs: its index is ``world_program_index(pd)``."""
     if not any(m.get("program") for m in materials) and world is None:
         return None
@@ -269,13 +269,11 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         data.append(prog["data"])
         op_start.append(op_start[-1] + len(ops))
         const_start.append(const_start[-1] + len(prog["constants"]))
-        slot_of = table.lobe_slot_of[i] if getattr(table, "lobe_slot_of", None) is not None else None
-        slot = 0
+        slot_of = table.lobe_slot_of[i]
         for j, lobe in enumerate(mat["lobes"]):
-            if (j not in slot_of) if slot_of is not None else np.mean(lobe["color"]) < cutoff:
+            if j not in slot_of:
                 continue
-            if slot_of is not None:
-                slot = slot_of[j]
+            slot = slot_of[j]
             color_reg[i, slot] = _reg(lobe.get("color_reg"), n, f"{where} lobe {j} color_reg")
             rough_reg[i, slot] = _reg(lobe.get("roughness_reg"), n, f"{where} lobe {j} roughness_reg")
             weight_reg[i, slot] = _reg(lobe.get("weight_reg"), n, f"{where} lobe {j} weight_reg")
@@ -286,7 +284,6 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
             if lobe["type"] == "DIELECTRIC_SPECULAR" and 0 < (ior_reg[i, slot] >= 0).sum() < 3:
                 raise ValueError(f"{where} lobe {j}: a DIELECTRIC_SPECULAR lobe needs all of "
                                  f"{', '.join(IOR_REG_KEYS)} or none")
-            slot += 1
         emission_reg[i] = _reg(mat.get("emission_reg"), n, f"{where} emission_reg")
         normal_reg[i] = _reg(mat.get("normal_reg"), n, f"{where} normal_reg")
         if mat.get("coat_normal") == "SMOOTH":

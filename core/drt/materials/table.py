@@ -1396,7 +1396,7 @@ class MaterialTable:
             return empty_program_data()
         if src is None:  # only the world has a program: no geometry inputs are read
             return build_program_data([{}] * len(self.names), self, getattr(self, "images", []),
-                                      None, None, None, CLOSURE_WEIGHT_CUTOFF, origin=origin,
+                                      None, None, None, origin=origin,
                                       camera=camera, footprint=footprint, world=world)
         attrs = corner_attrs or {}
         named = None
@@ -1409,7 +1409,7 @@ class MaterialTable:
                     if f"attr{i}" in attrs:
                         named[i] = attrs[f"attr{i}"]
         return build_program_data(src[0], self, src[1], uv, attrs.get("generated"),
-                                  attrs.get("object_coords"), CLOSURE_WEIGHT_CUTOFF, named, origin,
+                                  attrs.get("object_coords"), named, origin,
                                   object_of, object_info, positions, triangles, footprint, camera, world)
 
     # ------------------------------------------------------------------ queries
