@@ -334,9 +334,7 @@ def set_pass_pixels(render_pass, img: np.ndarray) -> None:
 
 #: view-layer passes Cycles renders and DRT does not (yet): (property, name in the warning)
 _UNRENDERED_PASSES = (
-    ("use_pass_position", "Position"), ("use_pass_vector", "Vector"),
-    ("use_pass_uv", "UV"), ("use_pass_object_index", "Object Index"),
-    ("use_pass_material_index", "Material Index"),
+    ("use_pass_vector", "Vector"),
     ("use_pass_diffuse_direct", "Diffuse Direct"), ("use_pass_diffuse_indirect", "Diffuse Indirect"),
     ("use_pass_glossy_direct", "Glossy Direct"), ("use_pass_glossy_indirect", "Glossy Indirect"),
     ("use_pass_glossy_color", "Glossy Color"), ("use_pass_transmission_direct", "Transmission Direct"),
@@ -352,6 +350,18 @@ _UNRENDERED_CYCLES_PASSES = (
     ("use_pass_volume_direct", "Volume Direct"), ("use_pass_volume_indirect", "Volume Indirect"),
     ("use_pass_shadow_catcher", "Shadow Catcher"),
 )
+
+
+#: render passes Blender renamed (its RE_PASSNAME_* names; bpy 5.0 measured: Cycles writes
+#: "Diffuse Color", "Object Index", "Material Index"); DRT registers each under the running
+#: Blender's name, as Cycles does, so a compositing tree made with Cycles finds its sockets
+_RENAMED_PASSES = {"DiffCol": "Diffuse Color", "IndexOB": "Object Index", "IndexMA": "Material Index"}
+_PASSES_RENAMED_IN = (4, 2, 0)
+
+
+def pass_name(name: str) -> str:
+    """The running Blender's name of render pass ``name`` (given by its pre-4.2 name)."""
+    return _RENAMED_PASSES.get(name, name) if BLENDER_VERSION >= _PASSES_RENAMED_IN else name
 
 
 def unrendered_passes(view_layer) -> list:
@@ -372,4 +382,8 @@ def view_layer_pass_flags(view_layer) -> dict:
         "normal": bool(getattr(view_layer, "use_pass_normal", False)),
         "albedo": bool(getattr(view_layer, "use_pass_diffuse_color", False)),
         "mist": bool(getattr(view_layer, "use_pass_mist", False)),
+        "object_index": bool(getattr(view_layer, "use_pass_object_index", False)),
+        "material_index": bool(getattr(view_layer, "use_pass_material_index", False)),
+        "position": bool(getattr(view_layer, "use_pass_position", False)),
+        "uv": bool(getattr(view_layer, "use_pass_uv", False)),
     }

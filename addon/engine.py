@@ -16,11 +16,16 @@ from . import cluster, compat, denoising, viewport
 from .export import ExportError, export_depsgraph
 
 # Film arrays are top row first; Blender's render result wants bottom row first.
-PASSES = (  # (Blender pass name, channels, chan_id, type, film attribute, view-layer flag)
+PASSES = (  # (Blender pass name before 4.2: compat.pass_name, channels, chan_id, type, film attribute,
+    #         view-layer flag)
     ("Depth", 1, "Z", "VALUE", "depth", "depth"),
     ("Normal", 3, "XYZ", "VECTOR", "normal", "normal"),
     ("DiffCol", 3, "RGB", "COLOR", "albedo", "albedo"),
     ("Mist", 1, "Z", "VALUE", "mist", "mist"),
+    ("Position", 3, "XYZ", "VECTOR", "position", "position"),
+    ("UV", 3, "UVA", "VECTOR", "uv", "uv"),
+    ("IndexOB", 1, "X", "VALUE", "object_index", "object_index"),
+    ("IndexMA", 1, "X", "VALUE", "material_index", "material_index"),
 )
 
 
@@ -69,7 +74,7 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         flags = compat.view_layer_pass_flags(renderlayer)
         for name, channels, chan_id, kind, _attr, flag in PASSES:
             if flags[flag]:
-                self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
+                self.register_pass(scene, renderlayer, compat.pass_name(name), channels, chan_id, kind)
         for name, channels, chan_id, kind in denoising.extra_passes(scene, renderlayer):
             self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
 
@@ -239,4 +244,4 @@ def fill_layer(layer, film, crop, wanted) -> None:
         if img is None:  # (a film without the pass: film.mist of a render that did not ask for it)
             continue
         img = np.asarray(img)[rows, cols]  # film.depth: background already 1e10
-        _set_pass(layer, name, img.reshape(img.shape[0], img.shape[1], channels))
+        _set_pass(layer, compat.pass_name(name), img.reshape(img.shape[0], img.shape[1], channels))

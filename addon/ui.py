@@ -139,6 +139,12 @@ class DRT_VIEWLAYER_PT_passes_data(bpy.types.Panel):
         col.prop(vl, "use_pass_normal")
         col.prop(vl, "use_pass_diffuse_color", text="Albedo (Diffuse Color)")
         col.prop(vl, "use_pass_mist")
+        col.prop(vl, "use_pass_position")
+        col.prop(vl, "use_pass_uv")
+        col = layout.column(heading="Indexes", align=True)
+        col.prop(vl, "use_pass_object_index")
+        col.prop(vl, "use_pass_material_index")
+        layout.prop(vl, "pass_alpha_threshold")
         cl = getattr(vl, "cycles", None)  # the Cycles add-on's view-layer settings, if enabled
         if cl is not None:
             col.prop(cl, "denoising_store_passes", text="Denoising Data")

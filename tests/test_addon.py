@@ -18,6 +18,7 @@ if REPO not in sys.path:
     sys.path.insert(0, REPO)
 
 import addon  # noqa: E402
+from addon import compat  # noqa: E402
 from addon import engine as drt_engine  # noqa: E402
 
 pytestmark = pytest.mark.blender
@@ -185,30 +186,30 @@ def test_passes_written(tmp_path):
     vl.use_pass_diffuse_color = True
     chans, _ = render_to(scene, tmp_path / "passes.exr", multilayer=True)
     names = " ".join(chans)
-    for p in ("Depth", "Normal", "DiffCol"):
+    for p in ("Depth", "Normal", compat.pass_name("DiffCol")):
         assert p in names, names
     depth = next(v for k, v in chans.items() if "Depth" in k)
     assert np.nanmin(depth) > 1.0  # the camera is 2.9 m from the open front of the box
 
 
 def test_passes_drt_does_not_render_are_named(monkeypatch):
-    """Passes the view layer enables that DRT has no figures for (Position, Emission, Cryptomatte,
-    AOVs…) are named in one warning instead of silently missing from the result."""
-    from addon import compat
-
+    """Passes the view layer enables that DRT has no figures for (Vector, Emission, Cryptomatte,
+    AOVs…) are named in one warning instead of silently missing from the result; the ones it
+    renders (Position here) are not."""
     scene = open_scene("cornell_box")
     scene.drt.samples = 1
     vl = scene.view_layers[0]
     assert compat.unrendered_passes(vl) == []
-    vl.use_pass_position = vl.use_pass_emit = vl.use_pass_cryptomatte_object = True
+    vl.use_pass_position = vl.use_pass_vector = vl.use_pass_emit = vl.use_pass_cryptomatte_object = True
     vl.aovs.add().name = "dirt"
     reports = []
     monkeypatch.setattr(drt_engine.DRTRenderEngine, "warn", lambda self, msg: reports.append(msg))
     bpy.ops.render.render()
     passes = [r for r in reports if "passes not rendered" in r]
     assert len(passes) == 1, reports
-    for name in ("Position", "Emission", "Cryptomatte Object", "AOV 'dirt'"):
+    for name in ("Vector", "Emission", "Cryptomatte Object", "AOV 'dirt'"):
         assert name in passes[0], passes[0]
+    assert "Position" not in passes[0], passes[0]
 
 
 def test_error_is_reported_not_raised_silently(registered):

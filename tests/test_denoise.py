@@ -213,7 +213,9 @@ def test_blender_render_with_denoising(tmp_path):
     assert np.all(np.isfinite(combined))
     assert np.abs(combined[..., :3] - noisy[..., :3]).mean() > 1e-3  # denoised differs from the noisy pass
     assert np.array_equal(combined[..., 3], noisy[..., 3])  # alpha is the film's
-    albedo, normal, dalbedo, dnormal = get("DiffCol"), get("Normal"), get("Denoising Albedo"), get("Denoising Normal")
+    from addon import compat
+
+    albedo, normal, dalbedo, dnormal = get(compat.pass_name("DiffCol")), get("Normal"), get("Denoising Albedo"), get("Denoising Normal")
     np.testing.assert_array_equal(dalbedo, albedo)  # the guide is the albedo pass
     assert dalbedo.max() > 0.5
     lengths = np.linalg.norm(dnormal, axis=-1)

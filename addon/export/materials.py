@@ -242,6 +242,8 @@ class MaterialExporter:
                     self._normal = (None, disp_normal)
         medium = volume_medium(self, out, problems, textured=True) if tree is not None else None
         result = {"name": material.name, "lobes": [], "emission": [0.0, 0.0, 0.0]}
+        if getattr(material, "pass_index", 0):  # (the Material Index pass)
+            result["pass_index"] = int(material.pass_index)
         if medium is not None:  # a Volume output: the mesh bounds a medium (drt.volumes)
             result["volume"] = medium
             if src is None:

@@ -119,6 +119,22 @@ def mist_settings(world) -> dict:
     return {"start": float(ms.start), "depth": float(ms.depth), "falloff": str(ms.falloff)}
 
 
+#: the view layer's data passes DRT renders: Blender's property → the scene format's name
+DATA_PASS_PROPERTIES = (("use_pass_object_index", "object_index"), ("use_pass_material_index", "material_index"),
+                        ("use_pass_position", "position"), ("use_pass_uv", "uv"))
+
+
+def data_pass_settings(view_layer) -> dict:
+    """``render.data_passes`` (the data passes the view layer enables) and, with any, its Alpha
+    Threshold (View Layer > Passes > Data: a surface more transparent than it is seen through);
+    {} without any."""
+    names = [name for prop, name in DATA_PASS_PROPERTIES if getattr(view_layer, prop, False)]
+    if not names:
+        return {}
+    return {"data_passes": names,
+            "pass_alpha_threshold": float(min(max(getattr(view_layer, "pass_alpha_threshold", 0.5), 0.0), 1.0))}
+
+
 def caustics_switches(scene) -> dict[str, bool]:
     """Cycles's Light Paths > Caustics > Reflective / Refractive (``scene.cycles.caustics_*``,
     on in a new file): off, a hit right after a diffuse bounce is shaded without the glossy

@@ -2,7 +2,9 @@
 
 Channels written: R, G, B, A (combined); Z (depth along the view axis; 1e10 where nothing was
 hit, Cycles's convention); Normal.X/Y/Z (world-space shading normal); Albedo.R/G/B; Mist.Y (Cycles's
-Mist pass, when the scene asks for it: ``render.mist``); SampleCount.Y (samples taken by
+Mist pass, when the scene asks for it: ``render.mist``); IndexOB.X, IndexMA.X, Position.X/Y/Z,
+UV.U/V/A (Cycles's data passes, when the scene asks for any: ``render.data_passes``; all four
+then); SampleCount.Y (samples taken by
 each pixel); Variance.Y (variance of the pixel mean's luminance). The header carries
 ``drt:sample_offset``, ``drt:sample_count``, ``drt:seed`` and ``drt:version`` so that renders of
 disjoint sample ranges can be merged exactly (``python -m drt merge``).
@@ -21,7 +23,7 @@ import os
 import numpy as np
 import OpenEXR
 
-from .film import Film
+from .film import DATA_MATERIAL, DATA_OBJECT, DATA_POSITION, DATA_UV, DATA_WIDTH, Film
 
 
 def film_channels(film: Film, denoised: np.ndarray | None = None) -> dict[str, np.ndarray]:
@@ -42,6 +44,13 @@ def film_channels(film: Film, denoised: np.ndarray | None = None) -> dict[str, n
         ch[f"Albedo.{c}"] = film.albedo[..., i]
     if film.mist is not None:
         ch["Mist.Y"] = film.mist
+    if film.sum_data is not None:
+        ch["IndexOB.X"] = film.object_index
+        ch["IndexMA.X"] = film.material_index
+        for i, axis in enumerate("XYZ"):
+            ch[f"Position.{axis}"] = film.position[..., i]
+        for i, c in enumerate("UVA"):
+            ch[f"UV.{c}"] = film.uv[..., i]
     ch["SampleCount.Y"] = film.sample_count
     ch["Variance.Y"] = film.variance
     return {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in ch.items()}
@@ -84,6 +93,14 @@ def film_from_exr(path: str | os.PathLike) -> Film:
     film.min_depth = ch["Z"].astype(np.float64).reshape(-1)
     if "Mist.Y" in ch:  # (the pass is 1 − the mean of the samples' sums)
         film.sum_mist = (1.0 - ch["Mist.Y"].astype(np.float64).reshape(-1)) * count
+    if "IndexOB.X" in ch:  # the data passes: sample 0's values as they are, the UV's mean × N
+        film.sum_data = np.zeros((h * w, DATA_WIDTH))
+        film.sum_data[:, DATA_OBJECT] = ch["IndexOB.X"].reshape(-1)
+        film.sum_data[:, DATA_MATERIAL] = ch["IndexMA.X"].reshape(-1)
+        for i, axis in enumerate("XYZ"):
+            film.sum_data[:, DATA_POSITION + i] = ch[f"Position.{axis}"].reshape(-1)
+        for i, c in enumerate("UVA"):
+            film.sum_data[:, DATA_UV + i] = ch[f"UV.{c}"].astype(np.float64).reshape(-1) * count
     film.count = np.rint(count).astype(np.int64)
     # recover Σ L² from the stored variance of the mean: var·(N−1) + mean² = E[L²]
     lum = rgba[:, :3] @ np.array([0.2126, 0.7152, 0.0722])

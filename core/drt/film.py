@@ -57,6 +57,21 @@ def _accumulate_mist(pixel, mist, sum_mist):
         sum_mist[pixel[i]] += mist[i]
 
 
+@kernel
+def _accumulate_data(pixel, data, sum_data):
+    for i in range(pixel.shape[0]):
+        k = pixel[i]
+        for c in range(data.shape[1]):
+            sum_data[k, c] += data[i, c]
+
+
+#: columns of ``Film.sum_data`` (drt.path_stages.DATA_* up to DATA_DONE): the Object Index, the
+#: Material Index, the Position (3, Blender world space), whether sample 0 hit a surface — each
+#: from the pixel's sample 0 only, so their sum is that sample's value — and Σ UV (3: u, v, 1)
+DATA_OBJECT, DATA_MATERIAL, DATA_POSITION, DATA_HIT, DATA_UV = 0, 1, 2, 5, 6
+DATA_WIDTH = 9
+
+
 def _rows3(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
 
@@ -80,6 +95,10 @@ class SampleBatch:
     release: object = field(default=None, repr=False, compare=False)
     #: (n,) each sample's Mist sum (drt.path_stages.mist_weight), or None: no Mist pass
     mist: np.ndarray | None = None
+    #: (m, DATA_WIDTH) the data passes' columns of m samples (``Film.sum_data``), with their own
+    #: flat pixel ids ``data_pixel`` (m,): also samples whose radiance was dropped; None: none
+    data: np.ndarray | None = None
+    data_pixel: np.ndarray | None = None
 
 
 @dataclass
@@ -90,7 +109,10 @@ class Film:
     the camera's view axis to the first hit (inf: none); ``normal`` (H, W, 3): mean world-space
     shading normal of first hits; ``albedo`` (H, W, 3); ``sample_count`` (H, W); ``variance``
     (H, W): estimated variance of the pixel mean's luminance (σ²/N); ``mist`` (H, W) Cycles's
-    Mist pass, or None for a film whose samples carried none (``sum_mist`` None).
+    Mist pass, or None for a film whose samples carried none (``sum_mist`` None); the data
+    passes ``object_index``, ``material_index`` (H, W), ``position`` (H, W, 3) Blender world
+    space (0 where nothing was hit) — from each pixel's sample 0, as Cycles — and ``uv``
+    (H, W, 3) (mean u, v and coverage), or None without them (``sum_data`` None).
     """
 
     width: int
@@ -104,6 +126,8 @@ class Film:
     nan_samples: int = 0
     #: Σ of the samples' Mist sums per pixel (created by the first batch that carries one)
     sum_mist: np.ndarray = None
+    #: (n, DATA_WIDTH) the data passes' sums (created by the first batch that carries them)
+    sum_data: np.ndarray = None
     meta: dict = field(default_factory=dict)
     #: radiance scale applied as samples are added (Cycles's Film > Exposure); films merged
     #: from exposed parts keep 1
@@ -132,6 +156,11 @@ class Film:
                 self.sum_mist = np.zeros(self.width * self.height)
             _accumulate_mist(np.ascontiguousarray(b.pixel, dtype=np.int64),
                              np.ascontiguousarray(b.mist, dtype=np.float64), self.sum_mist)
+        if b.data is not None:
+            if self.sum_data is None:
+                self.sum_data = np.zeros((self.width * self.height, DATA_WIDTH))
+            _accumulate_data(np.ascontiguousarray(b.data_pixel, dtype=np.int64),
+                             np.ascontiguousarray(b.data, dtype=np.float64), self.sum_data)
 
     def merge(self, other: "Film") -> None:
         """Add another film of the same size (e.g. a disjoint sample range)."""
@@ -144,6 +173,8 @@ class Film:
         self.nan_samples += other.nan_samples
         if other.sum_mist is not None:
             self.sum_mist = other.sum_mist.copy() if self.sum_mist is None else self.sum_mist + other.sum_mist
+        if other.sum_data is not None:  # (only one part holds a pixel's sample 0)
+            self.sum_data = other.sum_data.copy() if self.sum_data is None else self.sum_data + other.sum_data
 
     def _mean(self, s: np.ndarray) -> np.ndarray:
         c = np.maximum(self.count, 1).reshape((-1,) + (1,) * (s.ndim - 1))
@@ -186,6 +217,27 @@ class Film:
         if self.sum_mist is None:
             return None
         return self._image(np.clip(1.0 - self._mean(self.sum_mist), 0.0, 1.0))
+
+    @property
+    def object_index(self) -> np.ndarray | None:
+        """(H, W) Cycles's Object Index pass: the pass index of the object sample 0 saw (0: none)."""
+        return None if self.sum_data is None else self._image(self.sum_data[:, DATA_OBJECT])
+
+    @property
+    def material_index(self) -> np.ndarray | None:
+        """(H, W) Cycles's Material Index pass (sample 0's material's pass index)."""
+        return None if self.sum_data is None else self._image(self.sum_data[:, DATA_MATERIAL])
+
+    @property
+    def position(self) -> np.ndarray | None:
+        """(H, W, 3) Cycles's Position pass: sample 0's surface point, Blender world space."""
+        return None if self.sum_data is None else self._image(self.sum_data[:, DATA_POSITION:DATA_POSITION + 3])
+
+    @property
+    def uv(self) -> np.ndarray | None:
+        """(H, W, 3) Cycles's UV pass: the mean over samples of (u, v, 1) at the first surface
+        each one saw (0 for samples that saw none, or a mesh without a UV map)."""
+        return None if self.sum_data is None else self._image(self._mean(self.sum_data[:, DATA_UV:DATA_UV + 3]))
 
     @property
     def sample_count(self) -> np.ndarray:

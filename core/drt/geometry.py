@@ -50,11 +50,16 @@ class SceneGeometry:
     normals: np.ndarray | None = None  # (T_all, 3, 3) float32 shading normals (world for static, local for moving)
     has_normals: np.ndarray = None  # (T_all,) bool; False: flat shading
     uvs: np.ndarray | None = None  # (T_all, 3, 2) float32
+    #: (T_all,) bool: the triangle's mesh has a UV map (zeros in ``uvs`` otherwise); with ``uvs``
+    has_uvs: np.ndarray | None = None
     #: (T_all,) int32 object of each global triangle and (O, 9) float64 Object Info rows
     #: (location xyz in Blender world, colour rgb, alpha, pass index, random); only when some
     #: object carries Object Info (a material program reads it), else None
     object_of: np.ndarray | None = None
     object_info: np.ndarray | None = None
+    #: (T_all, 2) float32 [object, material] pass index of each global triangle (the Object /
+    #: Material Index passes); only when the render asks for one of them, else None
+    pass_ids: np.ndarray | None = None
     #: (T_all,) uint8 VIS_* bits of the rays that see each triangle (drt.scene.RAY_VISIBILITY),
     #: plus VIS_HOLDOUT on a holdout object's; None when every object is visible to every ray
     #: and none is a holdout
@@ -237,6 +242,9 @@ def build_geometry(scene: Scene) -> SceneGeometry:
     geom.has_normals = cat(hasn_static + hasn_moving, np.zeros(0, bool))
     geom.normals = cat(nrm_static + nrm_moving, np.zeros((0, 3, 3), np.float32)) if any_normals else None
     geom.uvs = cat(uv_static + uv_moving, np.zeros((0, 3, 2), np.float32)) if any_uvs else None
+    if any_uvs:
+        object_has_uvs = np.array([scene.meshes[o.mesh].uvs is not None for o in scene.objects] or [False])
+        geom.has_uvs = object_has_uvs[cat(obj_static + obj_moving, np.zeros(0, np.int32))]
     geom.triangle_count = offset
     if any(t.any() for t in shade_static + shade_moving):
         geom.terminator_shading = np.concatenate(shade_static + shade_moving)
@@ -251,6 +259,13 @@ def build_geometry(scene: Scene) -> SceneGeometry:
                                                      o.info if o.info is not None else [1, 1, 1, 1, 0, 0],
                                                      _normal_matrix(o.matrix).reshape(9)])
                                      for o in scene.objects], np.float64).reshape(-1, 18)
+    if {"object_index", "material_index"} & set(getattr(scene.render, "data_passes", ())):
+        obj_of = cat(obj_static + obj_moving, np.zeros(0, np.int32))
+        obj_pass = np.array([o.pass_index for o in scene.objects] or [0], np.float32)
+        mat_pass = np.array([m.get("pass_index", 0) if isinstance(m, dict) else 0 for m in scene.materials]
+                            or [0], np.float32)
+        geom.pass_ids = np.stack([obj_pass[obj_of], mat_pass[np.minimum(geom.material, len(mat_pass) - 1)]],
+                                 axis=1).astype(np.float32)
     if any(isinstance(m, dict) and m.get("volume") for m in scene.materials):
         geom.object_id = cat(obj_static + obj_moving, np.zeros(0, np.int32))  # volume stack keys
     names = getattr(scene, "attributes", [])

@@ -87,6 +87,20 @@ def program_data_for(materials: MaterialTable, geom: SceneGeometry, camera: Came
                                   camera.pixel_footprint(), camera.texture_space(), world=world)
 
 
+def uv_pass_corners(geom) -> np.ndarray:
+    """(T, 3, 3) float32 per corner (u, v, 1) of the render UV map for the UV pass, (0, 0, 0)
+    on meshes without one, as Cycles's primitive_uv; (0, 3, 3) when no mesh has one."""
+    uvs = getattr(geom, "uvs", None)
+    if uvs is None:
+        return np.zeros((0, 3, 3), np.float32)
+    out = np.zeros((len(uvs), 3, 3), np.float32)
+    out[..., :2] = uvs
+    has = getattr(geom, "has_uvs", None)
+    out[..., 2] = 1.0 if has is None else np.asarray(has, np.float32)[:, None]
+    out[..., :2] *= out[..., 2:]
+    return out
+
+
 class Integrator:
     """Renders batches of camera samples. Thread-safe: holds only read-only scene data; every
     batch owns its arrays."""
@@ -146,9 +160,12 @@ class Integrator:
                                else -1.0),
             filter_glossy=float(getattr(settings, "filter_glossy", 0.0)),
             mist_start=float(mist[0]), mist_inv_depth=1.0 / mist[1] if mist[1] > 0.0 else 0.0,
-            mist_falloff=float(mist[2]), mist_ortho=getattr(getattr(camera, "spec", None), "type", "") == "ORTHO")
+            mist_falloff=float(mist[2]), mist_ortho=getattr(getattr(camera, "spec", None), "type", "") == "ORTHO",
+            pass_alpha=float(getattr(settings, "pass_alpha_threshold", 0.5)))
         #: the Mist pass is kept only for a render that asks for it (``RenderSettings.mist``)
         self.mist_pass = getattr(settings, "mist", None) is not None
+        #: likewise the data passes (``RenderSettings.data_passes``; path_stages.write_data_passes)
+        self.data_passes = tuple(getattr(settings, "data_passes", ()))
         # Filter Glossy keeps a pdf per path only where it can widen a lobe: a render with it on,
         # of a scene with a microfacet lobe (drt.materials.table.filtered_alpha)
         self.filters_glossy = self.stage_settings.filter_glossy > 0.0 and bool(
@@ -171,7 +188,10 @@ class Integrator:
             has_normals=np.ascontiguousarray(geom.has_normals, dtype=bool),
             terminator=term_cut, corners=term_corners, shading_mult=shading_multipliers(geom),
             visibility=(np.ascontiguousarray(geom.visibility, dtype=np.uint8) if geom.visibility is not None
-                        else np.zeros(0, np.uint8)))
+                        else np.zeros(0, np.uint8)),
+            pass_ids=(np.ascontiguousarray(geom.pass_ids, dtype=np.float32)
+                      if getattr(geom, "pass_ids", None) is not None else np.zeros((0, 2), np.float32)),
+            uvs=uv_pass_corners(geom) if "uv" in self.data_passes else np.zeros((0, 3, 3), np.float32))
         # objects some rays do not see (Cycles's ray visibility): path rays pass them before
         # shade (_skip_unseen), shadow rays in _shadows_through's rounds of closest hits
         vis, path_bits = self.surfaces.visibility, VIS_ALL & ~VIS_SHADOW
@@ -246,7 +266,8 @@ class Integrator:
                 buffers = stages.Outputs(radiance=np.empty((n, 3)), alpha=np.empty(n), depth=np.empty(n),
                                          normal=np.empty((n, 3)), albedo=np.empty((n, 3)),
                                          eye=np.empty((n, 3)), forward=np.empty((n, 3)),
-                                         mist=np.empty(n if self.mist_pass else 0))
+                                         mist=np.empty(n if self.mist_pass else 0),
+                                         data=np.empty((n if self.data_passes else 0, stages.DATA_COLUMNS)))
                 break
             if buffers.alpha.shape[0] >= n:
                 break  # (a smaller one is dropped; a new set of this batch's size replaces it)
@@ -364,10 +385,28 @@ class Integrator:
         pixel = (np.asarray(row, dtype=np.int64) * self.s.width + np.asarray(x, dtype=np.int64))
         alpha, depth, normal, albedo = out.alpha, out.depth, out.normal, out.albedo
         mist = out.mist if self.mist_pass else None
+        data, data_pixel = self._data_pass_rows(out, pixel, good)
         nan_count = int(n - good.sum())
         if nan_count:
             pixel, radiance, alpha, depth = pixel[good], radiance[good], alpha[good], depth[good]
             normal, albedo = normal[good], albedo[good]
             mist = mist[good] if mist is not None else None
         return SampleBatch(pixel, radiance, alpha, depth, normal, albedo, nan_count, mist=mist,
+                           data=data, data_pixel=data_pixel,
                            release=functools.partial(self._returned_outputs.append, buffers))
+
+    def _data_pass_rows(self, out, pixel, good):
+        """The batch's data-pass columns for the film (``SampleBatch.data``) and their pixels, or
+        (None, None) without data passes. Every sample keeps its sample-0 columns (a sample whose
+        radiance was dropped as non-finite still hit what it hit); only the UV, which the film
+        averages over the counted samples, is dropped with it. The Position goes back to
+        Blender's world space where sample 0 hit a surface."""
+        if not self.data_passes:
+            return None, None
+        data = out.data[:, :stages.DATA_DONE].copy()
+        shift = getattr(self.geom, "origin_shift", None)
+        if shift is not None:
+            hit = data[:, stages.DATA_HIT] > 0.0
+            data[hit, stages.DATA_POSITION:stages.DATA_POSITION + 3] += np.asarray(shift, np.float64)
+        data[~good, stages.DATA_UV:stages.DATA_UV + 3] = 0.0
+        return data, pixel

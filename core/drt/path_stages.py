@@ -40,6 +40,7 @@ from collections import namedtuple
 import numpy as np
 
 from .camera import camera_ray
+from .film import DATA_HIT, DATA_MATERIAL, DATA_OBJECT, DATA_POSITION, DATA_UV, DATA_WIDTH
 from .kernels import inline_kernel, kernel
 from .kernels.vec3 import add, build_frame, dot, load, mul, neg, normalize, scale, store, sub, to_local, to_world
 from .lights.common import I_VISIBLE_CAMERA
@@ -98,6 +99,7 @@ StageSettings = namedtuple("StageSettings", [
     "mist_start", "mist_inv_depth",       # the Mist pass: (distance − start) · inv_depth, ^falloff,
     "mist_falloff", "mist_ortho",         # distance along the view axis for an orthographic camera
                                           # (``mist_weight``; read only where ``Outputs.mist`` has rows)
+    "pass_alpha",                         # the data passes' alpha threshold (``write_data_passes``)
 ])
 
 Paths = namedtuple("Paths", [
@@ -135,7 +137,16 @@ RAY_DIFFUSE, RAY_GLOSSY, RAY_SINGULAR, RAY_TRANSMIT = 1, 2, 4, 8
 #: Transparent Glass; Cycles's PATH_RAY_TRANSPARENT_BACKGROUND beyond camera rays)
 RAY_TRANSPARENT_BG = 16
 
-Outputs = namedtuple("Outputs", ["radiance", "alpha", "depth", "normal", "albedo", "eye", "forward", "mist"])
+Outputs = namedtuple("Outputs", ["radiance", "alpha", "depth", "normal", "albedo", "eye", "forward", "mist",
+                                 "data"])  # (n, DATA_COLUMNS) the data passes, (0, DATA_COLUMNS): none
+
+#: columns of ``Outputs.data`` (``write_data_passes``): the film's (drt.film.DATA_*) — written
+#: by a pixel's sample 0 only, as Cycles: the Object Index, the Material Index, the Position
+#: (shifted world space; the integrator adds the origin shift back) and whether sample 0 hit a
+#: surface; by every sample: the UV (u, v, 1 as Cycles's primitive_uv) — then, never filmed,
+#: whether the sample's data passes are done (Cycles's PATH_RAY_SINGLE_PASS_DONE)
+DATA_DONE = DATA_WIDTH
+DATA_COLUMNS = DATA_WIDTH + 1
 
 ShadowRays = namedtuple("ShadowRays", ["o", "d", "tmax", "tau", "contrib", "slot",
                                        "vstack"])  # (n, STACK_SIZE): the media the ray starts in
@@ -149,6 +160,9 @@ Surfaces = namedtuple("Surfaces", [
     "shading_mult",   # (T,) float32 shadow terminator shading-offset multiplier ((0,): none)
     "visibility",     # (T,) uint8 VIS_* bits of the rays that see each triangle, with VIS_HOLDOUT
                       # on holdout objects' ((0,): all see all, no holdout)
+    "pass_ids",       # (T, 2) float32 [object, material] pass index ((0, 2): no index pass)
+    "uvs",            # (T, 3, 3) float32 (u, v, 1) of the render UV map per corner, zeros on
+                      # meshes without one ((0, 3, 3): no UV pass, or no UV map in the scene)
 ])
 
 HitArrays = namedtuple("HitArrays", [
@@ -505,6 +519,9 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
         store(out.forward, i, forward)
         if out.mist.shape[0]:
             out.mist[i] = 0.0
+        if out.data.shape[0]:
+            for c in range(DATA_COLUMNS):
+                out.data[i, c] = 0.0
         if tmax < 0.0:
             continue
         store(paths.o, j, o)
@@ -561,6 +578,36 @@ def mist_weight(settings, md, m, thr, p, eye, forward):
     a = (thr[0] * min(max(1.0 - t[0], 0.0), 1.0) + thr[1] * min(max(1.0 - t[1], 0.0), 1.0)
          + thr[2] * min(max(1.0 - t[2], 0.0), 1.0)) * (1.0 / 3.0)
     return (1.0 - mist) * a
+
+
+@kernel
+def write_data_passes(settings, surf, md, mat, hits, i, prim, p, first, out, slot):
+    """Cycles's data passes (film_write_data_passes) at a see-through surface hit (a camera ray,
+    or one still seeing the world through transparency or Transparent Glass) whose sample has
+    not finished them: the pixel's sample 0 (``first``) overwrites the Object and Material Index,
+    the Position and the hit flag at every such surface; at the first surface whose alpha
+    (1 − average transparency of this hit's row ``mat``) reaches the alpha threshold (or any
+    surface with the threshold 0) the sample adds its UV and its passes are done. Columns:
+    ``DATA_*``."""
+    if first:
+        if surf.pass_ids.shape[0]:
+            out.data[slot, DATA_OBJECT] = surf.pass_ids[prim, 0]
+            out.data[slot, DATA_MATERIAL] = surf.pass_ids[prim, 1]
+        for c in range(3):
+            out.data[slot, DATA_POSITION + c] = p[c]
+        out.data[slot, DATA_HIT] = 1.0
+    if settings.pass_alpha > 0.0:
+        t = transparency(md, mat)
+        if 1.0 - (t[0] + t[1] + t[2]) * (1.0 / 3.0) < settings.pass_alpha:
+            return
+    if surf.uvs.shape[0]:
+        b1 = hits.b1[i]
+        b2 = hits.b2[i]
+        b0 = 1.0 - b1 - b2
+        c = surf.uvs[prim]
+        for k in range(3):
+            out.data[slot, DATA_UV + k] = b0 * c[0, k] + b1 * c[1, k] + b2 * c[2, k]
+    out.data[slot, DATA_DONE] = 1.0
 
 
 @kernel
@@ -740,6 +787,11 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             j += 1
             continue
         if prim < 0:
+            if out.data.shape[0] and see_through and idx == 0 and out.data[slot, DATA_DONE] == 0.0:
+                # the world ends the sample's data passes unfinished: no surface (Cycles's
+                # film_write_data_passes_background)
+                for c in range(DATA_HIT + 1):
+                    out.data[slot, c] = 0.0
             sun = sun_in_cone(ld, d)
             if sun >= 0 and not (camera and ld.li[sun, I_VISIBLE_CAMERA] == 0):
                 le, lpdf = sun_emission(ld, sun, prev_p, d, prev_hint)
@@ -858,6 +910,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 if h >= 1.0:
                     store(out.radiance, slot, add(load(out.radiance, slot), acc))
                     continue
+        if out.data.shape[0] and see_through and not exiting and out.data[slot, DATA_DONE] == 0.0:
+            write_data_passes(settings, surf, md, mat, hits, i, prim, p, idx == 0, out, slot)
         if md.has_emission[mat] and not exiting:
             le = load(md.emission, mat)
             if md.emission_layer[mat] >= 0:  # a Principled's emission under its coat / sheen

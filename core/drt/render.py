@@ -613,6 +613,9 @@ def _collect(batch, film, stats, tick, total_paths, workers, t0, to_film=None):
         width, fx0, fy0, fw = to_film
         row, col = np.divmod(batch.pixel, width)
         batch = replace(batch, pixel=(row - fy0) * fw + (col - fx0))
+        if batch.data_pixel is not None:
+            row, col = np.divmod(batch.data_pixel, width)
+            batch = replace(batch, data_pixel=(row - fy0) * fw + (col - fx0))
     film.add(batch)
     stats.camera_paths += len(batch.pixel) + batch.nan_count
     if batch.release is not None:  # the film holds its sums: the arrays can serve a later batch

@@ -215,6 +215,12 @@ class RenderSettings:
     #: Cycles's Mist pass, wanted: (start, depth, falloff exponent) of the world's Mist Pass
     #: settings (falloff 2 quadratic, 1 linear, 0.5 inverse quadratic); None: no Mist pass
     mist: tuple[float, float, float] | None = None
+    #: Cycles's data passes wanted, a subset of DATA_PASSES in that order ("object_index",
+    #: "material_index", "position", "uv"); empty: none (drt.path_stages.write_data_passes)
+    data_passes: tuple = ()
+    #: the view layer's Alpha Threshold: a data pass skips a transparent surface whose alpha
+    #: (1 − average transparency) is below it (0: every surface counts), as Cycles
+    pass_alpha_threshold: float = 0.5
     shutter: tuple[float, float] | None = None
     direct: str = "MIS_POWER"  # direct-light estimator (see integrator.DIRECT_STRATEGIES)
     indirect: str = "BSDF"  # continuation sampling (integrator.INDIRECT_STRATEGIES)
@@ -307,6 +313,8 @@ class ObjectSpec:
     #: a camera ray (still one through transparent surfaces) hits the object, the film's alpha
     #: loses the hit's opaque part and no light is added; every other ray sees it as usual
     holdout: bool = False
+    #: Object > Relations > Pass Index: the Object Index pass's value on the object's surfaces
+    pass_index: int = 0
 
 
 @dataclass
@@ -364,6 +372,22 @@ def _mist(r: dict, path: str):
     return (_number(m, "start", p, 5.0, lo=0), _number(m, "depth", p, 25.0, lo=0), MIST_FALLOFF[falloff])
 
 
+#: the data passes a scene may ask for (``render.data_passes``), in their column order
+DATA_PASSES = ("object_index", "material_index", "position", "uv")
+
+
+def _data_passes(r: dict, path: str) -> tuple:
+    """``render.data_passes``: a list of DATA_PASSES names (any order, no repeats needed)."""
+    names = _get(r, "data_passes", path, [])
+    p = _join(path, "data_passes")
+    if not isinstance(names, (list, tuple)):
+        raise SceneError(p, f"must be a list of {', '.join(DATA_PASSES)}")
+    unknown = [n for n in names if n not in DATA_PASSES]
+    if unknown:
+        raise SceneError(p, f"{unknown[0]!r} is not a data pass (one of {', '.join(DATA_PASSES)})")
+    return tuple(n for n in DATA_PASSES if n in names)
+
+
 def _render_settings(h: dict) -> RenderSettings:
     p = "render"
     r = _get(h, "render", "")
@@ -418,6 +442,8 @@ def _render_settings(h: dict) -> RenderSettings:
         caustics_reflective=_bool(r, "caustics_reflective", p, True),
         caustics_refractive=_bool(r, "caustics_refractive", p, True),
         mist=_mist(r, p),
+        data_passes=_data_passes(r, p),
+        pass_alpha_threshold=_number(r, "pass_alpha_threshold", p, 0.5, lo=0, hi=1),
         shutter=shutter,
         direct=_enum(r, "direct", p, DIRECT_STRATEGIES, "MIS_POWER"),
         indirect=_enum(r, "indirect", p, INDIRECT_STRATEGIES, "BSDF"),
@@ -544,6 +570,8 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
             "lobes": clean,
             "emission": _vector(m, "emission", p, 3, default=[0, 0, 0], lo=0.0).tolist(),
         }
+        if "pass_index" in m:  # Material > Settings > Pass Index (the Material Index pass)
+            mat["pass_index"] = _number(m, "pass_index", p, integer=True, lo=0, hi=2**31 - 1)
         if "emission_layer" in m:  # the coat / sheen lobe over a Principled's emission (issue 11)
             mat["emission_layer"] = _number(m, "emission_layer", p, integer=True, lo=0, hi=max(len(lobes) - 1, 0))
         volume = _medium(m, p)
@@ -780,7 +808,8 @@ def _objects(h: dict, n_meshes: int) -> list[ObjectSpec]:
                               _motion(o, "motion", p), info,
                               _number(term, "geometry_offset", tp, default=0.0, lo=0.0, hi=1.0),
                               _number(term, "shading_offset", tp, default=0.0, lo=0.0, hi=1.0),
-                              _visibility(o, p), _bool(o, "holdout", p, False)))
+                              _visibility(o, p), _bool(o, "holdout", p, False),
+                              _number(o, "pass_index", p, 0, lo=0, hi=2**31 - 1, integer=True)))
     return out
 
 

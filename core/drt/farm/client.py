@@ -26,7 +26,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..film import Film
+from ..film import DATA_WIDTH, Film
 from .plan import TASK_SECONDS, TaskSpec, plan_frame
 
 DEFAULT_TIMEOUT = 30.0  # seconds
@@ -214,6 +214,11 @@ def _add_part(film: Film, part: dict) -> None:
         if film.sum_mist is None:
             film.sum_mist = np.zeros(film.width * film.height)
         film.sum_mist.reshape(film.height, film.width)[rows, cols] += part["sum_mist"].reshape(h, w)
+    if part.get("sum_data") is not None:  # (the data passes, when the scene asks for them)
+        if film.sum_data is None:
+            film.sum_data = np.zeros((film.width * film.height, DATA_WIDTH))
+        film.sum_data.reshape(film.height, film.width, DATA_WIDTH)[rows, cols] += \
+            part["sum_data"].reshape(h, w, DATA_WIDTH)
     film.nan_samples += int(part["nan_samples"])
 
 
