@@ -339,8 +339,7 @@ _UNRENDERED_PASSES = (
     ("use_pass_glossy_direct", "Glossy Direct"), ("use_pass_glossy_indirect", "Glossy Indirect"),
     ("use_pass_glossy_color", "Glossy Color"), ("use_pass_transmission_direct", "Transmission Direct"),
     ("use_pass_transmission_indirect", "Transmission Indirect"),
-    ("use_pass_transmission_color", "Transmission Color"), ("use_pass_emit", "Emission"),
-    ("use_pass_environment", "Environment"), ("use_pass_shadow", "Shadow"),
+    ("use_pass_transmission_color", "Transmission Color"), ("use_pass_shadow", "Shadow"),
     ("use_pass_ambient_occlusion", "Ambient Occlusion"),
     ("use_pass_cryptomatte_object", "Cryptomatte Object"),
     ("use_pass_cryptomatte_material", "Cryptomatte Material"),
@@ -355,7 +354,8 @@ _UNRENDERED_CYCLES_PASSES = (
 #: render passes Blender renamed (its RE_PASSNAME_* names; bpy 5.0 measured: Cycles writes
 #: "Diffuse Color", "Object Index", "Material Index"); DRT registers each under the running
 #: Blender's name, as Cycles does, so a compositing tree made with Cycles finds its sockets
-_RENAMED_PASSES = {"DiffCol": "Diffuse Color", "IndexOB": "Object Index", "IndexMA": "Material Index"}
+_RENAMED_PASSES = {"DiffCol": "Diffuse Color", "IndexOB": "Object Index", "IndexMA": "Material Index",
+                   "Emit": "Emission", "Env": "Environment"}
 _PASSES_RENAMED_IN = (4, 2, 0)
 
 
@@ -386,4 +386,6 @@ def view_layer_pass_flags(view_layer) -> dict:
         "material_index": bool(getattr(view_layer, "use_pass_material_index", False)),
         "position": bool(getattr(view_layer, "use_pass_position", False)),
         "uv": bool(getattr(view_layer, "use_pass_uv", False)),
+        "emission": bool(getattr(view_layer, "use_pass_emit", False)),
+        "environment": bool(getattr(view_layer, "use_pass_environment", False)),
     }

@@ -20,12 +20,14 @@ PASSES = (  # (Blender pass name before 4.2: compat.pass_name, channels, chan_id
     #         view-layer flag)
     ("Depth", 1, "Z", "VALUE", "depth", "depth"),
     ("Normal", 3, "XYZ", "VECTOR", "normal", "normal"),
-    ("DiffCol", 3, "RGB", "COLOR", "albedo", "albedo"),
+    ("DiffCol", 3, "RGB", "COLOR", "diffuse_color", "albedo"),
     ("Mist", 1, "Z", "VALUE", "mist", "mist"),
     ("Position", 3, "XYZ", "VECTOR", "position", "position"),
     ("UV", 3, "UVA", "VECTOR", "uv", "uv"),
     ("IndexOB", 1, "X", "VALUE", "object_index", "object_index"),
     ("IndexMA", 1, "X", "VALUE", "material_index", "material_index"),
+    ("Emit", 3, "RGB", "COLOR", "emission", "emission"),
+    ("Env", 3, "RGB", "COLOR", "environment", "environment"),
 )
 
 

@@ -145,6 +145,9 @@ class DRT_VIEWLAYER_PT_passes_data(bpy.types.Panel):
         col.prop(vl, "use_pass_object_index")
         col.prop(vl, "use_pass_material_index")
         layout.prop(vl, "pass_alpha_threshold")
+        col = layout.column(heading="Light", align=True)
+        col.prop(vl, "use_pass_emit", text="Emission")
+        col.prop(vl, "use_pass_environment")
         cl = getattr(vl, "cycles", None)  # the Cycles add-on's view-layer settings, if enabled
         if cl is not None:
             col.prop(cl, "denoising_store_passes", text="Denoising Data")

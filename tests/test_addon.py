@@ -193,21 +193,21 @@ def test_passes_written(tmp_path):
 
 
 def test_passes_drt_does_not_render_are_named(monkeypatch):
-    """Passes the view layer enables that DRT has no figures for (Vector, Emission, Cryptomatte,
+    """Passes the view layer enables that DRT has no figures for (Vector, Shadow, Cryptomatte,
     AOVs…) are named in one warning instead of silently missing from the result; the ones it
     renders (Position here) are not."""
     scene = open_scene("cornell_box")
     scene.drt.samples = 1
     vl = scene.view_layers[0]
     assert compat.unrendered_passes(vl) == []
-    vl.use_pass_position = vl.use_pass_vector = vl.use_pass_emit = vl.use_pass_cryptomatte_object = True
+    vl.use_pass_position = vl.use_pass_vector = vl.use_pass_shadow = vl.use_pass_cryptomatte_object = True
     vl.aovs.add().name = "dirt"
     reports = []
     monkeypatch.setattr(drt_engine.DRTRenderEngine, "warn", lambda self, msg: reports.append(msg))
     bpy.ops.render.render()
     passes = [r for r in reports if "passes not rendered" in r]
     assert len(passes) == 1, reports
-    for name in ("Vector", "Emission", "Cryptomatte Object", "AOV 'dirt'"):
+    for name in ("Vector", "Shadow", "Cryptomatte Object", "AOV 'dirt'"):
         assert name in passes[0], passes[0]
     assert "Position" not in passes[0], passes[0]
 

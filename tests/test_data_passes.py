@@ -1,8 +1,10 @@
 """Cycles's data passes (scene format ``render.data_passes``): Object Index, Material Index and
 Position from each pixel's sample 0, the UV averaged over samples, each at the first surface a
 camera ray meets whose alpha reaches the view layer's Alpha Threshold (Cycles's
-film_write_data_passes). Exact values on an orthographic view of known geometry; parity with
-Cycles through F12 in both engines is test_data_passes_blender.py."""
+film_write_data_passes); and its Emission and Environment passes (``render.light_passes``): what
+camera rays bring from emitters and from the world before their first scattering. Exact values
+on orthographic views of known geometry; parity with Cycles through F12 in both engines at the
+end."""
 
 import numpy as np
 import pytest
@@ -149,6 +151,7 @@ def test_a_render_without_data_passes_keeps_none():
 @pytest.mark.parametrize("change, where", [
     (lambda h: h["render"].__setitem__("data_passes", ["object_index", "cryptomatte"]), "render.data_passes"),
     (lambda h: h["render"].__setitem__("data_passes", "uv"), "render.data_passes"),
+    (lambda h: h["render"].__setitem__("light_passes", ["emission", "shadow"]), "render.light_passes"),
     (lambda h: h["render"].__setitem__("pass_alpha_threshold", 1.5), "render.pass_alpha_threshold"),
     (lambda h: h["objects"][0].__setitem__("pass_index", -1), "objects[0].pass_index"),
     (lambda h: h["materials"][0].__setitem__("pass_index", 2.5), "materials[0].pass_index"),
@@ -162,6 +165,104 @@ def test_bad_data_pass_settings_are_named(change, where):
     with pytest.raises(SceneError) as e:
         scene_from_dict(h, a)
     assert where in str(e.value)
+
+
+# ------------------------------------------------------------------------- light passes
+WORLD = (0.2, 0.3, 0.4)
+GLOW = (2.0, 1.0, 0.5)
+
+
+def _glow_scene(spp=16, card=False, **render_opts):
+    """An orthographic view down on a grey floor (x < 0.6) and, over its −x half, a glowing
+    plate (emission GLOW) at z = 0.3; the world (WORLD) seen beyond the floor (x > 0.6).
+    ``card``: a 50 % transparent card at z = 0.6 over the plate's −y half."""
+    cam = {"type": "ORTHO", "matrix_world": translation(0, 0, 3.0), "ortho_scale": 2.0,
+           "clip_start": 0.01, "clip_end": 100.0}
+    h = base_header(16, 16, spp, camera=cam, world=WORLD, light_passes=["emission", "environment"],
+                    **render_opts)
+    a = {}
+    grey = add_material(h, "grey", [{"type": "DIFFUSE", "color": [0.5] * 3}])
+    glow = add_material(h, "glow", [{"type": "DIFFUSE", "color": [0.0] * 3}], emission=GLOW)
+    add_mesh(h, a, "floor", *quad((-0.2, 0, 0), (0.8, 0, 0), (0, 1.2, 0)), material=grey)
+    add_mesh(h, a, "plate", *quad((-0.5, 0, 0.3), (0.45, 0, 0), (0, 0.9, 0)), material=glow)
+    if card:
+        half = add_material(h, "half", [{"type": "GLASS", "color": [0.5] * 3, "ior": 1.0, "roughness": 0.0},
+                                        {"type": "DIFFUSE", "color": [0.0] * 3}])
+        add_mesh(h, a, "card", *quad((-0.5, -0.45, 0.6), (0.45, 0, 0), (0, 0.45, 0)), material=half)
+    return scene_from_dict(h, a)
+
+
+# pixels every sample of which sees the plate (x in [−0.95, −0.05], y in ±0.9), the floor
+# beside it (x in [0, 0.6]) and the world (x > 0.6); the card's half of the plate (y < −0.05)
+PLATE = (slice(3, 13), slice(2, 5))
+FLOOR_LIT = (slice(4, 12), slice(10, 11))
+WORLD_SEEN = (slice(2, 14), slice(15, 16))
+PLATE_UNDER_CARD = (slice(10, 13), slice(2, 5))
+
+
+def test_emission_and_environment_passes_hold_what_camera_rays_see():
+    film = render(_glow_scene(), threads=2)
+    emit, env = film.emission, film.environment
+    np.testing.assert_allclose(emit[PLATE], np.broadcast_to(GLOW, emit[PLATE].shape), rtol=1e-6)
+    np.testing.assert_allclose(env[WORLD_SEEN], np.broadcast_to(WORLD, env[WORLD_SEEN].shape), rtol=1e-6)
+    assert np.all(env[PLATE] == 0.0) and np.all(emit[WORLD_SEEN] == 0.0)
+    # the floor reflects the plate and the world: light the two passes do not hold
+    assert np.all(emit[FLOOR_LIT] == 0.0) and np.all(env[FLOOR_LIT] == 0.0)
+    assert np.all(film.combined[FLOOR_LIT][..., :3] > 0.05)
+    # where nothing but emitters and the world is seen, the combined pass is their sum
+    np.testing.assert_allclose(film.combined[PLATE][..., :3], emit[PLATE], rtol=1e-6)
+
+
+def test_the_environment_pass_sees_the_world_behind_a_transparent_film_and_exposure_scales():
+    film = render(_glow_scene(film_transparent=True, exposure=2.0), threads=1)
+    env, emit = film.environment[WORLD_SEEN], film.emission[PLATE]
+    np.testing.assert_allclose(env, np.broadcast_to(np.multiply(WORLD, 2.0), env.shape), rtol=1e-6)
+    assert np.all(film.combined[WORLD_SEEN][..., 3] == 0.0) and np.all(film.combined[WORLD_SEEN][..., :3] == 0.0)
+    np.testing.assert_allclose(emit, np.broadcast_to(np.multiply(GLOW, 2.0), emit.shape), rtol=1e-6)
+
+
+def test_emission_seen_through_a_transparent_card_is_weighted_by_it():
+    """A camera ray stays one through transparency (Cycles: no PATH_RAY_ANY_PASS): behind the
+    50 % card the pass is half the plate's glow, in the mean of 64 stochastic pass-throughs."""
+    film = render(_glow_scene(spp=64, card=True), threads=2)
+    under = film.emission[PLATE_UNDER_CARD].reshape(-1, 3).mean(axis=0)
+    # 9 pixels × 64 samples of a Bernoulli(½) × 2·GLOW: σ of the mean ≈ GLOW / 24
+    np.testing.assert_allclose(under, np.multiply(GLOW, 0.5), rtol=0.15)
+
+
+def test_light_passes_merge_across_ranges_and_survive_the_exr(tmp_path):
+    sc = _glow_scene()
+    full = render(sc, threads=1)
+    merged = merge_films([render(sc, threads=1, sample_offset=o, sample_count=8) for o in (0, 8)])
+    np.testing.assert_allclose(merged.emission, full.emission, atol=1e-6)
+    np.testing.assert_allclose(merged.environment, full.environment, atol=1e-6)
+    write_exr(tmp_path / "l.exr", full)
+    back = film_from_exr(tmp_path / "l.exr")
+    np.testing.assert_allclose(back.emission, full.emission, atol=1e-6)
+    np.testing.assert_allclose(back.environment, full.environment, atol=1e-6)
+    assert render(_scene(passes=[], spp=1), threads=1).sum_light is None
+
+
+def test_the_diffuse_color_pass_holds_diffuse_lobes_only_and_is_not_exposed():
+    """Cycles's Diffuse Color: the diffuse-class closures' weights (× throughput), not the
+    albedo the denoiser reads: a Lambert plate gives its colour, a glossy one 0 (its albedo is
+    not 0); exposure scales light, not this colour."""
+    cam = {"type": "ORTHO", "matrix_world": translation(0, 0, 3.0), "ortho_scale": 2.0,
+           "clip_start": 0.01, "clip_end": 100.0}
+    h = base_header(16, 16, 4, camera=cam, world=WORLD, light_passes=["diffuse_color"], exposure=2.0)
+    a = {}
+    colour = [0.8, 0.5, 0.2]
+    add_mesh(h, a, "matte", *quad((-0.5, 0, 0), (0.45, 0, 0), (0, 0.9, 0)),
+             material=add_material(h, "matte", [{"type": "DIFFUSE", "color": colour}]))
+    add_mesh(h, a, "shiny", *quad((0.5, 0, 0), (0.45, 0, 0), (0, 0.9, 0)),
+             material=add_material(h, "shiny", [{"type": "GLOSSY", "color": colour, "roughness": 0.3}]))
+    film = render(scene_from_dict(h, a), threads=1)
+    matte, shiny = (slice(3, 13), slice(2, 5)), (slice(3, 13), slice(11, 14))
+    np.testing.assert_allclose(film.diffuse_color[matte], np.broadcast_to(colour, film.diffuse_color[matte].shape),
+                               rtol=1e-6)
+    assert np.all(film.diffuse_color[shiny] == 0.0) and np.all(film.albedo[shiny] > 0.1)
+    assert np.all(film.diffuse_color[WORLD_SEEN] == 0.0)
+    assert film.emission is not None  # (the light passes come together)
 
 
 # ------------------------------------------------------------------------------ Blender
@@ -182,8 +283,8 @@ def _blender_data_scene():
         m = bpy.data.materials.new(name)
         nt = m.node_tree
         nt.nodes.clear()
-        nt.links.new(node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": (0.5, 0.5, 0.5, 1), "Alpha": alpha}).outputs[0],
-                     nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+        bsdf = node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": (0.5, 0.5, 0.5, 1), "Alpha": alpha})
+        nt.links.new(bsdf.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
         m.pass_index = pass_index
         return m
 
@@ -239,3 +340,156 @@ def test_data_passes_match_cycles(tmp_path):
     assert (coverage == 0).mean() > 0.99 and coverage.max() <= 2 / 16
     uv_diff = np.abs(c["uv"] - d["uv"])[same]
     assert uv_diff.mean() < 0.002 and np.quantile(uv_diff, 0.99) < 0.01
+
+
+def _blender_glow_scene():
+    """node_parity's orthographic view down on a grey floor lit by a glowing plate (Emission
+    strength 3) beside a half-transparent card over part of it, a world of colour WORLD:
+    the Emission and Environment passes on, 256 samples, 2 bounces."""
+    import bpy
+
+    from node_parity import node, setup_scene
+
+    sc = setup_scene(2)
+    sc.cycles.samples = sc.drt.samples = 256
+    sc.cycles.max_bounces = sc.drt.max_bounces = 2
+    sc.world.node_tree.nodes["Background"].inputs[0].default_value = (*WORLD, 1.0)
+    sc.world.node_tree.nodes["Background"].inputs[1].default_value = 1.0
+    vl = sc.view_layers[0]
+    vl.use_pass_emit = vl.use_pass_environment = True
+
+    def material(name, shader, inputs):
+        m = bpy.data.materials.new(name)
+        nt = m.node_tree
+        nt.nodes.clear()
+        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        nt.links.new(node(nt, shader, inputs).outputs[0], out.inputs["Surface"])
+        return m
+
+    bpy.ops.mesh.primitive_plane_add(size=1.2, location=(-0.2, 0, -1))
+    grey = material("grey", "ShaderNodeBsdfDiffuse", {"Color": (0.5, 0.5, 0.5, 1)})
+    bpy.context.object.data.materials.append(grey)
+    bpy.ops.mesh.primitive_plane_add(size=0.5, location=(-0.45, 0.2, -0.7))
+    bpy.context.object.data.materials.append(material("glow", "ShaderNodeEmission",
+                                                      {"Color": (1.0, 0.5, 0.25, 1), "Strength": 3.0}))
+    bpy.ops.mesh.primitive_plane_add(size=0.3, location=(-0.45, 0.2, -0.4))  # (over the plate)
+    bpy.context.object.data.materials.append(material("card", "ShaderNodeBsdfPrincipled",
+                                                      {"Base Color": (0.8, 0.2, 0.2, 1), "Alpha": 0.5}))
+    return sc
+
+
+def test_light_passes_match_cycles(tmp_path):
+    """The Emission and Environment passes through F12 in both engines, pixel by pixel: the
+    plate's glow, the world beyond the floor, zero on the floor; mean absolute difference of
+    each pass well under a percent of its scale (measured: see the print)."""
+    pytest.importorskip("bpy")
+    from addon import compat
+    from test_addon import render_to
+
+    sc = _blender_glow_scene()
+    w, h = sc.render.resolution_x, sc.render.resolution_y
+    got = {}
+    for engine in ("CYCLES", "DRT"):
+        sc.render.engine = engine
+        chans, _ = render_to(sc, tmp_path / f"{engine}.exr", multilayer=True)
+        got[engine] = {}
+        for name in ("Emit", "Env"):
+            key = compat.pass_name(name)
+            keys = [k for k in chans if k.split(".")[-2:-1] == [key] or k.endswith(f".{key}")]
+            assert len(keys) == 1, keys  # (a colour pass reads back as one (h, w, 3) group)
+            got[engine][name] = np.asarray(chans[keys[0]], np.float64).reshape(h, w, -1)[..., :3]
+    for name, scale in (("Emit", 3.0), ("Env", max(WORLD))):
+        c, d = got["CYCLES"][name], got["DRT"][name]
+        diff = np.abs(c - d)
+        print(name, "mean |DRT − Cycles|", diff.mean(), "means", c.mean(), d.mean())
+        assert c.max() > 0.5 * scale  # the pass shows its subject
+        assert diff.mean() < 0.01 * scale and abs(c.mean() - d.mean()) < 0.01 * scale
+
+
+def test_the_passes_panel_shows_the_data_and_light_passes():
+    """DRT's Data passes panel edits the view layer's Position, UV, index and light passes and
+    the Alpha Threshold: every property it draws exists on the view layer."""
+    pytest.importorskip("bpy")
+    import bpy
+
+    from addon import ui
+    from test_addon import FakeLayout, ensure_registered
+
+    ensure_registered()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    panel = type("FakePanel", (), {"layout": FakeLayout()})()
+    ui.DRT_VIEWLAYER_PT_passes_data.draw(panel, bpy.context)
+    drawn = set(panel.layout.props)
+    assert {"use_pass_position", "use_pass_uv", "use_pass_object_index", "use_pass_material_index",
+            "pass_alpha_threshold", "use_pass_emit", "use_pass_environment"} <= drawn
+    vl = bpy.context.view_layer
+    assert all(hasattr(vl, p) or hasattr(getattr(vl, "cycles", None), p) for p in drawn), drawn
+
+
+def _blender_diffuse_color_scene():
+    """node_parity's view down on a grey floor and eight smooth spheres of base colour C, one
+    shader each: a coated Principled, Principled subsurface, Translucent, Principled sheen, a
+    Principled of Alpha 0.5, a rough Principled of IOR 2, the Sheen BSDF, a half-transmissive
+    Principled; the Diffuse Color pass on."""
+    import bpy
+
+    from node_parity import node, setup_scene
+
+    sc = setup_scene(4)
+    sc.cycles.samples = sc.drt.samples = 64
+    sc.view_layers[0].use_pass_diffuse_color = True
+
+    def material(name, shader, inputs):
+        m = bpy.data.materials.new(name)
+        nt = m.node_tree
+        nt.nodes.clear()
+        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        nt.links.new(node(nt, shader, inputs).outputs[0], out.inputs["Surface"])
+        return m
+
+    c = (0.8, 0.5, 0.2, 1)
+    principled = "ShaderNodeBsdfPrincipled"
+    mats = [material("coat", principled, {"Base Color": c, "Coat Weight": 1.0}),
+            material("sss", principled, {"Base Color": c, "Subsurface Weight": 1.0}),
+            material("translucent", "ShaderNodeBsdfTranslucent", {"Color": c}),
+            material("sheen", principled, {"Base Color": c, "Sheen Weight": 1.0}),
+            material("alpha", principled, {"Base Color": c, "Alpha": 0.5}),
+            material("rough", principled, {"Base Color": c, "Roughness": 1.0, "IOR": 2.0}),
+            material("sheen_bsdf", "ShaderNodeBsdfSheen", {"Color": c}),
+            material("transmission", principled, {"Base Color": c, "Transmission Weight": 0.5})]
+    bpy.ops.mesh.primitive_plane_add(size=2, location=(0, 0, -2))
+    bpy.context.object.data.materials.append(material("floor", "ShaderNodeBsdfDiffuse", {"Color": (0.3, 0.3, 0.3, 1)}))
+    for k, m in enumerate(mats):
+        loc = (-0.75 + 0.5 * (k % 4), 0.75 - 0.5 * (k // 4), -1)
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.22, location=loc, segments=32, ring_count=16)
+        bpy.ops.object.shade_smooth()
+        bpy.context.object.data.materials.append(m)
+    return sc, [m.name for m in mats]
+
+
+def test_diffuse_color_matches_cycles(tmp_path):
+    """Cycles's Diffuse Color pass against DRT's through F12: every sphere's centre within
+    0.002 per channel (measured: equal to 3 decimals, the Sheen BSDF's 0.02 included), the
+    image's mean difference under 0.002 (the Alpha sphere's stochastic pass-through)."""
+    pytest.importorskip("bpy")
+    from addon import compat
+    from test_addon import render_to
+
+    sc, names = _blender_diffuse_color_scene()
+    w, h = sc.render.resolution_x, sc.render.resolution_y
+    got = {}
+    for engine in ("CYCLES", "DRT"):
+        sc.render.engine = engine
+        chans, _ = render_to(sc, tmp_path / f"{engine}.exr", multilayer=True)
+        key = f"ViewLayer.{compat.pass_name('DiffCol')}"
+        got[engine] = np.asarray(chans[key], np.float64).reshape(h, w, -1)[..., :3]
+    for k, name in enumerate(names):
+        cx, cy = int((k % 4 + 0.5) * w / 4), int((k // 4 + 0.5) * h / 4)
+        region = (slice(cy - 3, cy + 3), slice(cx - 3, cx + 3))
+        c, d = got["CYCLES"][region].reshape(-1, 3).mean(0), got["DRT"][region].reshape(-1, 3).mean(0)
+        print(name, c.round(4), d.round(4))
+        tol = 0.03 if name == "alpha" else 0.002  # (stochastic transparency: 36 pixels × 64 samples)
+        np.testing.assert_allclose(d, c, atol=tol, err_msg=name)
+    diff = np.abs(got["CYCLES"] - got["DRT"]).max(-1)
+    print("mean |DRT − Cycles|", diff.mean())
+    assert diff.mean() < 0.002

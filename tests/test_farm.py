@@ -52,12 +52,14 @@ def cluster_render(address, scene, spp, **kw):
 def test_tiles_on_the_cluster_are_bit_identical_to_the_local_render(cluster):
     scene = small_box(64, 64)
     # (the Mist pass and the data passes travel too)
-    scene.render = replace(scene.render, mist=(1.0, 5.0, 2.0), data_passes=("object_index", "position", "uv"))
+    scene.render = replace(scene.render, mist=(1.0, 5.0, 2.0), data_passes=("object_index", "position", "uv"),
+                           light_passes=("emission", "environment"))
     film, stats = cluster_render(cluster.scheduler_address, scene, 16, task_seconds=0.01)
     assert stats.tasks_done == stats.tasks_total == 4 and stats.workers == 2
     local = render(scene, spp=16)
-    assert local.sum_mist is not None and local.sum_data is not None
-    for name in ("sum_rgba", "sum_lum2", "sum_normal", "sum_albedo", "min_depth", "count", "sum_mist", "sum_data"):
+    assert local.sum_mist is not None and local.sum_data is not None and local.sum_light is not None
+    for name in ("sum_rgba", "sum_lum2", "sum_normal", "sum_albedo", "min_depth", "count", "sum_mist", "sum_data",
+                 "sum_light"):
         assert np.array_equal(getattr(film, name), getattr(local, name)), name
     assert np.array_equal(film.combined, local.combined)
     assert film.meta["sample_count"] == 16 and film.meta["spp"] == 16

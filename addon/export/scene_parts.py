@@ -124,15 +124,25 @@ DATA_PASS_PROPERTIES = (("use_pass_object_index", "object_index"), ("use_pass_ma
                         ("use_pass_position", "position"), ("use_pass_uv", "uv"))
 
 
+#: the view layer's light passes DRT renders (Passes > Light > Other)
+LIGHT_PASS_PROPERTIES = (("use_pass_emit", "emission"), ("use_pass_environment", "environment"),
+                         ("use_pass_diffuse_color", "diffuse_color"))
+
+
 def data_pass_settings(view_layer) -> dict:
     """``render.data_passes`` (the data passes the view layer enables) and, with any, its Alpha
     Threshold (View Layer > Passes > Data: a surface more transparent than it is seen through);
-    {} without any."""
+    ``render.light_passes`` (the Emission, Environment and Diffuse Color passes it enables); {}
+    without any."""
+    out = {}
     names = [name for prop, name in DATA_PASS_PROPERTIES if getattr(view_layer, prop, False)]
-    if not names:
-        return {}
-    return {"data_passes": names,
-            "pass_alpha_threshold": float(min(max(getattr(view_layer, "pass_alpha_threshold", 0.5), 0.0), 1.0))}
+    if names:
+        out["data_passes"] = names
+        out["pass_alpha_threshold"] = float(min(max(getattr(view_layer, "pass_alpha_threshold", 0.5), 0.0), 1.0))
+    light = [name for prop, name in LIGHT_PASS_PROPERTIES if getattr(view_layer, prop, False)]
+    if light:
+        out["light_passes"] = light
+    return out
 
 
 def caustics_switches(scene) -> dict[str, bool]:

@@ -4,7 +4,9 @@ Channels written: R, G, B, A (combined); Z (depth along the view axis; 1e10 wher
 hit, Cycles's convention); Normal.X/Y/Z (world-space shading normal); Albedo.R/G/B; Mist.Y (Cycles's
 Mist pass, when the scene asks for it: ``render.mist``); IndexOB.X, IndexMA.X, Position.X/Y/Z,
 UV.U/V/A (Cycles's data passes, when the scene asks for any: ``render.data_passes``; all four
-then); SampleCount.Y (samples taken by
+then); Emit.RGB, Env.RGB, DiffCol.RGB (Cycles's Emission, Environment and Diffuse Color passes:
+``render.light_passes``; all three then);
+SampleCount.Y (samples taken by
 each pixel); Variance.Y (variance of the pixel mean's luminance). The header carries
 ``drt:sample_offset``, ``drt:sample_count``, ``drt:seed`` and ``drt:version`` so that renders of
 disjoint sample ranges can be merged exactly (``python -m drt merge``).
@@ -23,7 +25,7 @@ import os
 import numpy as np
 import OpenEXR
 
-from .film import DATA_MATERIAL, DATA_OBJECT, DATA_POSITION, DATA_UV, DATA_WIDTH, Film
+from .film import DATA_MATERIAL, DATA_OBJECT, DATA_POSITION, DATA_UV, DATA_WIDTH, LIGHT_WIDTH, Film
 
 
 def film_channels(film: Film, denoised: np.ndarray | None = None) -> dict[str, np.ndarray]:
@@ -44,6 +46,11 @@ def film_channels(film: Film, denoised: np.ndarray | None = None) -> dict[str, n
         ch[f"Albedo.{c}"] = film.albedo[..., i]
     if film.mist is not None:
         ch["Mist.Y"] = film.mist
+    if film.sum_light is not None:
+        for i, c in enumerate("RGB"):
+            ch[f"Emit.{c}"] = film.emission[..., i]
+            ch[f"Env.{c}"] = film.environment[..., i]
+            ch[f"DiffCol.{c}"] = film.diffuse_color[..., i]
     if film.sum_data is not None:
         ch["IndexOB.X"] = film.object_index
         ch["IndexMA.X"] = film.material_index
@@ -93,6 +100,9 @@ def film_from_exr(path: str | os.PathLike) -> Film:
     film.min_depth = ch["Z"].astype(np.float64).reshape(-1)
     if "Mist.Y" in ch:  # (the pass is 1 − the mean of the samples' sums)
         film.sum_mist = (1.0 - ch["Mist.Y"].astype(np.float64).reshape(-1)) * count
+    if "Emit.R" in ch:  # the light passes: their means × N
+        film.sum_light = np.stack([ch[f"{layer}.{c}"] for layer in ("Emit", "Env", "DiffCol") for c in "RGB"],
+                                  -1).reshape(-1, LIGHT_WIDTH).astype(np.float64) * count[:, None]
     if "IndexOB.X" in ch:  # the data passes: sample 0's values as they are, the UV's mean × N
         film.sum_data = np.zeros((h * w, DATA_WIDTH))
         film.sum_data[:, DATA_OBJECT] = ch["IndexOB.X"].reshape(-1)

@@ -70,6 +70,10 @@ def _accumulate_data(pixel, data, sum_data):
 #: from the pixel's sample 0 only, so their sum is that sample's value — and Σ UV (3: u, v, 1)
 DATA_OBJECT, DATA_MATERIAL, DATA_POSITION, DATA_HIT, DATA_UV = 0, 1, 2, 5, 6
 DATA_WIDTH = 9
+#: columns of ``Film.sum_light``: Σ Emission, Σ Environment (exposed, as the combined pass),
+#: Σ Diffuse Color (an albedo: not exposed, as Cycles's colour passes), rgb each
+LIGHT_EMISSION, LIGHT_ENVIRONMENT, LIGHT_DIFFUSE_COLOR = 0, 3, 6
+LIGHT_WIDTH = 9
 
 
 def _rows3(a) -> np.ndarray:
@@ -99,6 +103,9 @@ class SampleBatch:
     #: flat pixel ids ``data_pixel`` (m,): also samples whose radiance was dropped; None: none
     data: np.ndarray | None = None
     data_pixel: np.ndarray | None = None
+    #: (n, LIGHT_WIDTH) each sample's Emission, Environment and Diffuse Color (rgb each), or
+    #: None: none
+    light: np.ndarray | None = None
 
 
 @dataclass
@@ -112,7 +119,9 @@ class Film:
     Mist pass, or None for a film whose samples carried none (``sum_mist`` None); the data
     passes ``object_index``, ``material_index`` (H, W), ``position`` (H, W, 3) Blender world
     space (0 where nothing was hit) — from each pixel's sample 0, as Cycles — and ``uv``
-    (H, W, 3) (mean u, v and coverage), or None without them (``sum_data`` None).
+    (H, W, 3) (mean u, v and coverage), or None without them (``sum_data`` None); the light
+    passes ``emission`` and ``environment`` (H, W, 3) mean radiance and ``diffuse_color``
+    (H, W, 3), or None (``sum_light`` None).
     """
 
     width: int
@@ -128,6 +137,8 @@ class Film:
     sum_mist: np.ndarray = None
     #: (n, DATA_WIDTH) the data passes' sums (created by the first batch that carries them)
     sum_data: np.ndarray = None
+    #: (n, LIGHT_WIDTH) the Emission, Environment and Diffuse Color passes' sums
+    sum_light: np.ndarray = None
     meta: dict = field(default_factory=dict)
     #: radiance scale applied as samples are added (Cycles's Film > Exposure); films merged
     #: from exposed parts keep 1
@@ -156,6 +167,15 @@ class Film:
                 self.sum_mist = np.zeros(self.width * self.height)
             _accumulate_mist(np.ascontiguousarray(b.pixel, dtype=np.int64),
                              np.ascontiguousarray(b.mist, dtype=np.float64), self.sum_mist)
+        if b.light is not None:
+            if self.sum_light is None:
+                self.sum_light = np.zeros((self.width * self.height, LIGHT_WIDTH))
+            light = b.light
+            if self.exposure != 1.0:
+                light = np.array(light, dtype=np.float64)
+                light[:, :LIGHT_DIFFUSE_COLOR] *= self.exposure
+            _accumulate_data(np.ascontiguousarray(b.pixel, dtype=np.int64),
+                             np.ascontiguousarray(light, dtype=np.float64), self.sum_light)
         if b.data is not None:
             if self.sum_data is None:
                 self.sum_data = np.zeros((self.width * self.height, DATA_WIDTH))
@@ -173,6 +193,8 @@ class Film:
         self.nan_samples += other.nan_samples
         if other.sum_mist is not None:
             self.sum_mist = other.sum_mist.copy() if self.sum_mist is None else self.sum_mist + other.sum_mist
+        if other.sum_light is not None:
+            self.sum_light = other.sum_light.copy() if self.sum_light is None else self.sum_light + other.sum_light
         if other.sum_data is not None:  # (only one part holds a pixel's sample 0)
             self.sum_data = other.sum_data.copy() if self.sum_data is None else self.sum_data + other.sum_data
 
@@ -238,6 +260,28 @@ class Film:
         """(H, W, 3) Cycles's UV pass: the mean over samples of (u, v, 1) at the first surface
         each one saw (0 for samples that saw none, or a mesh without a UV map)."""
         return None if self.sum_data is None else self._image(self._mean(self.sum_data[:, DATA_UV:DATA_UV + 3]))
+
+    @property
+    def emission(self) -> np.ndarray | None:
+        """(H, W, 3) Cycles's Emission pass: the mean light a camera ray (also past transparency)
+        brings from emitters before its first scattering; None without it."""
+        return None if self.sum_light is None else self._light(LIGHT_EMISSION)
+
+    @property
+    def environment(self) -> np.ndarray | None:
+        """(H, W, 3) Cycles's Environment pass: the world (and suns) camera rays see, also with a
+        transparent film; None without it."""
+        return None if self.sum_light is None else self._light(LIGHT_ENVIRONMENT)
+
+    @property
+    def diffuse_color(self) -> np.ndarray | None:
+        """(H, W, 3) Cycles's Diffuse Color pass: the mean over samples of the diffuse-class
+        lobes' colours × throughput, summed over the surfaces a camera ray meets while the world
+        still shows through (drt.path_stages.diffuse_color); None without it."""
+        return None if self.sum_light is None else self._light(LIGHT_DIFFUSE_COLOR)
+
+    def _light(self, first: int) -> np.ndarray:
+        return self._image(self._mean(self.sum_light[:, first:first + 3]))
 
     @property
     def sample_count(self) -> np.ndarray:

@@ -166,6 +166,8 @@ class Integrator:
         self.mist_pass = getattr(settings, "mist", None) is not None
         #: likewise the data passes (``RenderSettings.data_passes``; path_stages.write_data_passes)
         self.data_passes = tuple(getattr(settings, "data_passes", ()))
+        #: and the Emission / Environment passes (``RenderSettings.light_passes``)
+        self.light_passes = bool(getattr(settings, "light_passes", ()))
         # Filter Glossy keeps a pdf per path only where it can widen a lobe: a render with it on,
         # of a scene with a microfacet lobe (drt.materials.table.filtered_alpha)
         self.filters_glossy = self.stage_settings.filter_glossy > 0.0 and bool(
@@ -267,7 +269,8 @@ class Integrator:
                                          normal=np.empty((n, 3)), albedo=np.empty((n, 3)),
                                          eye=np.empty((n, 3)), forward=np.empty((n, 3)),
                                          mist=np.empty(n if self.mist_pass else 0),
-                                         data=np.empty((n if self.data_passes else 0, stages.DATA_COLUMNS)))
+                                         data=np.empty((n if self.data_passes else 0, stages.DATA_COLUMNS)),
+                                         light=np.empty((n if self.light_passes else 0, stages.LIGHT_COLUMNS)))
                 break
             if buffers.alpha.shape[0] >= n:
                 break  # (a smaller one is dropped; a new set of this batch's size replaces it)
@@ -385,14 +388,16 @@ class Integrator:
         pixel = (np.asarray(row, dtype=np.int64) * self.s.width + np.asarray(x, dtype=np.int64))
         alpha, depth, normal, albedo = out.alpha, out.depth, out.normal, out.albedo
         mist = out.mist if self.mist_pass else None
+        light = out.light if self.light_passes else None
         data, data_pixel = self._data_pass_rows(out, pixel, good)
         nan_count = int(n - good.sum())
         if nan_count:
             pixel, radiance, alpha, depth = pixel[good], radiance[good], alpha[good], depth[good]
             normal, albedo = normal[good], albedo[good]
             mist = mist[good] if mist is not None else None
+            light = light[good] if light is not None else None
         return SampleBatch(pixel, radiance, alpha, depth, normal, albedo, nan_count, mist=mist,
-                           data=data, data_pixel=data_pixel,
+                           data=data, data_pixel=data_pixel, light=light,
                            release=functools.partial(self._returned_outputs.append, buffers))
 
     def _data_pass_rows(self, out, pixel, good):

@@ -40,7 +40,8 @@ from collections import namedtuple
 import numpy as np
 
 from .camera import camera_ray
-from .film import DATA_HIT, DATA_MATERIAL, DATA_OBJECT, DATA_POSITION, DATA_UV, DATA_WIDTH
+from .film import (DATA_HIT, DATA_MATERIAL, DATA_OBJECT, DATA_POSITION, DATA_UV, DATA_WIDTH, LIGHT_DIFFUSE_COLOR,
+                   LIGHT_EMISSION, LIGHT_ENVIRONMENT, LIGHT_WIDTH)
 from .kernels import inline_kernel, kernel
 from .kernels.vec3 import add, build_frame, dot, load, mul, neg, normalize, scale, store, sub, to_local, to_world
 from .lights.common import I_VISIBLE_CAMERA
@@ -58,8 +59,9 @@ from .materials.program_format import (POINT_DEPTH, POINT_I, POINT_MISC, POINT_N
 from .materials.programs import eval_material
 from .materials.transparency import straight_lobe, transparency
 from .materials.holdout import holdout_weight
-from .materials.table import (LOBE_SUBSURFACE, LOBE_TRANSLUCENT, NO_VIEW_WEIGHTS, bsdf_eval_weights,
-                              layered_emission, pick_lobe_weights)
+from .materials.table import (BSDF_DIFFUSE, BSDF_SHEEN, BSDF_SUBSURFACE, BSDF_TRANSLUCENT, BSDF_VELVET,
+                              LOBE_SUBSURFACE, LOBE_TRANSLUCENT, NO_VIEW_WEIGHTS, bsdf_eval_weights, layer_albedo, layer_cos, layered_emission,
+                              pick_lobe_weights, under_weight)
 from .subsurface import SSS_DEAD, SSS_EXIT, SSS_EXIT_FLAT, SSS_NONE, SSS_WALK, sss_coefficients
 from .sampling.pixel_filter import filter_sample
 from .sampling.sequences import sample_2d, sample_3d, sample_5d
@@ -138,7 +140,10 @@ RAY_DIFFUSE, RAY_GLOSSY, RAY_SINGULAR, RAY_TRANSMIT = 1, 2, 4, 8
 RAY_TRANSPARENT_BG = 16
 
 Outputs = namedtuple("Outputs", ["radiance", "alpha", "depth", "normal", "albedo", "eye", "forward", "mist",
-                                 "data"])  # (n, DATA_COLUMNS) the data passes, (0, DATA_COLUMNS): none
+                                 "data",    # (n, DATA_COLUMNS) the data passes, (0, DATA_COLUMNS): none
+                                 "light"])  # (n, LIGHT_COLUMNS) the Emission, Environment and Diffuse
+                                            # Color passes (rgb each; ``add_light_passes``,
+                                            # ``diffuse_color``), (0, LIGHT_COLUMNS): none
 
 #: columns of ``Outputs.data`` (``write_data_passes``): the film's (drt.film.DATA_*) — written
 #: by a pixel's sample 0 only, as Cycles: the Object Index, the Material Index, the Position
@@ -147,6 +152,8 @@ Outputs = namedtuple("Outputs", ["radiance", "alpha", "depth", "normal", "albedo
 #: whether the sample's data passes are done (Cycles's PATH_RAY_SINGLE_PASS_DONE)
 DATA_DONE = DATA_WIDTH
 DATA_COLUMNS = DATA_WIDTH + 1
+#: columns of ``Outputs.light`` (the film's ``sum_light``): Emission, Environment, Diffuse Color
+LIGHT_COLUMNS = LIGHT_WIDTH
 
 ShadowRays = namedtuple("ShadowRays", ["o", "d", "tmax", "tau", "contrib", "slot",
                                        "vstack"])  # (n, STACK_SIZE): the media the ray starts in
@@ -522,6 +529,9 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
         if out.data.shape[0]:
             for c in range(DATA_COLUMNS):
                 out.data[i, c] = 0.0
+        if out.light.shape[0]:
+            for c in range(LIGHT_COLUMNS):
+                out.light[i, c] = 0.0
         if tmax < 0.0:
             continue
         store(paths.o, j, o)
@@ -578,6 +588,48 @@ def mist_weight(settings, md, m, thr, p, eye, forward):
     a = (thr[0] * min(max(1.0 - t[0], 0.0), 1.0) + thr[1] * min(max(1.0 - t[1], 0.0), 1.0)
          + thr[2] * min(max(1.0 - t[2], 0.0), 1.0)) * (1.0 / 3.0)
     return (1.0 - mist) * a
+
+
+@inline_kernel
+def add_light_passes(out, slot, emitted, env):
+    """Cycles's Emission and Environment passes (film_write_emission_or_background_pass before
+    the path's first scattering, PATH_RAY_ANY_PASS unset): what a camera ray (still one past
+    transparency) brings from emitters (surfaces, light shapes, media, suns) and from the world.
+    Columns of ``Outputs.light``: emission rgb, environment rgb."""
+    for c in range(3):
+        out.light[slot, LIGHT_EMISSION + c] += emitted[c]
+        out.light[slot, LIGHT_ENVIRONMENT + c] += env[c]
+
+
+@kernel
+def diffuse_color(md, m, wo, nc_local, nv_local, front):
+    """Cycles's surface_shader_diffuse for this hit's row ``m`` seen from ``wo`` (local frame):
+    the summed weights of the diffuse-class lobes (Lambert, translucent, subsurface, sheen and
+    velvet: Cycles's CLOSURE_IS_BSDF_DIFFUSE and BSSRDF), each scaled by what the layers over it
+    leave at wo (``under_weight``: Cycles's closure weights carry the layers' albedo scaling), a
+    microfiber sheen also by its own albedo at wo (Cycles's bsdf_albedo). RGB."""
+    c0 = c1 = c2 = 0.0
+    for l in range(md.lobe_count[m]):
+        t = md.lobe_type[m, l]
+        if (t == BSDF_DIFFUSE or t == BSDF_TRANSLUCENT or t == BSDF_SUBSURFACE or t == BSDF_SHEEN
+                or t == BSDF_VELVET):
+            w = under_weight(md, m, l, wo, nc_local, nv_local, front)
+            if t == BSDF_SHEEN:  # (Cycles's bsdf_albedo: a sheen's weight × its albedo at wo)
+                a = layer_albedo(md, m, l, layer_cos(md, m, l, wo, nc_local, nv_local), front)
+                w = (w[0] * a, w[1] * a, w[2] * a)
+            c0 += md.lobe_color[m, l, 0] * w[0]
+            c1 += md.lobe_color[m, l, 1] * w[1]
+            c2 += md.lobe_color[m, l, 2] * w[2]
+    return (c0, c1, c2)
+
+
+@inline_kernel
+def add_light(out, slot, acc, camera):
+    """Add a vertex's light ``acc`` (emitters met along the ray and at the hit) to its sample,
+    and on a camera ray to the Emission pass too, when the render asks for the light passes."""
+    store(out.radiance, slot, add(load(out.radiance, slot), acc))
+    if out.light.shape[0] and camera:
+        add_light_passes(out, slot, acc, (0.0, 0.0, 0.0))
 
 
 @kernel
@@ -746,7 +798,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 acc = add(acc, clamp(settings, scale(mul(thr0, le), w), deep))
         if scattered:
             # --- the path scatters in the medium: sample the phase function to continue
-            store(out.radiance, slot, add(load(out.radiance, slot), acc))
+            add_light(out, slot, acc, camera)
             if paths.vseg[i] >= VOLUME_BOUNDS_MAX + settings.max_bounces:
                 continue
             vbase = D_VOLUME0 + VOLUME_DIMS * paths.vseg[i]
@@ -787,6 +839,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             j += 1
             continue
         if prim < 0:
+            emitted = acc  # (media and light shapes along the ray, suns: the Emission pass's share)
+            env = (0.0, 0.0, 0.0)  # (the world: the Environment pass's)
             if out.data.shape[0] and see_through and idx == 0 and out.data[slot, DATA_DONE] == 0.0:
                 # the world ends the sample's data passes unfinished: no surface (Cycles's
                 # film_write_data_passes_background)
@@ -796,24 +850,33 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             if sun >= 0 and not (camera and ld.li[sun, I_VISIBLE_CAMERA] == 0):
                 le, lpdf = sun_emission(ld, sun, prev_p, d, prev_hint)
                 w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
-                acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
+                c = clamp(settings, scale(mul(thr, le), w), deep)
+                acc = add(acc, c)
+                emitted = add(emitted, c)  # (Cycles writes a sun hit as surface emission)
             if see_through and settings.film_transparent:
                 # the world shows through by what the camera ray still carries (transparent
                 # surfaces and media passed): Cycles's film_write_transparent, average(throughput)
                 out.alpha[slot] -= (thr[0] + thr[1] + thr[2]) * (1.0 / 3.0)
+                if out.light.shape[0] and camera:  # (the Environment pass still sees it, as Cycles)
+                    le = world_emission(ld, pd, regs, point, d, paths.prev_flags[i], paths.counts[i], camera)
+                    env = add(env, clamp(settings, mul(thr, le), deep))
             else:
                 le = world_emission(ld, pd, regs, point, d, paths.prev_flags[i], paths.counts[i], camera)
                 wpdf = world_pdf(ld, prev_p, prev_n, d, prev_hint)
                 w = hit_weight(direct, prev_delta, prev_pdf, wpdf)
-                acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
+                c = clamp(settings, scale(mul(thr, le), w), deep)
+                acc = add(acc, c)
+                env = add(env, c)
             store(out.radiance, slot, add(load(out.radiance, slot), acc))
+            if out.light.shape[0] and camera:
+                add_light_passes(out, slot, emitted, env)
             continue
 
         # --- the surface hit: its emission (also for paths stopping here at a bounce limit)
         mat = surf.material[prim]
         if vd is not None and vd.enabled and vd.pass_through[mat] and not exiting:
             # a volume-only mesh has no surface: cross it (update the stack), no bounce
-            store(out.radiance, slot, add(load(out.radiance, slot), acc))
+            add_light(out, slot, acc, camera)
             if paths.vseg[i] >= VOLUME_BOUNDS_MAX + settings.max_bounces or not any_positive(thr):
                 continue
             p = load(hits.p, i)
@@ -898,6 +961,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         if out.mist.shape[0] and see_through and not exiting:
             out.mist[slot] += mist_weight(settings, md, mat, thr, p, load(out.eye, slot), load(out.forward, slot))
         if obj_holdout and not exiting:
+            if out.light.shape[0] and camera:  # (holdout_object_hit stores acc, the media's emission)
+                add_light_passes(out, slot, acc, (0.0, 0.0, 0.0))
             if holdout_object_hit(md, mat, thr, acc, settings, paths, i, j, vd, prim, p, ng, d, t_geom, out, slot):
                 j += 1
             continue
@@ -908,7 +973,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             if h > 0.0:
                 out.alpha[slot] -= h * (thr[0] + thr[1] + thr[2]) * (1.0 / 3.0)
                 if h >= 1.0:
-                    store(out.radiance, slot, add(load(out.radiance, slot), acc))
+                    add_light(out, slot, acc, camera)
                     continue
         if out.data.shape[0] and see_through and not exiting and out.data[slot, DATA_DONE] == 0.0:
             write_data_passes(settings, surf, md, mat, hits, i, prim, p, idx == 0, out, slot)
@@ -921,7 +986,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             lpdf = emissive_pdf(ld, prim, prev_p, p, ng, prev_hint)
             w = hit_weight(direct, prev_delta, prev_pdf, lpdf)
             acc = add(acc, clamp(settings, scale(mul(thr, le), w), deep))
-        store(out.radiance, slot, add(load(out.radiance, slot), acc))
+        add_light(out, slot, acc, camera)
         if paths.terminate[i]:
             continue
 
@@ -950,6 +1015,11 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # sampling, whose MIS weight is then 1
         n_wo = ns if front > 0.0 else neg(ns)
         code = hint_code(mat, silhouette or nv_local[2] < 1.0 or nc_local[2] < 1.0)
+        if out.light.shape[0] and see_through and not exiting:
+            # the Diffuse Color pass: Cycles adds it at every see-through surface
+            dc = mul(thr, diffuse_color(md, mat, wo_l, nc_local, nv_local, front))
+            for c in range(3):
+                out.light[slot, LIGHT_DIFFUSE_COLOR + c] += dc[c]
         blur = glossy_blur(settings, paths, i)  # Filter Glossy (0: none)
 
         # --- next-event estimation

@@ -221,6 +221,9 @@ class RenderSettings:
     #: the view layer's Alpha Threshold: a data pass skips a transparent surface whose alpha
     #: (1 − average transparency) is below it (0: every surface counts), as Cycles
     pass_alpha_threshold: float = 0.5
+    #: Cycles's Emission, Environment and Diffuse Color passes wanted, a subset of LIGHT_PASSES;
+    #: empty: none (drt.path_stages.add_light_passes, diffuse_color)
+    light_passes: tuple = ()
     shutter: tuple[float, float] | None = None
     direct: str = "MIS_POWER"  # direct-light estimator (see integrator.DIRECT_STRATEGIES)
     indirect: str = "BSDF"  # continuation sampling (integrator.INDIRECT_STRATEGIES)
@@ -376,16 +379,21 @@ def _mist(r: dict, path: str):
 DATA_PASSES = ("object_index", "material_index", "position", "uv")
 
 
-def _data_passes(r: dict, path: str) -> tuple:
-    """``render.data_passes``: a list of DATA_PASSES names (any order, no repeats needed)."""
-    names = _get(r, "data_passes", path, [])
-    p = _join(path, "data_passes")
+#: the light passes a scene may ask for (``render.light_passes``)
+LIGHT_PASSES = ("emission", "environment", "diffuse_color")
+
+
+def _pass_list(r: dict, path: str, key: str, known: tuple, kind: str) -> tuple:
+    """``render.<key>``: a list of names from ``known`` (any order) → those names in known's
+    order."""
+    names = _get(r, key, path, [])
+    p = _join(path, key)
     if not isinstance(names, (list, tuple)):
-        raise SceneError(p, f"must be a list of {', '.join(DATA_PASSES)}")
-    unknown = [n for n in names if n not in DATA_PASSES]
+        raise SceneError(p, f"must be a list of {', '.join(known)}")
+    unknown = [n for n in names if n not in known]
     if unknown:
-        raise SceneError(p, f"{unknown[0]!r} is not a data pass (one of {', '.join(DATA_PASSES)})")
-    return tuple(n for n in DATA_PASSES if n in names)
+        raise SceneError(p, f"{unknown[0]!r} is not a {kind} (one of {', '.join(known)})")
+    return tuple(n for n in known if n in names)
 
 
 def _render_settings(h: dict) -> RenderSettings:
@@ -442,7 +450,8 @@ def _render_settings(h: dict) -> RenderSettings:
         caustics_reflective=_bool(r, "caustics_reflective", p, True),
         caustics_refractive=_bool(r, "caustics_refractive", p, True),
         mist=_mist(r, p),
-        data_passes=_data_passes(r, p),
+        data_passes=_pass_list(r, p, "data_passes", DATA_PASSES, "data pass"),
+        light_passes=_pass_list(r, p, "light_passes", LIGHT_PASSES, "light pass"),
         pass_alpha_threshold=_number(r, "pass_alpha_threshold", p, 0.5, lo=0, hi=1),
         shutter=shutter,
         direct=_enum(r, "direct", p, DIRECT_STRATEGIES, "MIS_POWER"),

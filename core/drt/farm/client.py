@@ -26,7 +26,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..film import DATA_WIDTH, Film
+from ..film import DATA_WIDTH, LIGHT_WIDTH, Film
 from .plan import TASK_SECONDS, TaskSpec, plan_frame
 
 DEFAULT_TIMEOUT = 30.0  # seconds
@@ -214,6 +214,11 @@ def _add_part(film: Film, part: dict) -> None:
         if film.sum_mist is None:
             film.sum_mist = np.zeros(film.width * film.height)
         film.sum_mist.reshape(film.height, film.width)[rows, cols] += part["sum_mist"].reshape(h, w)
+    if part.get("sum_light") is not None:  # (the Emission and Environment passes)
+        if film.sum_light is None:
+            film.sum_light = np.zeros((film.width * film.height, LIGHT_WIDTH))
+        film.sum_light.reshape(film.height, film.width, LIGHT_WIDTH)[rows, cols] += \
+            part["sum_light"].reshape(h, w, LIGHT_WIDTH)
     if part.get("sum_data") is not None:  # (the data passes, when the scene asks for them)
         if film.sum_data is None:
             film.sum_data = np.zeros((film.width * film.height, DATA_WIDTH))

@@ -96,7 +96,7 @@ def render_task(scene, scene_key: str, settings: dict, tile, sample_offset: int,
     top, end exclusive. Returns {"tile", "sample_offset", "sample_count", "sum_rgba" (n, 4),
     "sum_lum2" (n,), "sum_normal" (n, 3), "sum_albedo" (n, 3), "min_depth" (n,), "count"
     (n,), "sum_mist" ((n,) or None: no Mist pass), "sum_data" ((n, 9) or None: no data
-    passes), "nan_samples", "camera_paths", "rays",
+    passes), "sum_light" ((n, 9) or None: no light passes), "nan_samples", "camera_paths", "rays",
     "seconds", "meta"} with n the tile's pixels, row-major from its top row. One thread per task: Dask runs one task per worker thread.
     """
     from ..render import render
@@ -118,6 +118,7 @@ def render_task(scene, scene_key: str, settings: dict, tile, sample_offset: int,
         "sum_albedo": film.sum_albedo, "min_depth": film.min_depth, "count": film.count,
         "sum_mist": film.sum_mist,
         "sum_data": film.sum_data,
+        "sum_light": film.sum_light,
         "nan_samples": int(film.nan_samples),
         "camera_paths": int(st.camera_paths),
         "rays": int(st.rays),
