@@ -59,7 +59,7 @@ def render_on_cluster(engine, client, scene, exported, drt_scene, spp, offset, c
         now = time.perf_counter()
         if now - last_draw[0] > DRAW_SECONDS:
             last_draw[0] = now
-            fill_layer(result.layers[0], film, crop, wanted)
+            fill_layer(result.layers[0], film, crop, wanted, cryptomatte=False)
             engine.update_result(result)
 
     def progress(fraction, st):

@@ -341,9 +341,6 @@ _UNRENDERED_PASSES = (
     ("use_pass_transmission_indirect", "Transmission Indirect"),
     ("use_pass_transmission_color", "Transmission Color"), ("use_pass_shadow", "Shadow"),
     ("use_pass_ambient_occlusion", "Ambient Occlusion"),
-    ("use_pass_cryptomatte_object", "Cryptomatte Object"),
-    ("use_pass_cryptomatte_material", "Cryptomatte Material"),
-    ("use_pass_cryptomatte_asset", "Cryptomatte Asset"),
 )
 _UNRENDERED_CYCLES_PASSES = (
     ("use_pass_volume_direct", "Volume Direct"), ("use_pass_volume_indirect", "Volume Indirect"),

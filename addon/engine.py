@@ -79,6 +79,8 @@ class DRTRenderEngine(bpy.types.RenderEngine):
                 self.register_pass(scene, renderlayer, compat.pass_name(name), channels, chan_id, kind)
         for name, channels, chan_id, kind in denoising.extra_passes(scene, renderlayer):
             self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
+        for name, _layer, _index in cryptomatte_passes(renderlayer):
+            self.register_pass(scene, renderlayer, name, 4, "rgba", "COLOR")  # (Cycles's: the spec's)
 
     # --- final render -----------------------------------------------------------------------
 
@@ -174,7 +176,7 @@ class DRTRenderEngine(bpy.types.RenderEngine):
             now = time.perf_counter()
             if now - last_draw[0] > 0.25 and done < total:
                 last_draw[0] = now
-                fill_layer(result.layers[0], film, crop, wanted)
+                fill_layer(result.layers[0], film, crop, wanted, cryptomatte=False)
                 self.update_result(result)
 
         try:
@@ -194,6 +196,7 @@ class DRTRenderEngine(bpy.types.RenderEngine):
     def _finish_film(self, film, result, scene, crop, wanted, dn_passes, denoise_mod, dn_lib, drt_scene):
         """The finished film into the result's passes, denoised when asked (not when cancelled)."""
         fill_layer(result.layers[0], film, crop, wanted)
+        stamp_cryptomatte(self.get_result(), result.layers[0].name, film)
         cancelled = getattr(getattr(film, "stats", None), "cancelled", False)
         denoised = None
         if denoise_mod is not None and not cancelled:
@@ -237,8 +240,9 @@ def _set_pass(layer, name, img):
     compat.set_pass_pixels(rp, np.ascontiguousarray(img[::-1], dtype=np.float32))
 
 
-def fill_layer(layer, film, crop, wanted) -> None:
-    """Copy the film's passes into a render layer."""
+def fill_layer(layer, film, crop, wanted, cryptomatte=True) -> None:
+    """Copy the film's passes into a render layer (``cryptomatte`` False: not its layers, whose
+    sort per pixel a progressive redraw of a large frame need not pay)."""
     rows, cols = crop
     _set_pass(layer, "Combined", np.nan_to_num(film.combined[rows, cols], nan=0.0))
     for name, channels, _cid, _kind, attr, _flag in wanted:
@@ -247,3 +251,36 @@ def fill_layer(layer, film, crop, wanted) -> None:
             continue
         img = np.asarray(img)[rows, cols]  # film.depth: background already 1e10
         _set_pass(layer, compat.pass_name(name), img.reshape(img.shape[0], img.shape[1], channels))
+    for crypto_layer in getattr(film, "crypto_layers", ()) if cryptomatte else ():  # two (id, coverage) a pass
+        slots = film.cryptomatte(crypto_layer)[rows, cols]
+        h, w = slots.shape[:2]
+        for j in range(slots.shape[2] // 2):
+            pair = slots[:, :, 2 * j:2 * j + 2].reshape(h, w, 4)
+            _set_pass(layer, f"{CRYPTO_PASS_PREFIX[crypto_layer]}{j:02d}", pair)
+
+
+#: Cycles's pass name prefix of each Cryptomatte layer (drt.cryptomatte.PASS_PREFIX)
+CRYPTO_PASS_PREFIX = {"object": "CryptoObject", "material": "CryptoMaterial", "asset": "CryptoAsset"}
+
+
+def cryptomatte_passes(view_layer) -> list[tuple[str, str, int]]:
+    """(pass name, layer, index) of the Cryptomatte passes the view layer enables, as Cycles
+    registers them: Levels (rounded up to even) / 2 RGBA passes per layer, CryptoObject00, …"""
+    n = (int(getattr(view_layer, "pass_cryptomatte_depth", 6)) + 1) // 2
+    return [(f"{CRYPTO_PASS_PREFIX[layer]}{j:02d}", layer, j) for layer in CRYPTO_PASS_PREFIX
+            if getattr(view_layer, f"use_pass_cryptomatte_{layer}", False) for j in range(n)]
+
+
+def stamp_cryptomatte(full_result, view_layer: str, film) -> None:
+    """The Cryptomatte manifest into the render's metadata (Blender's compositor and the
+    multilayer EXR read it), under the layer names ``<view layer>.CryptoObject`` …, as Cycles:
+    on the engine's whole result (``RenderEngine.get_result``; a result from ``begin_result``
+    does not pass its stamps on)."""
+    layers = getattr(film, "crypto_layers", ())
+    if not layers or full_result is None or not hasattr(full_result, "stamp_data_add_field"):
+        return
+    crypto = compat.core_module("cryptomatte")
+    for layer in layers:
+        entries = crypto.metadata(f"{view_layer}.{CRYPTO_PASS_PREFIX[layer]}", film.crypto_names.get(layer, ()))
+        for key, value in entries.items():
+            full_result.stamp_data_add_field(key, value)

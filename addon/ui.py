@@ -19,6 +19,7 @@ EXTRA_PANELS = (
     "EEVEE_WORLD_PT_mist",  # (World > Mist Pass: the Mist pass's start, depth and falloff)
     "RENDER_PT_color_management", "RENDER_PT_format", "RENDER_PT_frame_range",
     "VIEWLAYER_PT_layer_passes",
+    "VIEWLAYER_PT_layer_passes_cryptomatte",  # (Object / Material / Asset, Levels)
 )
 # Panels that show for BLENDER_RENDER but draw settings DRT ignores.
 SKIP_PANELS = {"RENDER_PT_simplify", "RENDER_PT_freestyle",

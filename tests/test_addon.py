@@ -193,9 +193,9 @@ def test_passes_written(tmp_path):
 
 
 def test_passes_drt_does_not_render_are_named(monkeypatch):
-    """Passes the view layer enables that DRT has no figures for (Vector, Shadow, Cryptomatte,
-    AOVs…) are named in one warning instead of silently missing from the result; the ones it
-    renders (Position here) are not."""
+    """Passes the view layer enables that DRT has no figures for (Vector, Shadow, AOVs…) are
+    named in one warning instead of silently missing from the result; the ones it renders
+    (Position and Cryptomatte here) are not."""
     scene = open_scene("cornell_box")
     scene.drt.samples = 1
     vl = scene.view_layers[0]
@@ -207,9 +207,9 @@ def test_passes_drt_does_not_render_are_named(monkeypatch):
     bpy.ops.render.render()
     passes = [r for r in reports if "passes not rendered" in r]
     assert len(passes) == 1, reports
-    for name in ("Vector", "Shadow", "Cryptomatte Object", "AOV 'dirt'"):
+    for name in ("Vector", "Shadow", "AOV 'dirt'"):
         assert name in passes[0], passes[0]
-    assert "Position" not in passes[0], passes[0]
+    assert "Position" not in passes[0] and "Cryptomatte" not in passes[0], passes[0]
 
 
 def test_error_is_reported_not_raised_silently(registered):

@@ -53,7 +53,7 @@ def test_tiles_on_the_cluster_are_bit_identical_to_the_local_render(cluster):
     scene = small_box(64, 64)
     # (the Mist pass and the data passes travel too)
     scene.render = replace(scene.render, mist=(1.0, 5.0, 2.0), data_passes=("object_index", "position", "uv"),
-                           light_passes=("emission", "environment"))
+                           light_passes=("emission", "environment"), cryptomatte=("object", "material"))
     film, stats = cluster_render(cluster.scheduler_address, scene, 16, task_seconds=0.01)
     assert stats.tasks_done == stats.tasks_total == 4 and stats.workers == 2
     local = render(scene, spp=16)
@@ -62,6 +62,9 @@ def test_tiles_on_the_cluster_are_bit_identical_to_the_local_render(cluster):
                  "sum_light"):
         assert np.array_equal(getattr(film, name), getattr(local, name)), name
     assert np.array_equal(film.combined, local.combined)
+    for layer in ("object", "material"):  # (Cryptomatte's slots merge by id)
+        assert np.array_equal(film.cryptomatte(layer), local.cryptomatte(layer)), layer
+    assert film.crypto_names == local.crypto_names and film.cryptomatte("asset") is None
     assert film.meta["sample_count"] == 16 and film.meta["spp"] == 16
 
 
@@ -70,6 +73,7 @@ def test_sample_ranges_on_the_cluster_match_the_local_render(cluster, monkeypatc
     monkeypatch.setattr(plan, "MAX_TILE_TASK_FACTOR", 0.0)
     monkeypatch.setattr(plan, "MIN_TASK_PATHS", 1)
     scene = small_box(32, 24)
+    scene.render = replace(scene.render, cryptomatte=("asset",))
     specs = plan.plan_frame((0, 0, 32, 24), 0, 16, min_tasks=4, task_seconds=1e-9)
     assert len({s.sample_offset for s in specs}) > 1
     film, stats = cluster_render(cluster.scheduler_address, scene, 16, task_seconds=1e-9)
@@ -78,6 +82,8 @@ def test_sample_ranges_on_the_cluster_match_the_local_render(cluster, monkeypatc
     a, b = film.combined, local.combined
     assert np.array_equal(film.count, local.count)
     assert np.all(np.abs(a - b) <= 1e-5 * np.maximum(np.abs(b), 1e-6))
+    ca, cb = film.cryptomatte("asset"), local.cryptomatte("asset")
+    assert np.array_equal(ca[..., 0], cb[..., 0]) and np.allclose(ca[..., 1], cb[..., 1], atol=1e-6)
     assert not np.array_equal(film.sum_rgba, np.zeros_like(film.sum_rgba))
 
 

@@ -14,8 +14,8 @@ from .libraries import missing_link_warnings
 from .materials import MaterialExporter
 from .mesh import MESH_LIKE_TYPES, evaluated_mesh_arrays, evaluated_positions
 from .object_info import object_info
-from .scene_parts import (ExportError, camera_dict, data_pass_settings, shadow_terminator, light_dict, matrix_list,
-                          mist_settings, render_settings, world_dict)
+from .scene_parts import (ExportError, camera_dict, cryptomatte_names, data_pass_settings, shadow_terminator,
+                          light_dict, matrix_list, mist_settings, render_settings, world_dict)
 
 __all__ = ["ExportError", "ExportResult", "export_depsgraph"]
 
@@ -295,6 +295,8 @@ def export_depsgraph(depsgraph, *, frame_set=None, preview: bool = False) -> Exp
             objects[-1]["holdout"] = True
         if getattr(obj, "pass_index", 0):  # (the Object Index pass; an instance: its object's, as Cycles)
             objects[-1]["pass_index"] = int(obj.pass_index)
+        if "cryptomatte" in render:
+            objects[-1]["cryptomatte"] = cryptomatte_names(inst)
         term = shadow_terminator(obj)
         # the geometry offset acts on smooth shading only, the shading offset on any (drt.terminator)
         if term["shading_offset"] > 0.0 or (f"mesh{k}.normals" in arrays and term["geometry_offset"] > 0.0):

@@ -83,7 +83,8 @@ OP_VMATH_NORMALIZE = (OP_VMATH, VMATH_OPS.index("NORMALIZE"))
 
 DEFAULT_MATERIAL = {"name": "__drt_default__",
                     "lobes": [{"type": "DIFFUSE", "color": [0.8, 0.8, 0.8]}],
-                    "emission": [0.0, 0.0, 0.0]}
+                    "emission": [0.0, 0.0, 0.0],
+                    "cryptomatte": "default_surface"}  # (Cycles's default shader's name)
 
 _GLOSSY_IDS = {"ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"}
 _SHARP = {"SHARP"}

@@ -142,7 +142,25 @@ def data_pass_settings(view_layer) -> dict:
     light = [name for prop, name in LIGHT_PASS_PROPERTIES if getattr(view_layer, prop, False)]
     if light:
         out["light_passes"] = light
+    crypto = [layer for layer in ("object", "material", "asset")
+              if getattr(view_layer, f"use_pass_cryptomatte_{layer}", False)]
+    if crypto:  # (View Layer > Passes > Cryptomatte: its layers and Levels)
+        out["cryptomatte"] = crypto
+        out["cryptomatte_levels"] = int(min(max(getattr(view_layer, "pass_cryptomatte_depth", 6), 2), 16))
     return out
+
+
+def cryptomatte_names(inst) -> dict:
+    """An object instance's Cryptomatte names, as Cycles's object sync: ``object`` the object's
+    own name (an instance: the instanced object's), ``asset`` its topmost parent's (itself
+    without a parent)."""
+    obj = inst.object
+    top = obj  # (an instance's too: measured, Cycles names a collection instance's asset by it)
+    seen = 0
+    while top.parent is not None and seen < 1000:  # (a parent loop cannot happen; bounded anyway)
+        top = top.parent
+        seen += 1
+    return {"object": obj.name, "asset": top.name}
 
 
 def caustics_switches(scene) -> dict[str, bool]:

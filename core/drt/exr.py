@@ -5,7 +5,9 @@ hit, Cycles's convention); Normal.X/Y/Z (world-space shading normal); Albedo.R/G
 Mist pass, when the scene asks for it: ``render.mist``); IndexOB.X, IndexMA.X, Position.X/Y/Z,
 UV.U/V/A (Cycles's data passes, when the scene asks for any: ``render.data_passes``; all four
 then); Emit.RGB, Env.RGB, DiffCol.RGB (Cycles's Emission, Environment and Diffuse Color passes:
-``render.light_passes``; all three then);
+``render.light_passes``; all three then); CryptoObject00.RGBA, CryptoObject01.RGBA, … (and
+CryptoMaterial / CryptoAsset: the Cryptomatte layers of ``render.cryptomatte``, two (id,
+coverage) pairs per pass, with the specification's ``cryptomatte/<key>/…`` manifest headers);
 SampleCount.Y (samples taken by
 each pixel); Variance.Y (variance of the pixel mean's luminance). The header carries
 ``drt:sample_offset``, ``drt:sample_count``, ``drt:seed`` and ``drt:version`` so that renders of
@@ -20,11 +22,13 @@ a denoised file works on the Monte Carlo estimate, never on a denoised image.
 
 from __future__ import annotations
 
+import json
 import os
 
 import numpy as np
 import OpenEXR
 
+from . import cryptomatte
 from .film import DATA_MATERIAL, DATA_OBJECT, DATA_POSITION, DATA_UV, DATA_WIDTH, LIGHT_WIDTH, Film
 
 
@@ -58,6 +62,11 @@ def film_channels(film: Film, denoised: np.ndarray | None = None) -> dict[str, n
             ch[f"Position.{axis}"] = film.position[..., i]
         for i, c in enumerate("UVA"):
             ch[f"UV.{c}"] = film.uv[..., i]
+    for layer in film.crypto_layers:  # Cryptomatte: CryptoObject00.RGBA = id, coverage, id, coverage
+        for j, img in enumerate(cryptomatte.pass_images(film.cryptomatte(layer).reshape(-1, film.crypto_slots, 2),
+                                                        film.height, film.width)):
+            for i, c in enumerate("RGBA"):
+                ch[f"{cryptomatte.PASS_PREFIX[layer]}{j:02d}.{c}"] = img[..., i]
     ch["SampleCount.Y"] = film.sample_count
     ch["Variance.Y"] = film.variance
     return {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in ch.items()}
@@ -70,25 +79,53 @@ def write_exr(path: str | os.PathLike, film: Film, metadata: dict | None = None,
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for k, v in {**film.meta, **(metadata or {})}.items():
         header[f"drt:{k}"] = str(v)
+    for layer in film.crypto_layers:  # the Cryptomatte specification's manifest
+        header.update(cryptomatte.metadata(cryptomatte.PASS_PREFIX[layer], film.crypto_names.get(layer, ())))
     tmp = f"{os.fspath(path)}.tmp.exr"
     with OpenEXR.File(header, film_channels(film, denoised)) as f:
         f.write(tmp)
     os.replace(tmp, path)  # a reader never sees half a file
 
 
-def read_exr(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict]:
-    """Channels by name (each (H, W) float32) and the header's ``drt:`` metadata (strings)."""
+def read_exr(path: str | os.PathLike, with_header: bool = False):
+    """Channels by name (each (H, W) float32) and the header's ``drt:`` metadata (strings);
+    ``with_header``: also the whole header."""
     with OpenEXR.File(os.fspath(path), separate_channels=True) as f:
         channels = {k: np.array(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
-        meta = {k[4:]: v for k, v in f.header().items() if isinstance(k, str) and k.startswith("drt:")}
-    return channels, meta
+        header = dict(f.header())
+        meta = {k[4:]: v for k, v in header.items() if isinstance(k, str) and k.startswith("drt:")}
+    return (channels, meta, header) if with_header else (channels, meta)
+
+
+def _crypto_from_exr(film: Film, ch: dict, header: dict, count: np.ndarray) -> None:
+    """Cryptomatte slots back from the passes (coverage × N) and names from the manifests."""
+    layers = tuple(t for t in cryptomatte.CRYPTO_LAYERS if f"{cryptomatte.PASS_PREFIX[t]}00.R" in ch)
+    if not layers:
+        return
+    first = cryptomatte.PASS_PREFIX[layers[0]]
+    n_slots = 2 * sum(1 for k in ch if k.startswith(first) and k.endswith(".R") and k[len(first):-2].isdigit())
+    parts = []
+    for layer in layers:
+        prefix = cryptomatte.PASS_PREFIX[layer]
+        rgba = [np.stack([ch[f"{prefix}{j:02d}.{c}"] for c in "RGBA"], -1).reshape(-1, 2, 2)
+                for j in range(n_slots // 2)]
+        parts.append(np.concatenate(rgba, axis=1).astype(np.float32))
+    slots = np.concatenate(parts, axis=1)
+    slots[:, :, 1] *= count[:, None].astype(np.float32)
+    film.sum_crypto, film.crypto_layers, film.crypto_slots = slots, layers, n_slots
+    for layer in layers:
+        key = cryptomatte.layer_key(cryptomatte.PASS_PREFIX[layer])
+        try:
+            film.crypto_names[layer] = tuple(sorted(json.loads(header.get(key + "manifest", "{}"))))
+        except (TypeError, ValueError):
+            film.crypto_names[layer] = ()
 
 
 def film_from_exr(path: str | os.PathLike) -> Film:
     """Rebuild a ``Film`` (its sums) from a DRT EXR, for merging sample ranges. A denoised
     file's sums come from its ``Noisy`` layer (the Monte Carlo mean); ``denoised`` is dropped
     from the metadata."""
-    ch, meta = read_exr(path)
+    ch, meta, header = read_exr(path, with_header=True)
     h, w = ch["R"].shape
     count = ch["SampleCount.Y"].astype(np.float64).reshape(-1)
     film = Film(w, h)
@@ -111,6 +148,7 @@ def film_from_exr(path: str | os.PathLike) -> Film:
             film.sum_data[:, DATA_POSITION + i] = ch[f"Position.{axis}"].reshape(-1)
         for i, c in enumerate("UVA"):
             film.sum_data[:, DATA_UV + i] = ch[f"UV.{c}"].astype(np.float64).reshape(-1) * count
+    _crypto_from_exr(film, ch, header, count)
     film.count = np.rint(count).astype(np.int64)
     # recover Σ L² from the stored variance of the mean: var·(N−1) + mean² = E[L²]
     lum = rgba[:, :3] @ np.array([0.2126, 0.7152, 0.0722])

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import cryptomatte
 from .kernels import kernel
 
 
@@ -106,6 +107,9 @@ class SampleBatch:
     #: (n, LIGHT_WIDTH) each sample's Emission, Environment and Diffuse Color (rgb each), or
     #: None: none
     light: np.ndarray | None = None
+    #: (n, CRYPTO_SURFACES, CRYPTO_COLUMNS) each sample's see-through hits for Cryptomatte
+    #: (drt.cryptomatte), or None: none
+    crypto: np.ndarray | None = None
 
 
 @dataclass
@@ -139,6 +143,15 @@ class Film:
     sum_data: np.ndarray = None
     #: (n, LIGHT_WIDTH) the Emission, Environment and Diffuse Color passes' sums
     sum_light: np.ndarray = None
+    #: Cryptomatte: (n, len(crypto_layers) · crypto_slots, 2) float32 [id, Σ weight] slots per
+    #: pixel, unsorted (drt.cryptomatte; float32 as Cycles's: ids are float32 values, and a 4K
+    #: frame's three layers of 6 slots take 1.2 GB so); None without Cryptomatte. ``crypto_layers``: the layers
+    #: ("object", "material", "asset") in slot order; ``crypto_slots``: slots per layer
+    sum_crypto: np.ndarray = None
+    crypto_layers: tuple = ()
+    crypto_slots: int = 0
+    #: the names each Cryptomatte layer may hold (layer → tuple of names), for the manifest
+    crypto_names: dict = field(default_factory=dict)
     meta: dict = field(default_factory=dict)
     #: radiance scale applied as samples are added (Cycles's Film > Exposure); films merged
     #: from exposed parts keep 1
@@ -176,6 +189,13 @@ class Film:
                 light[:, :LIGHT_DIFFUSE_COLOR] *= self.exposure
             _accumulate_data(np.ascontiguousarray(b.pixel, dtype=np.int64),
                              np.ascontiguousarray(light, dtype=np.float64), self.sum_light)
+        if b.crypto is not None and self.crypto_layers:
+            if self.sum_crypto is None:
+                self.sum_crypto = np.zeros((self.width * self.height, len(self.crypto_layers) * self.crypto_slots, 2),
+                                           np.float32)
+            cryptomatte.accumulate(np.ascontiguousarray(b.pixel, dtype=np.int64),
+                                   np.ascontiguousarray(b.crypto, dtype=np.float64), self._crypto_columns(),
+                                   self.crypto_slots, self.sum_crypto)
         if b.data is not None:
             if self.sum_data is None:
                 self.sum_data = np.zeros((self.width * self.height, DATA_WIDTH))
@@ -195,8 +215,36 @@ class Film:
             self.sum_mist = other.sum_mist.copy() if self.sum_mist is None else self.sum_mist + other.sum_mist
         if other.sum_light is not None:
             self.sum_light = other.sum_light.copy() if self.sum_light is None else self.sum_light + other.sum_light
+        if other.sum_crypto is not None:
+            self.merge_crypto(other.sum_crypto, other.crypto_layers, other.crypto_slots, other.crypto_names)
         if other.sum_data is not None:  # (only one part holds a pixel's sample 0)
             self.sum_data = other.sum_data.copy() if self.sum_data is None else self.sum_data + other.sum_data
+
+    def _crypto_columns(self) -> np.ndarray:
+        return np.array([cryptomatte.CRYPTO_LAYERS.index(t) for t in self.crypto_layers], np.int64)
+
+    def merge_crypto(self, slots: np.ndarray, layers: tuple, n_slots: int, names: dict | None = None) -> None:
+        """Add another film's Cryptomatte slots (same pixels) and manifest names to this one's."""
+        for layer, ns in (names or {}).items():
+            self.crypto_names[layer] = tuple(sorted(set(self.crypto_names.get(layer, ())) | set(ns)))
+        if self.sum_crypto is None:
+            self.crypto_layers, self.crypto_slots = tuple(layers), int(n_slots)
+            self.sum_crypto = np.zeros((self.width * self.height, len(layers) * n_slots, 2), np.float32)
+        if tuple(layers) != self.crypto_layers or int(n_slots) != self.crypto_slots:
+            raise ValueError(f"Cryptomatte layers {tuple(layers)} x {n_slots} slots do not match "
+                             f"{self.crypto_layers} x {self.crypto_slots}")
+        cryptomatte.merge_slots(self.sum_crypto, np.ascontiguousarray(slots, dtype=np.float32),
+                                len(self.crypto_layers), self.crypto_slots)
+
+    def cryptomatte(self, layer: str) -> np.ndarray | None:
+        """(H, W, slots, 2) float32 [id, coverage] of a Cryptomatte layer ("object", "material",
+        "asset"): each pixel's ids by coverage, heaviest first (empty slots: id 0, coverage 0);
+        None when the film has no such layer."""
+        if self.sum_crypto is None or layer not in self.crypto_layers:
+            return None
+        slots = cryptomatte.read_layer(self.sum_crypto, self.crypto_layers.index(layer), self.crypto_slots,
+                                       self.count)
+        return slots.reshape(self.height, self.width, self.crypto_slots, 2)
 
     def _mean(self, s: np.ndarray) -> np.ndarray:
         c = np.maximum(self.count, 1).reshape((-1,) + (1,) * (s.ndim - 1))

@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from .cryptomatte import name_id
 from .kernels import kernel
 
 from .motion import RigidMotion, invert_linear
@@ -60,6 +61,9 @@ class SceneGeometry:
     #: (T_all, 2) float32 [object, material] pass index of each global triangle (the Object /
     #: Material Index passes); only when the render asks for one of them, else None
     pass_ids: np.ndarray | None = None
+    #: (T, 3) float32 Cryptomatte ids [object, material, asset] (drt.cryptomatte.name_id), or
+    #: None when the scene asks for no Cryptomatte layer
+    crypto_ids: np.ndarray | None = None
     #: (T_all,) uint8 VIS_* bits of the rays that see each triangle (drt.scene.RAY_VISIBILITY),
     #: plus VIS_HOLDOUT on a holdout object's; None when every object is visible to every ray
     #: and none is a holdout
@@ -266,6 +270,8 @@ def build_geometry(scene: Scene) -> SceneGeometry:
                             or [0], np.float32)
         geom.pass_ids = np.stack([obj_pass[obj_of], mat_pass[np.minimum(geom.material, len(mat_pass) - 1)]],
                                  axis=1).astype(np.float32)
+    if getattr(scene.render, "cryptomatte", ()):
+        geom.crypto_ids = _crypto_ids(scene, cat(obj_static + obj_moving, np.zeros(0, np.int32)), geom.material)
     if any(isinstance(m, dict) and m.get("volume") for m in scene.materials):
         geom.object_id = cat(obj_static + obj_moving, np.zeros(0, np.int32))  # volume stack keys
     names = getattr(scene, "attributes", [])
@@ -284,6 +290,16 @@ def build_geometry(scene: Scene) -> SceneGeometry:
         center = 0.5 * (lo + hi)
         geom.scene_radius = float(max(np.linalg.norm(hi - center), 1e-3))
     return geom
+
+
+def _crypto_ids(scene: Scene, obj_of: np.ndarray, material: np.ndarray) -> np.ndarray:
+    """(T, 3) float32 [object, material, asset] Cryptomatte ids of each global triangle."""
+    objs = np.array([(name_id(o.crypto_object or o.name), name_id(o.crypto_asset or o.name))
+                     for o in scene.objects] or [(0.0, 0.0)], np.float32).reshape(-1, 2)
+    mats = np.array([name_id(str(m.get("cryptomatte", m.get("name", f"material{i}")))) if isinstance(m, dict) else 0.0
+                     for i, m in enumerate(scene.materials)] or [0.0], np.float32)
+    mat_id = mats[np.clip(np.asarray(material, np.int64), 0, len(mats) - 1)]
+    return np.stack([objs[obj_of, 0], mat_id, objs[obj_of, 1]], axis=1).astype(np.float32)
 
 
 def corner_attribute_kinds(names) -> dict:

@@ -27,6 +27,7 @@ import numpy as np
 from . import path_stages as stages
 from . import scene as scene_module
 from .camera import Camera
+from .cryptomatte import CRYPTO_COLUMNS, CRYPTO_SURFACES
 from .film import SampleBatch
 from .geometry import SceneGeometry
 from .lights import LightSet
@@ -168,6 +169,8 @@ class Integrator:
         self.data_passes = tuple(getattr(settings, "data_passes", ()))
         #: and the Emission / Environment passes (``RenderSettings.light_passes``)
         self.light_passes = bool(getattr(settings, "light_passes", ()))
+        #: and Cryptomatte (``RenderSettings.cryptomatte``; path_stages.write_cryptomatte)
+        self.cryptomatte = bool(getattr(settings, "cryptomatte", ())) and getattr(geom, "crypto_ids", None) is not None
         # Filter Glossy keeps a pdf per path only where it can widen a lobe: a render with it on,
         # of a scene with a microfacet lobe (drt.materials.table.filtered_alpha)
         self.filters_glossy = self.stage_settings.filter_glossy > 0.0 and bool(
@@ -193,7 +196,9 @@ class Integrator:
                         else np.zeros(0, np.uint8)),
             pass_ids=(np.ascontiguousarray(geom.pass_ids, dtype=np.float32)
                       if getattr(geom, "pass_ids", None) is not None else np.zeros((0, 2), np.float32)),
-            uvs=uv_pass_corners(geom) if "uv" in self.data_passes else np.zeros((0, 3, 3), np.float32))
+            uvs=uv_pass_corners(geom) if "uv" in self.data_passes else np.zeros((0, 3, 3), np.float32),
+            crypto_ids=(np.ascontiguousarray(geom.crypto_ids, dtype=np.float32) if self.cryptomatte
+                        else np.zeros((0, 3), np.float32)))
         # objects some rays do not see (Cycles's ray visibility): path rays pass them before
         # shade (_skip_unseen), shadow rays in _shadows_through's rounds of closest hits
         vis, path_bits = self.surfaces.visibility, VIS_ALL & ~VIS_SHADOW
@@ -270,7 +275,9 @@ class Integrator:
                                          eye=np.empty((n, 3)), forward=np.empty((n, 3)),
                                          mist=np.empty(n if self.mist_pass else 0),
                                          data=np.empty((n if self.data_passes else 0, stages.DATA_COLUMNS)),
-                                         light=np.empty((n if self.light_passes else 0, stages.LIGHT_COLUMNS)))
+                                         light=np.empty((n if self.light_passes else 0, stages.LIGHT_COLUMNS)),
+                                         crypto=np.empty((n if self.cryptomatte else 0, CRYPTO_SURFACES,
+                                                          CRYPTO_COLUMNS)))
                 break
             if buffers.alpha.shape[0] >= n:
                 break  # (a smaller one is dropped; a new set of this batch's size replaces it)
@@ -389,6 +396,7 @@ class Integrator:
         alpha, depth, normal, albedo = out.alpha, out.depth, out.normal, out.albedo
         mist = out.mist if self.mist_pass else None
         light = out.light if self.light_passes else None
+        crypto = out.crypto if self.cryptomatte else None
         data, data_pixel = self._data_pass_rows(out, pixel, good)
         nan_count = int(n - good.sum())
         if nan_count:
@@ -396,8 +404,9 @@ class Integrator:
             normal, albedo = normal[good], albedo[good]
             mist = mist[good] if mist is not None else None
             light = light[good] if light is not None else None
+            crypto = crypto[good] if crypto is not None else None
         return SampleBatch(pixel, radiance, alpha, depth, normal, albedo, nan_count, mist=mist,
-                           data=data, data_pixel=data_pixel, light=light,
+                           data=data, data_pixel=data_pixel, light=light, crypto=crypto,
                            release=functools.partial(self._returned_outputs.append, buffers))
 
     def _data_pass_rows(self, out, pixel, good):

@@ -40,6 +40,7 @@ from collections import namedtuple
 import numpy as np
 
 from .camera import camera_ray
+from .cryptomatte import CRYPTO_IDS, CRYPTO_WEIGHT
 from .film import (DATA_HIT, DATA_MATERIAL, DATA_OBJECT, DATA_POSITION, DATA_UV, DATA_WIDTH, LIGHT_DIFFUSE_COLOR,
                    LIGHT_EMISSION, LIGHT_ENVIRONMENT, LIGHT_WIDTH)
 from .kernels import inline_kernel, kernel
@@ -141,9 +142,12 @@ RAY_TRANSPARENT_BG = 16
 
 Outputs = namedtuple("Outputs", ["radiance", "alpha", "depth", "normal", "albedo", "eye", "forward", "mist",
                                  "data",    # (n, DATA_COLUMNS) the data passes, (0, DATA_COLUMNS): none
-                                 "light"])  # (n, LIGHT_COLUMNS) the Emission, Environment and Diffuse
+                                 "light",   # (n, LIGHT_COLUMNS) the Emission, Environment and Diffuse
                                             # Color passes (rgb each; ``add_light_passes``,
                                             # ``diffuse_color``), (0, LIGHT_COLUMNS): none
+                                 "crypto"])  # (n, CRYPTO_SURFACES, CRYPTO_COLUMNS) the see-through
+                                             # hits Cryptomatte counts (``write_cryptomatte``),
+                                             # (0, CRYPTO_SURFACES, CRYPTO_COLUMNS): none
 
 #: columns of ``Outputs.data`` (``write_data_passes``): the film's (drt.film.DATA_*) — written
 #: by a pixel's sample 0 only, as Cycles: the Object Index, the Material Index, the Position
@@ -170,6 +174,7 @@ Surfaces = namedtuple("Surfaces", [
     "pass_ids",       # (T, 2) float32 [object, material] pass index ((0, 2): no index pass)
     "uvs",            # (T, 3, 3) float32 (u, v, 1) of the render UV map per corner, zeros on
                       # meshes without one ((0, 3, 3): no UV pass, or no UV map in the scene)
+    "crypto_ids",     # (T, 3) float32 Cryptomatte [object, material, asset] ids ((0, 3): none)
 ])
 
 HitArrays = namedtuple("HitArrays", [
@@ -532,6 +537,9 @@ def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
         if out.light.shape[0]:
             for c in range(LIGHT_COLUMNS):
                 out.light[i, c] = 0.0
+        if out.crypto.shape[0]:
+            for e in range(out.crypto.shape[1]):
+                out.crypto[i, e, CRYPTO_WEIGHT] = 0.0
         if tmax < 0.0:
             continue
         store(paths.o, j, o)
@@ -660,6 +668,24 @@ def write_data_passes(settings, surf, md, mat, hits, i, prim, p, first, out, slo
         for k in range(3):
             out.data[slot, DATA_UV + k] = b0 * c[0, k] + b1 * c[1, k] + b2 * c[2, k]
     out.data[slot, DATA_DONE] = 1.0
+
+
+@kernel
+def write_cryptomatte(surf, md, mat, prim, thr, out, slot):
+    """Record a see-through surface hit for Cryptomatte (drt.cryptomatte; Cycles's
+    film_write_data_passes): weight average(throughput) × (1 − average transparency of this hit's
+    row ``mat``) and the triangle's object, material and asset ids, in the sample's first free
+    entry of ``out.crypto`` (none free: dropped)."""
+    t = transparency(md, mat)
+    w = (thr[0] + thr[1] + thr[2]) * (1.0 / 3.0) * (1.0 - (t[0] + t[1] + t[2]) * (1.0 / 3.0))
+    if not w > 0.0:
+        return
+    for e in range(out.crypto.shape[1]):
+        if out.crypto[slot, e, CRYPTO_WEIGHT] == 0.0:
+            out.crypto[slot, e, CRYPTO_WEIGHT] = w
+            for c in range(3):
+                out.crypto[slot, e, CRYPTO_IDS + c] = surf.crypto_ids[prim, c]
+            return
 
 
 @kernel
@@ -977,6 +1003,8 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                     continue
         if out.data.shape[0] and see_through and not exiting and out.data[slot, DATA_DONE] == 0.0:
             write_data_passes(settings, surf, md, mat, hits, i, prim, p, idx == 0, out, slot)
+        if out.crypto.shape[0] and see_through and not exiting:
+            write_cryptomatte(surf, md, mat, prim, thr, out, slot)
         if md.has_emission[mat] and not exiting:
             le = load(md.emission, mat)
             if md.emission_layer[mat] >= 0:  # a Principled's emission under its coat / sheen

@@ -27,6 +27,7 @@ import numpy as np
 
 from . import __version__
 from .camera import Camera
+from .cryptomatte import scene_names, slot_count
 from .film import Film, luminance
 from .geometry import build_geometry
 from .integrator import Integrator
@@ -349,11 +350,15 @@ def _film_for(scene: Scene, xs: np.ndarray, ys: np.ndarray, tile) -> tuple[Film,
     """The film a render of pixels (xs, ys) fills: the frame's, or with ``tile`` one of just
     the tile (a 4K frame's full film is ~0.8 GB per task), and the (frame width, x0, y0, tile
     width) that maps frame pixels into it (None: the whole frame)."""
+    layers = tuple(getattr(scene.render, "cryptomatte", ()))
+    crypto = dict(crypto_layers=layers,
+                  crypto_slots=slot_count(scene.render.cryptomatte_levels) if layers else 0,
+                  crypto_names=scene_names(scene, layers))
     if tile is None:
-        return Film(scene.render.width, scene.render.height, exposure=scene.render.exposure), None
+        return Film(scene.render.width, scene.render.height, exposure=scene.render.exposure, **crypto), None
     fx0, fy0 = (int(xs.min()), int(ys.min())) if len(xs) else (tile[0], tile[1])
     fx1, fy1 = (int(xs.max()) + 1, int(ys.max()) + 1) if len(xs) else (tile[0], tile[1])
-    film = Film(fx1 - fx0, fy1 - fy0, exposure=scene.render.exposure)
+    film = Film(fx1 - fx0, fy1 - fy0, exposure=scene.render.exposure, **crypto)
     film.meta["tile"] = [fx0, fy0, fx1, fy1]
     return film, (scene.render.width, fx0, fy0, fx1 - fx0)
 

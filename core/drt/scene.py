@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .cryptomatte import CRYPTO_LAYERS, MAX_LEVELS, MIN_LEVELS
+
 FORMAT_NAME = "drt-scene"
 SUPPORTED_VERSIONS = (1, 2)  # 2: adds SUBSURFACE lobes (docs/scene-format.md)
 
@@ -224,6 +226,11 @@ class RenderSettings:
     #: Cycles's Emission, Environment and Diffuse Color passes wanted, a subset of LIGHT_PASSES;
     #: empty: none (drt.path_stages.add_light_passes, diffuse_color)
     light_passes: tuple = ()
+    #: Cryptomatte layers wanted, a subset of drt.cryptomatte.CRYPTO_LAYERS ("object",
+    #: "material", "asset"); empty: none. ``cryptomatte_levels``: Blender's Levels, the
+    #: (id, coverage) pairs each pixel keeps per layer (2–16, rounded up to even)
+    cryptomatte: tuple = ()
+    cryptomatte_levels: int = 6
     shutter: tuple[float, float] | None = None
     direct: str = "MIS_POWER"  # direct-light estimator (see integrator.DIRECT_STRATEGIES)
     indirect: str = "BSDF"  # continuation sampling (integrator.INDIRECT_STRATEGIES)
@@ -318,6 +325,10 @@ class ObjectSpec:
     holdout: bool = False
     #: Object > Relations > Pass Index: the Object Index pass's value on the object's surfaces
     pass_index: int = 0
+    #: the names Cryptomatte's object and asset layers hash (the add-on's: the object's own
+    #: name, as Cycles, and its topmost parent's); default both ``name``
+    crypto_object: str = ""
+    crypto_asset: str = ""
 
 
 @dataclass
@@ -452,6 +463,8 @@ def _render_settings(h: dict) -> RenderSettings:
         mist=_mist(r, p),
         data_passes=_pass_list(r, p, "data_passes", DATA_PASSES, "data pass"),
         light_passes=_pass_list(r, p, "light_passes", LIGHT_PASSES, "light pass"),
+        cryptomatte=_pass_list(r, p, "cryptomatte", CRYPTO_LAYERS, "Cryptomatte layer"),
+        cryptomatte_levels=_number(r, "cryptomatte_levels", p, 6, lo=MIN_LEVELS, hi=MAX_LEVELS, integer=True),
         pass_alpha_threshold=_number(r, "pass_alpha_threshold", p, 0.5, lo=0, hi=1),
         shutter=shutter,
         direct=_enum(r, "direct", p, DIRECT_STRATEGIES, "MIS_POWER"),
@@ -579,6 +592,11 @@ def _materials(h: dict, n_images: int = 0, n_attributes: int = 0, version: int =
             "lobes": clean,
             "emission": _vector(m, "emission", p, 3, default=[0, 0, 0], lo=0.0).tolist(),
         }
+        if "cryptomatte" in m:  # the name Cryptomatte's material layer hashes (default: "name")
+            cname = _get(m, "cryptomatte", p)
+            if not isinstance(cname, str) or not cname:
+                raise SceneError(f"{p}.cryptomatte", f"must be a non-empty name, got {cname!r}")
+            mat["cryptomatte"] = cname
         if "pass_index" in m:  # Material > Settings > Pass Index (the Material Index pass)
             mat["pass_index"] = _number(m, "pass_index", p, integer=True, lo=0, hi=2**31 - 1)
         if "emission_layer" in m:  # the coat / sheen lobe over a Principled's emission (issue 11)
@@ -794,6 +812,22 @@ def _visibility(o: dict, p: str) -> int:
     return sum(1 << k for k, kind in enumerate(RAY_VISIBILITY) if _bool(vis, kind, vp, True))
 
 
+def _crypto_names(o: dict, p: str, name: str) -> tuple[str, str]:
+    """An object's ``"cryptomatte": {"object": name, "asset": name}`` (each default ``name``)."""
+    c = _get(o, "cryptomatte", p, None)
+    if c is None:
+        return name, name
+    if not isinstance(c, dict):
+        raise SceneError(f"{p}.cryptomatte", "must be an object with object / asset names")
+    names = []
+    for key in ("object", "asset"):
+        v = c.get(key, name)
+        if not isinstance(v, str) or not v:
+            raise SceneError(f"{p}.cryptomatte.{key}", f"must be a non-empty name, got {v!r}")
+        names.append(v)
+    return names[0], names[1]
+
+
 def _objects(h: dict, n_meshes: int) -> list[ObjectSpec]:
     objs = _list(h, "objects", "")
     out = []
@@ -818,7 +852,8 @@ def _objects(h: dict, n_meshes: int) -> list[ObjectSpec]:
                               _number(term, "geometry_offset", tp, default=0.0, lo=0.0, hi=1.0),
                               _number(term, "shading_offset", tp, default=0.0, lo=0.0, hi=1.0),
                               _visibility(o, p), _bool(o, "holdout", p, False),
-                              _number(o, "pass_index", p, 0, lo=0, hi=2**31 - 1, integer=True)))
+                              _number(o, "pass_index", p, 0, lo=0, hi=2**31 - 1, integer=True),
+                              *_crypto_names(o, p, str(o.get("name", f"object{i}")))))
     return out
 
 

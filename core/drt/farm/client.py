@@ -224,6 +224,18 @@ def _add_part(film: Film, part: dict) -> None:
             film.sum_data = np.zeros((film.width * film.height, DATA_WIDTH))
         film.sum_data.reshape(film.height, film.width, DATA_WIDTH)[rows, cols] += \
             part["sum_data"].reshape(h, w, DATA_WIDTH)
+    if part.get("sum_crypto") is not None:  # (Cryptomatte: slots merge by id, not by sum)
+        layers, n_slots = tuple(part["crypto_layers"]), int(part["crypto_slots"])
+        if film.sum_crypto is None:
+            film.crypto_layers, film.crypto_slots = layers, n_slots
+            film.sum_crypto = np.zeros((film.width * film.height, len(layers) * n_slots, 2), np.float32)
+        whole = film.sum_crypto.reshape(film.height, film.width, -1, 2)
+        block = np.ascontiguousarray(whole[rows, cols]).reshape(h * w, -1, 2)
+        tile_film = Film(w, h, sum_crypto=block, crypto_layers=film.crypto_layers, crypto_slots=film.crypto_slots)
+        tile_film.merge_crypto(part["sum_crypto"], layers, n_slots, part.get("crypto_names"))
+        whole[rows, cols] = tile_film.sum_crypto.reshape(h, w, -1, 2)
+        film.crypto_names = {k: tuple(sorted(set(film.crypto_names.get(k, ())) | set(v)))
+                             for k, v in {**film.crypto_names, **tile_film.crypto_names}.items()}
     film.nan_samples += int(part["nan_samples"])
 
 

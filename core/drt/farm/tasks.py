@@ -96,7 +96,8 @@ def render_task(scene, scene_key: str, settings: dict, tile, sample_offset: int,
     top, end exclusive. Returns {"tile", "sample_offset", "sample_count", "sum_rgba" (n, 4),
     "sum_lum2" (n,), "sum_normal" (n, 3), "sum_albedo" (n, 3), "min_depth" (n,), "count"
     (n,), "sum_mist" ((n,) or None: no Mist pass), "sum_data" ((n, 9) or None: no data
-    passes), "sum_light" ((n, 9) or None: no light passes), "nan_samples", "camera_paths", "rays",
+    passes), "sum_light" ((n, 9) or None: no light passes), "sum_crypto" ((n, slots, 2) or None:
+    no Cryptomatte; with "crypto_layers" and "crypto_slots", drt.film.Film), "nan_samples", "camera_paths", "rays",
     "seconds", "meta"} with n the tile's pixels, row-major from its top row. One thread per task: Dask runs one task per worker thread.
     """
     from ..render import render
@@ -119,6 +120,8 @@ def render_task(scene, scene_key: str, settings: dict, tile, sample_offset: int,
         "sum_mist": film.sum_mist,
         "sum_data": film.sum_data,
         "sum_light": film.sum_light,
+        "sum_crypto": film.sum_crypto, "crypto_layers": list(film.crypto_layers),
+        "crypto_slots": int(film.crypto_slots), "crypto_names": dict(film.crypto_names),
         "nan_samples": int(film.nan_samples),
         "camera_paths": int(st.camera_paths),
         "rays": int(st.rays),
