@@ -340,7 +340,6 @@ _UNRENDERED_PASSES = (
     ("use_pass_glossy_color", "Glossy Color"), ("use_pass_transmission_direct", "Transmission Direct"),
     ("use_pass_transmission_indirect", "Transmission Indirect"),
     ("use_pass_transmission_color", "Transmission Color"), ("use_pass_shadow", "Shadow"),
-    ("use_pass_ambient_occlusion", "Ambient Occlusion"),
 )
 _UNRENDERED_CYCLES_PASSES = (
     ("use_pass_volume_direct", "Volume Direct"), ("use_pass_volume_indirect", "Volume Indirect"),
@@ -352,7 +351,7 @@ _UNRENDERED_CYCLES_PASSES = (
 #: "Diffuse Color", "Object Index", "Material Index"); DRT registers each under the running
 #: Blender's name, as Cycles does, so a compositing tree made with Cycles finds its sockets
 _RENAMED_PASSES = {"DiffCol": "Diffuse Color", "IndexOB": "Object Index", "IndexMA": "Material Index",
-                   "Emit": "Emission", "Env": "Environment"}
+                   "Emit": "Emission", "Env": "Environment", "AO": "Ambient Occlusion"}
 _PASSES_RENAMED_IN = (4, 2, 0)
 
 
@@ -385,4 +384,5 @@ def view_layer_pass_flags(view_layer) -> dict:
         "uv": bool(getattr(view_layer, "use_pass_uv", False)),
         "emission": bool(getattr(view_layer, "use_pass_emit", False)),
         "environment": bool(getattr(view_layer, "use_pass_environment", False)),
+        "ao": bool(getattr(view_layer, "use_pass_ambient_occlusion", False)),
     }

@@ -28,6 +28,7 @@ PASSES = (  # (Blender pass name before 4.2: compat.pass_name, channels, chan_id
     ("IndexMA", 1, "X", "VALUE", "material_index", "material_index"),
     ("Emit", 3, "RGB", "COLOR", "emission", "emission"),
     ("Env", 3, "RGB", "COLOR", "environment", "environment"),
+    ("AO", 3, "RGB", "COLOR", "ao", "ao"),
 )
 
 

@@ -149,6 +149,7 @@ class DRT_VIEWLAYER_PT_passes_data(bpy.types.Panel):
         col = layout.column(heading="Light", align=True)
         col.prop(vl, "use_pass_emit", text="Emission")
         col.prop(vl, "use_pass_environment")
+        col.prop(vl, "use_pass_ambient_occlusion", text="Ambient Occlusion")
         cl = getattr(vl, "cycles", None)  # the Cycles add-on's view-layer settings, if enabled
         if cl is not None:
             col.prop(cl, "denoising_store_passes", text="Denoising Data")

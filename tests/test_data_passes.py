@@ -421,7 +421,7 @@ def test_the_passes_panel_shows_the_data_and_light_passes():
     ui.DRT_VIEWLAYER_PT_passes_data.draw(panel, bpy.context)
     drawn = set(panel.layout.props)
     assert {"use_pass_position", "use_pass_uv", "use_pass_object_index", "use_pass_material_index",
-            "pass_alpha_threshold", "use_pass_emit", "use_pass_environment"} <= drawn
+            "pass_alpha_threshold", "use_pass_emit", "use_pass_environment", "use_pass_ambient_occlusion"} <= drawn
     vl = bpy.context.view_layer
     assert all(hasattr(vl, p) or hasattr(getattr(vl, "cycles", None), p) for p in drawn), drawn
 

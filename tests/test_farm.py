@@ -53,7 +53,7 @@ def test_tiles_on_the_cluster_are_bit_identical_to_the_local_render(cluster):
     scene = small_box(64, 64)
     # (the Mist pass and the data passes travel too)
     scene.render = replace(scene.render, mist=(1.0, 5.0, 2.0), data_passes=("object_index", "position", "uv"),
-                           light_passes=("emission", "environment"), cryptomatte=("object", "material"))
+                           light_passes=("emission", "environment", "ao"), cryptomatte=("object", "material"))
     film, stats = cluster_render(cluster.scheduler_address, scene, 16, task_seconds=0.01)
     assert stats.tasks_done == stats.tasks_total == 4 and stats.workers == 2
     local = render(scene, spp=16)

@@ -126,7 +126,7 @@ DATA_PASS_PROPERTIES = (("use_pass_object_index", "object_index"), ("use_pass_ma
 
 #: the view layer's light passes DRT renders (Passes > Light > Other)
 LIGHT_PASS_PROPERTIES = (("use_pass_emit", "emission"), ("use_pass_environment", "environment"),
-                         ("use_pass_diffuse_color", "diffuse_color"))
+                         ("use_pass_diffuse_color", "diffuse_color"), ("use_pass_ambient_occlusion", "ao"))
 
 
 def data_pass_settings(view_layer) -> dict:
@@ -142,6 +142,10 @@ def data_pass_settings(view_layer) -> dict:
     light = [name for prop, name in LIGHT_PASS_PROPERTIES if getattr(view_layer, prop, False)]
     if light:
         out["light_passes"] = light
+    if "ao" in light:  # (World > Ambient Occlusion > Distance; a scene without a world: 10 m)
+        world = getattr(getattr(view_layer, "id_data", None), "world", None)
+        distance = getattr(getattr(world, "light_settings", None), "distance", 10.0)
+        out["ao_distance"] = float(distance) if distance > 0.0 else 1e-6
     crypto = [layer for layer in ("object", "material", "asset")
               if getattr(view_layer, f"use_pass_cryptomatte_{layer}", False)]
     if crypto:  # (View Layer > Passes > Cryptomatte: its layers and Levels)

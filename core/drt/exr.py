@@ -4,8 +4,8 @@ Channels written: R, G, B, A (combined); Z (depth along the view axis; 1e10 wher
 hit, Cycles's convention); Normal.X/Y/Z (world-space shading normal); Albedo.R/G/B; Mist.Y (Cycles's
 Mist pass, when the scene asks for it: ``render.mist``); IndexOB.X, IndexMA.X, Position.X/Y/Z,
 UV.U/V/A (Cycles's data passes, when the scene asks for any: ``render.data_passes``; all four
-then); Emit.RGB, Env.RGB, DiffCol.RGB (Cycles's Emission, Environment and Diffuse Color passes:
-``render.light_passes``; all three then); CryptoObject00.RGBA, CryptoObject01.RGBA, … (and
+then); Emit.RGB, Env.RGB, DiffCol.RGB, AO.RGB (Cycles's Emission, Environment, Diffuse Color
+and Ambient Occlusion passes: ``render.light_passes``; all four then); CryptoObject00.RGBA, CryptoObject01.RGBA, … (and
 CryptoMaterial / CryptoAsset: the Cryptomatte layers of ``render.cryptomatte``, two (id,
 coverage) pairs per pass, with the specification's ``cryptomatte/<key>/…`` manifest headers);
 SampleCount.Y (samples taken by
@@ -55,6 +55,7 @@ def film_channels(film: Film, denoised: np.ndarray | None = None) -> dict[str, n
             ch[f"Emit.{c}"] = film.emission[..., i]
             ch[f"Env.{c}"] = film.environment[..., i]
             ch[f"DiffCol.{c}"] = film.diffuse_color[..., i]
+            ch[f"AO.{c}"] = film.ao[..., i]
     if film.sum_data is not None:
         ch["IndexOB.X"] = film.object_index
         ch["IndexMA.X"] = film.material_index
@@ -138,7 +139,8 @@ def film_from_exr(path: str | os.PathLike) -> Film:
     if "Mist.Y" in ch:  # (the pass is 1 − the mean of the samples' sums)
         film.sum_mist = (1.0 - ch["Mist.Y"].astype(np.float64).reshape(-1)) * count
     if "Emit.R" in ch:  # the light passes: their means × N
-        film.sum_light = np.stack([ch[f"{layer}.{c}"] for layer in ("Emit", "Env", "DiffCol") for c in "RGB"],
+        layers = ("Emit", "Env", "DiffCol", "AO")  # (a file from before the AO pass has no AO: 0)
+        film.sum_light = np.stack([ch.get(f"{layer}.{c}", np.zeros_like(ch["R"])) for layer in layers for c in "RGB"],
                                   -1).reshape(-1, LIGHT_WIDTH).astype(np.float64) * count[:, None]
     if "IndexOB.X" in ch:  # the data passes: sample 0's values as they are, the UV's mean × N
         film.sum_data = np.zeros((h * w, DATA_WIDTH))

@@ -72,9 +72,10 @@ def _accumulate_data(pixel, data, sum_data):
 DATA_OBJECT, DATA_MATERIAL, DATA_POSITION, DATA_HIT, DATA_UV = 0, 1, 2, 5, 6
 DATA_WIDTH = 9
 #: columns of ``Film.sum_light``: Σ Emission, Σ Environment (exposed, as the combined pass),
-#: Σ Diffuse Color (an albedo: not exposed, as Cycles's colour passes), rgb each
-LIGHT_EMISSION, LIGHT_ENVIRONMENT, LIGHT_DIFFUSE_COLOR = 0, 3, 6
-LIGHT_WIDTH = 9
+#: Σ Diffuse Color (an albedo: not exposed, as Cycles's colour passes), Σ Ambient Occlusion (a
+#: visibility: not exposed), rgb each
+LIGHT_EMISSION, LIGHT_ENVIRONMENT, LIGHT_DIFFUSE_COLOR, LIGHT_AO = 0, 3, 6, 9
+LIGHT_WIDTH = 12
 
 
 def _rows3(a) -> np.ndarray:
@@ -327,6 +328,14 @@ class Film:
         lobes' colours × throughput, summed over the surfaces a camera ray meets while the world
         still shows through (drt.path_stages.diffuse_color); None without it."""
         return None if self.sum_light is None else self._light(LIGHT_DIFFUSE_COLOR)
+
+    @property
+    def ao(self) -> np.ndarray | None:
+        """(H, W, 3) Cycles's Ambient Occlusion pass: the mean over samples of throughput ×
+        alpha at each surface a camera ray meets (through transparent ones), where a
+        cosine-distributed ray about its normal is unoccluded within the AO distance
+        (drt.path_stages.queue_ao_ray); 0 for the world; None without it."""
+        return None if self.sum_light is None else self._light(LIGHT_AO)
 
     def _light(self, first: int) -> np.ndarray:
         return self._image(self._mean(self.sum_light[:, first:first + 3]))

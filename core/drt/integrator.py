@@ -28,7 +28,7 @@ from . import path_stages as stages
 from . import scene as scene_module
 from .camera import Camera
 from .cryptomatte import CRYPTO_COLUMNS, CRYPTO_SURFACES
-from .film import SampleBatch
+from .film import LIGHT_AO, SampleBatch
 from .geometry import SceneGeometry
 from .lights import LightSet
 from .lights.world_map import point_rows
@@ -162,7 +162,9 @@ class Integrator:
             filter_glossy=float(getattr(settings, "filter_glossy", 0.0)),
             mist_start=float(mist[0]), mist_inv_depth=1.0 / mist[1] if mist[1] > 0.0 else 0.0,
             mist_falloff=float(mist[2]), mist_ortho=getattr(getattr(camera, "spec", None), "type", "") == "ORTHO",
-            pass_alpha=float(getattr(settings, "pass_alpha_threshold", 0.5)))
+            pass_alpha=float(getattr(settings, "pass_alpha_threshold", 0.5)),
+            ao_distance=(float(getattr(settings, "ao_distance", 10.0))
+                         if "ao" in getattr(settings, "light_passes", ()) else 0.0))
         #: the Mist pass is kept only for a render that asks for it (``RenderSettings.mist``)
         self.mist_pass = getattr(settings, "mist", None) is not None
         #: likewise the data passes (``RenderSettings.data_passes``; path_stages.write_data_passes)
@@ -295,6 +297,31 @@ class Integrator:
         paths, shadow = ws
         return (stages.Paths(*(a[:n] for a in paths)), stages.ShadowRays(*(a[:n_shadow] for a in shadow)))
 
+    def _ao_workspace(self, n: int) -> stages.ShadowRays:
+        """This thread's queue of Ambient Occlusion pass rays: n rows (one per path and bounce;
+        ``path_stages.queue_ao_ray``), or zero rows for a render without the pass."""
+        if self.stage_settings.ao_distance <= 0.0:
+            n = 0
+        q = getattr(self._workspaces, "ao_rays", None)
+        if q is None or len(q.slot) < n:
+            q = self._workspaces.ao_rays = _shadow_rays(n)
+        return stages.ShadowRays(*(a[:n] for a in q))
+
+    def _trace_ao(self, ao_rays, n_ao, out, md, regs, point) -> None:
+        """Trace the queued AO rays as shadow rays (through transparent surfaces and media, as
+        Cycles's PATH_RAY_SHADOW_FOR_AO) and add the unoccluded ones' weight to the AO columns
+        of ``out.light``: seen as (n·LIGHT_WIDTH/3, 3) rows, a path's AO is row slot·4 + 3."""
+        groups = stages.LIGHT_COLUMNS // 3
+        slot = ao_rays.slot[:n_ao]
+        slot *= groups
+        slot += LIGHT_AO // 3
+        target = out.light.reshape(-1, 3)
+        if self.media.enabled or self.transparent.shape[0] or self.unseen_by_shadows:
+            self._shadows_through(ao_rays, n_ao, target, md, regs, point)
+        else:
+            blocked = self.tracer.occluded(ao_rays.o[:n_ao], ao_rays.d[:n_ao], ao_rays.tmax[:n_ao], ao_rays.tau[:n_ao])
+            stages.add_unoccluded(ao_rays, n_ao, blocked, target)
+
     def _skip_unseen(self, paths, live, hits) -> None:
         """Rows whose hit is on an object their kind of ray does not see (Cycles's ray
         visibility) are traced on from just past it, as if it were not there (``hits``
@@ -354,6 +381,7 @@ class Integrator:
         row from the TOP; index: (n,) sample number within the pixel. Returns per-path results."""
         n = len(x)
         paths, shadow = self._workspace(n)
+        ao_rays = self._ao_workspace(n)
         buffers, out = self._outputs(n)
         sd, ld = self.sampler.data, self.lights.data
         md, regs, point = self._material_workspace()
@@ -377,8 +405,11 @@ class Integrator:
                 self._skip_unseen(paths, live, hit_arrays)
             if self.sss is not None:
                 self.sss.patch_hits(paths, live, hit_arrays)
-            live, n_shadow = stages.shade(sd, md, self.programs_arg, regs, point, ld, self.surfaces, self.stage_settings, depth_i, live,
-                                          paths, hit_arrays, out, shadow, self.media_arg, self.holdouts_arg)
+            live, n_shadow, n_ao = stages.shade(sd, md, self.programs_arg, regs, point, ld, self.surfaces,
+                                                self.stage_settings, depth_i, live, paths, hit_arrays, out, shadow,
+                                                ao_rays, self.media_arg, self.holdouts_arg)
+            if n_ao:
+                self._trace_ao(ao_rays, n_ao, out, md, regs, point)
             if n_shadow and (vd.enabled or self.transparent.shape[0] or self.unseen_by_shadows):
                 self._shadows_through(shadow, n_shadow, out.radiance, md, regs, point)
             elif n_shadow:

@@ -103,6 +103,8 @@ StageSettings = namedtuple("StageSettings", [
     "mist_falloff", "mist_ortho",         # distance along the view axis for an orthographic camera
                                           # (``mist_weight``; read only where ``Outputs.mist`` has rows)
     "pass_alpha",                         # the data passes' alpha threshold (``write_data_passes``)
+    "ao_distance",                        # the Ambient Occlusion pass's ray length, metres (0: no
+                                          # AO pass; ``queue_ao_ray``)
 ])
 
 Paths = namedtuple("Paths", [
@@ -689,6 +691,34 @@ def write_cryptomatte(surf, md, mat, prim, thr, out, slot):
 
 
 @kernel
+def queue_ao_ray(md, mat, thr, p, ng, wo, ns, t_ax, b_ax, front, u0, u1, settings, paths, i, slot, ao_rays, k, vd):
+    """Queue row k of ``ao_rays`` for Cycles's Ambient Occlusion pass (integrate_surface_ao) at a
+    surface a camera ray meets (still one past transparent surfaces): a cosine-distributed
+    direction about the shading normal on the viewer's side (frame ``t_ax``, ``b_ax``, ``ns``;
+    ``front`` its side), ``settings.ao_distance`` long, carrying throughput × alpha (1 −
+    transparency of row ``mat``) to the pass where nothing blocks it. Returns whether it
+    queued one: a direction below the facet, or a surface without opacity, queues none (the
+    pass adds 0 there, as for an occluded ray)."""
+    t = transparency(md, mat)
+    c = (thr[0] * max(1.0 - t[0], 0.0), thr[1] * max(1.0 - t[1], 0.0), thr[2] * max(1.0 - t[2], 0.0))
+    if not any_positive(c):
+        return False
+    local = cosine_hemisphere(u0, u1)
+    wi = to_world((local[0], local[1], local[2] * front), t_ax, b_ax, ns)
+    if dot(wi, ng) * dot(wo, ng) <= 0.0:
+        return False
+    store(ao_rays.o, k, offset_point(p, ng, wi))
+    store(ao_rays.d, k, wi)
+    ao_rays.tmax[k] = settings.ao_distance
+    ao_rays.tau[k] = paths.tau[i]
+    store(ao_rays.contrib, k, c)
+    ao_rays.slot[k] = slot
+    if vd is not None and vd.enabled:  # (the ray starts in the media the path is in)
+        stack_copy(paths.vstack, i, ao_rays.vstack, k)
+    return True
+
+
+@kernel
 def holdout_object_hit(md, mat, thr, acc, settings, paths, i, j, vd, prim, p, ng, d, t_geom, out, slot):
     """Path i's see-through ray (a camera ray, or one past Transparent Glass) hit a holdout
     object (``Surfaces.visibility`` & VIS_HOLDOUT) of
@@ -715,9 +745,11 @@ def holdout_object_hit(md, mat, thr, acc, settings, paths, i, j, vd, prim, p, ng
 
 
 @kernel
-def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hits, out, shadow, vd, holdouts):
+def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hits, out, shadow, ao_rays, vd,
+          holdouts):
     """One bounce for paths [0, live) (see the module docstring). Returns (paths still alive,
-    now compacted to the front; shadow rays queued in ``shadow``). ``pd`` holds the material
+    now compacted to the front; shadow rays queued in ``shadow``; Ambient Occlusion pass rays
+    queued in ``ao_rays``, a queue of zero rows when the render has no AO pass). ``pd`` holds the material
     programs (``drt.materials.programs``; no programs: zero-size arrays); when there are any,
     ``md`` must be this thread's own copy of the material data and ``regs`` its register file,
     since a textured material's row is rewritten at each of its hits, and ``point`` its
@@ -736,6 +768,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
     samples, with ``point`` filled for the direction (``drt.lights.world_map``)."""
     direct = settings.direct
     n_shadow = 0
+    n_ao = 0
     j = 0
     sss_on = paths.sss.shape[0] > 0
     for i in range(live):
@@ -1101,6 +1134,11 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         # lobe drawn from its own padded dimension a pixel's directions stratify within the
         # union of lobes but not within each lobe (glass, mixes: docs/estimators.md)
         ub0, ub1, u_lobe = sample_3d(sd, pixel, idx, base + 2)
+        if ao_rays.o.shape[0] and camera and not exiting:
+            # the Ambient Occlusion pass, from the BSDF's own dimensions, as Cycles's
+            if queue_ao_ray(md, mat, thr, p, ng, wo, ns, t_ax, b_ax, front, ub0, ub1, settings, paths, i, slot,
+                            ao_rays, n_ao, vd):
+                n_ao += 1
         wi_l, weight, bpdf, kind, b_delta, b_valid = bsdf_sample_bump(md, mat, wo_l, u_lobe, ub0, ub1, ns_local,
                                                                       nc_local, nv_local, front, view_weights, blur)
         if settings.indirect != INDIRECT_BSDF and not md.transmission_or_delta[mat]:
@@ -1218,7 +1256,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
         paths.pixel[j] = pixel
         paths.index[j] = idx
         j += 1
-    return j, n_shadow
+    return j, n_shadow, n_ao
 
 
 @kernel

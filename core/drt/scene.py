@@ -231,6 +231,9 @@ class RenderSettings:
     #: (id, coverage) pairs each pixel keeps per layer (2–16, rounded up to even)
     cryptomatte: tuple = ()
     cryptomatte_levels: int = 6
+    #: metres an Ambient Occlusion pass ray looks for occluders (World > Ambient Occlusion >
+    #: Distance; Blender's default 10); matters only with "ao" in ``light_passes``
+    ao_distance: float = 10.0
     shutter: tuple[float, float] | None = None
     direct: str = "MIS_POWER"  # direct-light estimator (see integrator.DIRECT_STRATEGIES)
     indirect: str = "BSDF"  # continuation sampling (integrator.INDIRECT_STRATEGIES)
@@ -391,7 +394,7 @@ DATA_PASSES = ("object_index", "material_index", "position", "uv")
 
 
 #: the light passes a scene may ask for (``render.light_passes``)
-LIGHT_PASSES = ("emission", "environment", "diffuse_color")
+LIGHT_PASSES = ("emission", "environment", "diffuse_color", "ao")
 
 
 def _pass_list(r: dict, path: str, key: str, known: tuple, kind: str) -> tuple:
@@ -465,6 +468,7 @@ def _render_settings(h: dict) -> RenderSettings:
         light_passes=_pass_list(r, p, "light_passes", LIGHT_PASSES, "light pass"),
         cryptomatte=_pass_list(r, p, "cryptomatte", CRYPTO_LAYERS, "Cryptomatte layer"),
         cryptomatte_levels=_number(r, "cryptomatte_levels", p, 6, lo=MIN_LEVELS, hi=MAX_LEVELS, integer=True),
+        ao_distance=_number(r, "ao_distance", p, 10.0, lo=0, lo_open=True),
         pass_alpha_threshold=_number(r, "pass_alpha_threshold", p, 0.5, lo=0, hi=1),
         shutter=shutter,
         direct=_enum(r, "direct", p, DIRECT_STRATEGIES, "MIS_POWER"),
