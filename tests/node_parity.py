@@ -33,6 +33,38 @@ from addon.export.node_programs import socket  # noqa: E402
 TILE = 16
 
 
+def f12_in_both(sc, tmp_path):
+    """F12 in Cycles, then in DRT, on the same scene: (engine, channels, header) of each one's
+    multilayer EXR in ``tmp_path``."""
+    from test_addon import render_to
+
+    for engine in ("CYCLES", "DRT"):
+        sc.render.engine = engine
+        chans, header = render_to(sc, tmp_path / f"{engine}.exr", multilayer=True)
+        yield engine, chans, header
+
+
+def shader_material(name, shader, inputs):
+    """A material whose surface is one ``shader`` node with ``inputs`` ({name: value})."""
+    m = bpy.data.materials.new(name)
+    nt = m.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(node(nt, shader, inputs).outputs[0], out.inputs["Surface"])
+    return m
+
+
+def grey_principled(name, alpha=1.0, pass_index=0):
+    """A material of one grey (0.5) Principled BSDF with ``alpha``: the pass tests' surfaces."""
+    m = bpy.data.materials.new(name)
+    nt = m.node_tree
+    nt.nodes.clear()
+    bsdf = node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": (0.5, 0.5, 0.5, 1), "Alpha": alpha})
+    nt.links.new(bsdf.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    m.pass_index = pass_index
+    return m
+
+
 def node(nt, kind, inputs=None, **props):
     """A new node of ``kind`` with properties set and inputs {index or name: socket or value}."""
     n = nt.nodes.new(kind)

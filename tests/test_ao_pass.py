@@ -85,21 +85,14 @@ def _blender_ao_scene():
     overhanging card and a half-transparent card, World > Ambient Occlusion > Distance 0.6."""
     import bpy
 
-    from node_parity import node, setup_scene
+    from node_parity import grey_principled, setup_scene
 
     sc = setup_scene(2)
     sc.cycles.samples = sc.drt.samples = 256
     sc.view_layers[0].use_pass_ambient_occlusion = True
     sc.world.light_settings.distance = 0.6
 
-    def material(name, alpha=1.0):
-        m = bpy.data.materials.new(name)
-        nt = m.node_tree
-        nt.nodes.clear()
-        bsdf = node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": (0.5, 0.5, 0.5, 1), "Alpha": alpha})
-        nt.links.new(bsdf.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
-        return m
-
+    material = grey_principled
     grey = material("grey")
     bpy.ops.mesh.primitive_plane_add(size=1.8, location=(0, 0, -1))
     bpy.context.object.data.materials.append(grey)
@@ -117,14 +110,12 @@ def test_ao_pass_matches_cycles(tmp_path):
     each): means 0.6636 and 0.6632, mean absolute difference 0.004, 99th percentile 0.02."""
     pytest.importorskip("bpy")
     from addon import compat
-    from test_addon import render_to
+    from node_parity import f12_in_both
 
     sc = _blender_ao_scene()
     w, h = sc.render.resolution_x, sc.render.resolution_y
     got = {}
-    for engine in ("CYCLES", "DRT"):
-        sc.render.engine = engine
-        chans, _ = render_to(sc, tmp_path / f"{engine}.exr", multilayer=True)
+    for engine, chans, _ in f12_in_both(sc, tmp_path):
         key = f"ViewLayer.{compat.pass_name('AO')}"
         got[engine] = np.asarray(chans[key], np.float64).reshape(h, w, 3)
     c, d = got["CYCLES"], got["DRT"]

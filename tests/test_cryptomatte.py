@@ -170,7 +170,7 @@ def _blender_crypto_scene():
     Cycles's default pixel filter (edges share pixels)."""
     import bpy
 
-    from node_parity import node, setup_scene
+    from node_parity import grey_principled, setup_scene
 
     sc = setup_scene(2)
     sc.cycles.samples = sc.drt.samples = 64
@@ -178,14 +178,7 @@ def _blender_crypto_scene():
     vl = sc.view_layers[0]
     vl.use_pass_cryptomatte_object = vl.use_pass_cryptomatte_material = vl.use_pass_cryptomatte_asset = True
 
-    def material(name, alpha=1.0):
-        m = bpy.data.materials.new(name)
-        nt = m.node_tree
-        nt.nodes.clear()
-        bsdf = node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": (0.5, 0.5, 0.5, 1), "Alpha": alpha})
-        nt.links.new(bsdf.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
-        return m
-
+    material = grey_principled
     def place(name, mat):
         bpy.context.object.name = name
         bpy.context.object.data.materials.append(mat)
@@ -226,14 +219,12 @@ def test_cryptomatte_matches_cycles(tmp_path):
     the manifests in the multilayer EXR's header. Measured: mean distance 0.007, at most 0.16
     (edge pixels, 64 samples in each engine)."""
     pytest.importorskip("bpy")
-    from test_addon import render_to
+    from node_parity import f12_in_both
 
     sc = _blender_crypto_scene()
     w, h = sc.render.resolution_x, sc.render.resolution_y
     maps, manifests = {}, {}
-    for engine in ("CYCLES", "DRT"):
-        sc.render.engine = engine
-        chans, header = render_to(sc, tmp_path / f"{engine}.exr", multilayer=True)
+    for engine, chans, header in f12_in_both(sc, tmp_path):
         for layer in ("Object", "Material", "Asset"):
             passes = [np.stack([np.asarray(chans[f"ViewLayer.Crypto{layer}{j:02d}.{c}"], np.float32).reshape(h, w)
                                 for c in "rgba"], axis=-1).reshape(h, w, 2, 2) for j in range(3)]

@@ -272,7 +272,7 @@ def _blender_data_scene():
     (Object and Material Index, Position, UV), the view layer's Alpha Threshold at its default."""
     import bpy
 
-    from node_parity import node, setup_scene
+    from node_parity import grey_principled, setup_scene
 
     sc = setup_scene(2)
     sc.cycles.samples = sc.drt.samples = 16
@@ -280,13 +280,7 @@ def _blender_data_scene():
     vl.use_pass_object_index = vl.use_pass_material_index = vl.use_pass_position = vl.use_pass_uv = True
 
     def material(name, pass_index, alpha=1.0):
-        m = bpy.data.materials.new(name)
-        nt = m.node_tree
-        nt.nodes.clear()
-        bsdf = node(nt, "ShaderNodeBsdfPrincipled", {"Base Color": (0.5, 0.5, 0.5, 1), "Alpha": alpha})
-        nt.links.new(bsdf.outputs[0], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
-        m.pass_index = pass_index
-        return m
+        return grey_principled(name, alpha, pass_index)
 
     def place(obj_pass, mat):
         bpy.context.object.pass_index = obj_pass
@@ -312,14 +306,12 @@ def test_data_passes_match_cycles(tmp_path):
     0.0001."""
     pytest.importorskip("bpy")
     from addon import compat
-    from test_addon import render_to
+    from node_parity import f12_in_both
 
     sc = _blender_data_scene()
     w, h = sc.render.resolution_x, sc.render.resolution_y
     got = {}
-    for engine in ("CYCLES", "DRT"):
-        sc.render.engine = engine
-        chans, _ = render_to(sc, tmp_path / f"{engine}.exr", multilayer=True)
+    for engine, chans, _ in f12_in_both(sc, tmp_path):
 
         def pass_of(name, comps):
             keys = [next(k for k in chans if k.endswith(f"{name}.{c}")) for c in comps]
@@ -348,7 +340,7 @@ def _blender_glow_scene():
     the Emission and Environment passes on, 256 samples, 2 bounces."""
     import bpy
 
-    from node_parity import node, setup_scene
+    from node_parity import setup_scene, shader_material
 
     sc = setup_scene(2)
     sc.cycles.samples = sc.drt.samples = 256
@@ -358,13 +350,7 @@ def _blender_glow_scene():
     vl = sc.view_layers[0]
     vl.use_pass_emit = vl.use_pass_environment = True
 
-    def material(name, shader, inputs):
-        m = bpy.data.materials.new(name)
-        nt = m.node_tree
-        nt.nodes.clear()
-        out = nt.nodes.new("ShaderNodeOutputMaterial")
-        nt.links.new(node(nt, shader, inputs).outputs[0], out.inputs["Surface"])
-        return m
+    material = shader_material
 
     bpy.ops.mesh.primitive_plane_add(size=1.2, location=(-0.2, 0, -1))
     grey = material("grey", "ShaderNodeBsdfDiffuse", {"Color": (0.5, 0.5, 0.5, 1)})
@@ -384,14 +370,12 @@ def test_light_passes_match_cycles(tmp_path):
     each pass well under a percent of its scale (measured: see the print)."""
     pytest.importorskip("bpy")
     from addon import compat
-    from test_addon import render_to
+    from node_parity import f12_in_both
 
     sc = _blender_glow_scene()
     w, h = sc.render.resolution_x, sc.render.resolution_y
     got = {}
-    for engine in ("CYCLES", "DRT"):
-        sc.render.engine = engine
-        chans, _ = render_to(sc, tmp_path / f"{engine}.exr", multilayer=True)
+    for engine, chans, _ in f12_in_both(sc, tmp_path):
         got[engine] = {}
         for name in ("Emit", "Env"):
             key = compat.pass_name(name)
@@ -433,19 +417,13 @@ def _blender_diffuse_color_scene():
     Principled; the Diffuse Color pass on."""
     import bpy
 
-    from node_parity import node, setup_scene
+    from node_parity import setup_scene, shader_material
 
     sc = setup_scene(4)
     sc.cycles.samples = sc.drt.samples = 64
     sc.view_layers[0].use_pass_diffuse_color = True
 
-    def material(name, shader, inputs):
-        m = bpy.data.materials.new(name)
-        nt = m.node_tree
-        nt.nodes.clear()
-        out = nt.nodes.new("ShaderNodeOutputMaterial")
-        nt.links.new(node(nt, shader, inputs).outputs[0], out.inputs["Surface"])
-        return m
+    material = shader_material
 
     c = (0.8, 0.5, 0.2, 1)
     principled = "ShaderNodeBsdfPrincipled"
@@ -473,14 +451,12 @@ def test_diffuse_color_matches_cycles(tmp_path):
     image's mean difference under 0.002 (the Alpha sphere's stochastic pass-through)."""
     pytest.importorskip("bpy")
     from addon import compat
-    from test_addon import render_to
+    from node_parity import f12_in_both
 
     sc, names = _blender_diffuse_color_scene()
     w, h = sc.render.resolution_x, sc.render.resolution_y
     got = {}
-    for engine in ("CYCLES", "DRT"):
-        sc.render.engine = engine
-        chans, _ = render_to(sc, tmp_path / f"{engine}.exr", multilayer=True)
+    for engine, chans, _ in f12_in_both(sc, tmp_path):
         key = f"ViewLayer.{compat.pass_name('DiffCol')}"
         got[engine] = np.asarray(chans[key], np.float64).reshape(h, w, -1)[..., :3]
     for k, name in enumerate(names):
