@@ -260,7 +260,9 @@ def fill_layer(layer, film, crop, wanted, cryptomatte=True) -> None:
             _set_pass(layer, f"{CRYPTO_PASS_PREFIX[crypto_layer]}{j:02d}", pair)
 
 
-#: Cycles's pass name prefix of each Cryptomatte layer (drt.cryptomatte.PASS_PREFIX)
+#: Cycles's pass name prefix of each Cryptomatte layer: drt.cryptomatte.PASS_PREFIX, copied
+#: because registering passes (any UI change) must not import the core's kernels (numba);
+#: tests/test_cryptomatte.py keeps the two equal
 CRYPTO_PASS_PREFIX = {"object": "CryptoObject", "material": "CryptoMaterial", "asset": "CryptoAsset"}
 
 

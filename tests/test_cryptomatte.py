@@ -163,6 +163,13 @@ def test_bad_cryptomatte_settings_are_named(change, where):
     assert where in str(e.value)
 
 
+def test_the_add_on_names_the_passes_as_the_core():
+    pytest.importorskip("bpy")
+    from addon import engine
+
+    assert engine.CRYPTO_PASS_PREFIX == cryptomatte.PASS_PREFIX
+
+
 def _blender_crypto_scene():
     """node_parity's orthographic view down on a floor, a sphere parented to an empty "Rig"
     (its asset), an opaque card, a card of Principled Alpha 0.5, a plane without a material and
