@@ -159,7 +159,7 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         for w in getattr(context, "warnings", []):
             self.report({"WARNING"}, f"DRT: {w}")
         if not kernels.kernels_compiled(variant):
-            self.update_stats("", "DRT | Compiling render kernels (first render of this kind of scene: a minute or more)")
+            self.update_stats("", "DRT | Compiling render kernels (first render of this kind of scene: up to a minute)")
         t_render = time.perf_counter()
         last_draw = [0.0]
         crop = border_crop(scene, width, height)

@@ -422,7 +422,7 @@ def status_text(frame, target: int, error: str | None, variant: str = "") -> str
         return f"DRT | Error: {error}"
     if frame is None:
         if not compat.core_module("kernels").kernels_compiled(variant):
-            return "DRT | Compiling render kernels (first render of this kind of scene: a minute or more)"
+            return "DRT | Compiling render kernels (first render of this kind of scene: up to a minute)"
         return "DRT | Preparing"
     if frame.divider > 1:
         return f"DRT | Preview 1/{frame.divider}"

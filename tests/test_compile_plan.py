@@ -25,20 +25,22 @@ def test_the_shipped_plan_loads_and_every_entry_is_a_kernel():
     assert set(plan) - features == set(K.KERNEL_VARIANTS)
     assert features == {CP.FEATURE_PREFIX + f for f in CP.PLAN_FEATURES}
     for variant, entries in plan.items():
-        names = {attr for _, attr, _ in entries}
+        called = {attr for _, attr, _, linked in entries if not linked}
         if variant not in features:
-            assert {"shade", "camera_stage"} <= names, variant
-        missing = [(m, a) for m, a, _ in entries if CP._resolve(m, a) is None]
+            # the stage kernels are called from Python; most of the rest only from kernels
+            assert {"shade", "camera_stage"} <= called, variant
+            assert sum(linked for *_, linked in entries) > 5 * len(called), variant
+        missing = [(m, a) for m, a, _, _ in entries if CP._resolve(m, a) is None]
         assert not missing, f"{variant or 'plain'}: {missing[:5]}"
-        assert all(len(sigs) >= 1 for _, _, sigs in entries)
+        assert all(len(sigs) >= 1 for _, _, sigs, _ in entries)
     # the media variant holds the whole shade, so it needs more kernels than the plain one
     assert len(plan["media"]) > len(plan[""]) > 100
     # a feature holds what the plain plan lacks: the walk for subsurface scattering, and no
     # signature twice
-    assert "walk_local" in {attr for _, attr, _ in plan[CP.FEATURE_PREFIX + "sss"]}
-    plain = {(m, a, s) for m, a, sigs in plan[""] for s in sigs}
+    assert "walk_local" in {attr for _, attr, _, _ in plan[CP.FEATURE_PREFIX + "sss"]}
+    plain = {(m, a, s, linked) for m, a, sigs, linked in plan[""] for s in sigs}
     for feature in features:
-        assert not plain & {(m, a, s) for m, a, sigs in plan[feature] for s in sigs}, feature
+        assert not plain & {(m, a, s, linked) for m, a, sigs, linked in plan[feature] for s in sigs}, feature
 
 
 def test_a_scene_s_features_are_what_it_compiles_beyond_its_variant():
@@ -51,12 +53,14 @@ def test_a_scene_s_features_are_what_it_compiles_beyond_its_variant():
 
 
 def test_plan_entries_are_the_variant_s_then_each_feature_s():
-    plan = {"": [("a", "f", [1])], "media": [("a", "g", [2])], "+sss": [("b", "w", [3])]}
-    assert CP.plan_entries(plan, "") == [("a", "f", [1])]
-    assert CP.plan_entries(plan, "", ("sss",)) == [("a", "f", [1]), ("b", "w", [3])]
-    assert CP.plan_entries(plan, "media", ("sss", "motion")) == [("a", "g", [2]), ("b", "w", [3])]
+    plan = {"": [("a", "f", [1], True)], "media": [("a", "g", [2], True)], "+sss": [("b", "w", [3], False)]}
+    assert CP.plan_entries(plan, "") == [("a", "f", [1], True)]
+    assert CP.plan_entries(plan, "", ("sss",)) == [("a", "f", [1], True), ("b", "w", [3], False)]
+    assert CP.plan_entries(plan, "media", ("sss", "motion")) == [("a", "g", [2], True), ("b", "w", [3], False)]
     assert CP.plan_entries(None, "", ("sss",)) == []
-    assert CP._beyond([("a", "f", [1, 2]), ("b", "w", [3])], [("a", "f", [1])]) == [("a", "f", [2]), ("b", "w", [3])]
+    # a signature of the other form is not the same entry
+    assert CP._beyond([("a", "f", [1, 2], True), ("b", "w", [3], True), ("a", "f", [1], False)],
+                      [("a", "f", [1], True)]) == [("a", "f", [2], True), ("b", "w", [3], True), ("a", "f", [1], False)]
 
 
 def test_plan_classes_map_to_this_copys_package(monkeypatch):
@@ -134,8 +138,8 @@ def test_a_feature_compiles_alone_when_its_variant_is_compiled(monkeypatch):
         return real_popen([sys.executable, "-c", "pass"], *args, **kwargs)
 
     marks = {""}  # the plain variant is compiled; no feature is
-    monkeypatch.setattr(CP, "load_plan", lambda: {"": [("m", "k", [1])], "+sss": [("m", "walk", [2])],
-                                                  "+motion": [("m", "moving", [3])]})
+    monkeypatch.setattr(CP, "load_plan", lambda: {"": [("m", "k", [1], True)], "+sss": [("m", "walk", [2], True)],
+                                                  "+motion": [("m", "moving", [3], True)]})
     monkeypatch.setattr(K, "kernels_compiled", lambda variant="": variant in marks)
     monkeypatch.setattr(K, "mark_kernels_compiled", lambda variant="": marks.add(variant))
     monkeypatch.setattr(CP, "_PRECOMPILED", set())
@@ -186,8 +190,8 @@ misses = 0
 for name, mod in list(sys.modules.items()):
     if name.startswith("drt"):
         for obj in list(vars(mod).values()):
-            if isinstance(obj, LazyKernel) and obj._dispatcher is not None:
-                misses += sum(obj._dispatcher._cache_misses.values())
+            if isinstance(obj, LazyKernel):
+                misses += sum(sum(d._cache_misses.values()) for d in (obj._dispatcher, obj._linked) if d is not None)
 print(misses, round(t1 - t0, 1), round(t2 - t1, 1))
 """
     env = {k: v for k, v in os.environ.items() if k not in ("DRT_SET_NUMBA_CACHE_DIR", CP.NO_PRECOMPILE_ENV)}

@@ -190,14 +190,22 @@ from drt import kernels
 from drt.sampling import pixel_filter as pf
 ys = np.array([0.0, 2.0])
 first = pf.lerp_table(0.25, ys)  # loaded from the cache: its linking bitcode is not parsed
+linked = pf.lerp_table.linked()
+linked.compile((numba.float64, numba.float64[::1]))  # the form kernels call, loaded too
 deferred = len(kernels._UNPARSED)
 
 @numba.njit
 def twice(x, ys):  # a new compile that links the loaded kernel in: the bitcode is parsed now
     return 2.0 * pf.lerp_table(x, ys)
 
-print(sum(pf.lerp_table.stats.cache_hits.values()), deferred, first, twice(0.25, ys), len(kernels._UNPARSED),
-      len(pf.lerp_table.overloads))
+print(sum(pf.lerp_table.stats.cache_hits.values()) + sum(linked.stats.cache_hits.values()), deferred,
+      first, twice(0.25, ys), len(kernels._UNPARSED), len(linked.overloads))
+"""
+
+_COMPILE_LINKED_FORM = """
+import numba
+from drt.sampling import pixel_filter as pf
+pf.lerp_table.linked().compile((numba.float64, numba.float64[::1]))
 """
 
 
@@ -207,14 +215,17 @@ def test_a_loaded_kernel_links_into_a_later_compile(tmp_path):
     compiled afterwards that calls it still links it, and computes the same value."""
     env = dict(os.environ, DRT_CACHE_DIR=str(tmp_path / "cache"))
     env.pop("NUMBA_CACHE_DIR", None)
-    out = subprocess.run([sys.executable, "-c", _COMPILE_ONE_KERNEL], env=env, cwd=tmp_path,
-                         capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
+    for code in (_COMPILE_ONE_KERNEL, _COMPILE_LINKED_FORM):
+        out = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path,
+                             capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr
     out = subprocess.run([sys.executable, "-c", _LOAD_THEN_LINK], env=env, cwd=tmp_path,
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     hit, deferred, first, twice, left, overloads = out.stdout.split()
-    assert hit == "1" and int(deferred) >= 1 and overloads == "1"  # the loaded one was linked
+    # both forms loaded (the Python-called one and the linked one), neither parsed; the linked
+    # one, typed inside `twice`, is the one linked
+    assert hit == "2" and int(deferred) >= 2 and overloads == "1"
     assert float(first) == 0.5 and float(twice) == 1.0
     assert int(left) < int(deferred)  # the linked library's bitcode was parsed on demand
 
@@ -333,6 +344,8 @@ def test_kernels_are_built_on_first_use():
         return twice(x) + 1.0
 
     assert twice._dispatcher is None and twice.py_func(3.0) == 6.0 and twice._dispatcher is None
-    assert twice_plus_one(3.0) == 7.0  # typing the callee through the proxy builds it
-    assert twice._dispatcher is not None and len(twice.overloads) == 1
+    assert twice_plus_one(3.0) == 7.0  # typing the callee through the proxy builds its linked form
+    assert twice._linked is not None and len(twice.linked().overloads) == 1
+    assert twice._dispatcher is None  # no Python entry point compiled for a kernel only kernels call
+    assert twice(3.0) == 6.0 and len(twice.overloads) == 1
     assert twice.__name__ == "twice" and "LazyKernel" not in repr(twice)

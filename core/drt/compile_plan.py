@@ -14,9 +14,11 @@ Kernels outside `shade` that only some scenes need are planned per feature (``PL
 the subsurface walk, moving objects) and compiled by the helpers when the scene uses them
 (`scene_features`); others (transparent shadows) the render compiles itself.
 
-Measured (first render into an empty cache, whole process, 2 vCPUs): Cornell box 53.6 → 40.6 s,
-textured 128.2 → 72.4 s, volume_fog 166.6 → 124.1 s; the render's own part after the helpers is mostly `shade`, whose body
-with every callee inlined LLVM optimises as one function (docs/kernels.md).
+Measured (first render into an empty cache, whole process, 2 vCPUs, 2026-12-04): Cornell box
+53.6 → 40.6 s, textured 128.2 → 72.4 s, volume_fog 166.6 → 124.1 s; the render's own part after
+the helpers is mostly `shade`, whose body with every callee inlined LLVM optimises as one
+function (docs/kernels.md). Since 2026-12-07 kernels only other kernels call compile without
+entry points (`drt.kernels.LazyKernel.linked`): 24.5 s, 47.7 s and 64.0 s on a faster machine.
 
 The plan is data, regenerated with ``python -m drt.compile_plan`` after kernel signatures change
 (~5 min). A stale plan is harmless: an entry that no longer resolves or types is skipped, a
@@ -72,8 +74,10 @@ class _PackageUnpickler(pickle.Unpickler):
 
 
 def load_plan(path: str = PLAN_FILE) -> dict | None:
-    """{variant: [(module relative to the package, attribute, [signature, ...]), ...]}, or None
-    when there is no plan or it does not load (another compiler version, a renamed record type)."""
+    """{variant: [(module relative to the package, attribute, [signature, ...], linked), ...]}, or
+    None when there is no plan or it does not load (another compiler version, a renamed record
+    type). ``linked``: the entry is the kernel's form other kernels call (`LazyKernel.linked`),
+    not its Python-callable one."""
     from .kernels import compiler_version
 
     try:
@@ -130,15 +134,16 @@ def compile_part(variant: str | None, part: int, parts: int, plan: dict | None =
     from the cache)."""
     plan = load_plan() if plan is None else plan
     done = 0
-    for k, (module, attr, sigs) in enumerate(plan_entries(plan, variant, features)):
+    for k, (module, attr, sigs, linked) in enumerate(plan_entries(plan, variant, features)):
         if k % parts != part:
             continue
         kern = _resolve(module, attr)
         if kern is None:
             continue
+        dispatcher = kern.linked() if linked else kern.dispatcher()
         for sig in sigs:
             try:
-                kern.dispatcher().compile(sig)
+                dispatcher.compile(sig)
                 done += 1
             except Exception:  # noqa: BLE001 -- stale entry: the render compiles what it needs
                 pass
@@ -275,21 +280,21 @@ FEATURE_PREFIX = "+"
 def _beyond(entries: list, base: list) -> list:
     """``entries`` without the signatures ``base`` holds for the same kernel."""
     known = {}
-    for module, attr, sigs in base:
-        known.setdefault((module, attr), []).extend(sigs)
+    for module, attr, sigs, linked in base:
+        known.setdefault((module, attr, linked), []).extend(sigs)
     out = []
-    for module, attr, sigs in entries:
-        new = [s for s in sigs if s not in known.get((module, attr), ())]
+    for module, attr, sigs, linked in entries:
+        new = [s for s in sigs if s not in known.get((module, attr, linked), ())]
         if new:
-            out.append((module, attr, new))
+            out.append((module, attr, new, linked))
     return out
 
 
 def record_variant(variant: str, scenes: list[str]) -> list:
     """Render ``scenes`` (paths of .npz files) small into the current, empty NUMBA_CACHE_DIR and
-    return this variant's plan entries: every DRT kernel compiled, with its signatures, in the
-    order the compiler finished them (by their cache index files' times: callees before
-    callers)."""
+    return this variant's plan entries: every DRT kernel compiled, with its signatures and its
+    form (linked into other kernels or called from Python), in the order the compiler finished
+    them (by their cache index files' times: callees before callers)."""
     from . import render as render_mod
     from .kernels import LazyKernel
     from .loaders import load_scene
@@ -303,18 +308,19 @@ def record_variant(variant: str, scenes: list[str]) -> list:
         if not (name == PACKAGE or name.startswith(PACKAGE + ".")):
             continue
         for attr, obj in list(vars(module).items()):
-            if not isinstance(obj, LazyKernel) or obj.__module__ != name or obj._dispatcher is None:
+            if not isinstance(obj, LazyKernel) or obj.__module__ != name:
                 continue
-            sigs = list(obj._dispatcher.signatures)
-            if not sigs:
-                continue
-            try:
-                finished = os.path.getmtime(obj._dispatcher._cache._cache_file._index_path)
-            except (AttributeError, OSError):
-                finished = float("inf")
-            entries.append((finished, name[len(PACKAGE) + 1:], attr, sigs))
+            for linked, dispatcher in ((False, obj._dispatcher), (True, obj._linked)):
+                sigs = list(dispatcher.signatures) if dispatcher is not None else []
+                if not sigs:
+                    continue
+                try:
+                    finished = os.path.getmtime(dispatcher._cache._cache_file._index_path)
+                except (AttributeError, OSError):
+                    finished = float("inf")
+                entries.append((finished, name[len(PACKAGE) + 1:], attr, sigs, linked))
     entries.sort(key=lambda e: e[0])
-    return [(m, a, s) for _, m, a, s in entries]
+    return [(m, a, s, linked) for _, m, a, s, linked in entries]
 
 
 def _main(argv=None) -> int:
@@ -360,7 +366,7 @@ def _main(argv=None) -> int:
                 variants[variant] = _beyond(variants[variant], variants[""])
             shutil.rmtree(cache, ignore_errors=True)
             print(f"{label}: {len(variants[variant])} kernels, "
-                  f"{sum(len(s) for _, _, s in variants[variant])} signatures, {time.perf_counter() - t0:.0f} s")
+                  f"{sum(len(s) for _, _, s, _ in variants[variant])} signatures, {time.perf_counter() - t0:.0f} s")
     plan = {"compiler": compiler_version(), "variants": variants}
     with open(args.out, "wb") as f:
         pickle.dump(plan, f, protocol=4)

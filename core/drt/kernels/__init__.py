@@ -318,6 +318,10 @@ def _defer_linking_bitcode() -> None:
         if not name.startswith(".") and self._ee.get_function_address(name):
             self._defined_symbols.add(name)
             return True
+        if name.startswith(("_ZN7cpython", "cfunc.")):
+            # a wrapper is a function, which the engine would have found: a kernel's linked form
+            # (`LazyKernel.linked`) has none, and numba asks for it on every load
+            return False
         parse_all()
         return original_defined(self, name)
 
@@ -425,10 +429,11 @@ def _share_the_cache_between_copies_of_drt() -> None:
 _share_the_cache_between_copies_of_drt()
 
 _READY_MARK = "compiled"
-#: what a user is told before the first render of a version (measured 2026-12-03: ~1.2 min of
-#: one core on the 2-vCPU development machine for a plain scene, docs/kernels.md)
+#: what a user is told before the first render of a version (measured 2026-12-07 on the 2-vCPU
+#: development machine: 25 s for a plain scene, 48 s with textures, 64 s with volumes,
+#: docs/kernels.md)
 COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this version takes "
-                    "a minute or more longer (once per version and machine, and again the first "
+                    "half a minute to a minute longer (once per version and machine, and again the first "
                     "time a scene with textures or volumes renders); later renders start in "
                     "about a second")
 
@@ -496,43 +501,83 @@ _DISPATCHER_LOCK = threading.Lock()
 
 
 class LazyKernel:
-    """A kernel whose numba dispatcher is built on first use.
+    """A kernel whose numba dispatchers are built on first use: one for calls from Python, one
+    for calls from other kernels.
 
     A warm render calls a few dozen of DRT's ~440 kernels from Python; the rest live only inside
     their callers' cached machine code and are never looked at. Building a numba dispatcher is
     ~0.15 ms (it inspects the function's signature and sets up a compiler), ~0.06 s of every
     process's start-up for all of them (`import drt.render` 0.43 -> 0.37 s, five runs each).
-    numba types a global by asking it for ``_numba_type_``, which (like every attribute this
-    object does not hold) is forwarded to the dispatcher, built then: inside a kernel a
-    `LazyKernel` is typed, called and compiled exactly as the dispatcher it stands for.
-    ``py_func`` is the Python function, available without building anything."""
+    ``py_func`` is the Python function, available without building anything.
+
+    **Two compiled forms.** Called from Python (``kern(...)``, `dispatcher`), a kernel needs
+    numba's wrappers: a CPython entry point that unboxes every argument (each array of a
+    per-scene namedtuple: hundreds of values for `MaterialData`) and a C-callable one. Called
+    from another kernel it needs neither: the caller links the kernel's LLVM code in. Building,
+    optimising and compiling the two wrappers to machine code was a third of the compile time of
+    a first render (55 -> 37 s of one core for the Cornell box, 2026-12-07, docs/kernels.md), for
+    ~230 kernels no Python code calls. So numba types a kernel used inside another kernel
+    through a second dispatcher (`linked`, compiled with ``no_cpython_wrapper`` and
+    ``no_cfunc_wrapper``, cached apart under a ``linked-`` file name): numba asks a global for
+    ``_numba_type_``, which this object answers with the linked dispatcher's type. Its entry
+    point must never be called from Python (it has none); nothing hands it out but `linked`."""
 
     def __init__(self, py_func, options):
         functools.update_wrapper(self, py_func)
         self.py_func = py_func
         self._options = dict(options)
         self._dispatcher = None
+        self._linked = None
 
     def dispatcher(self):
-        """The numba dispatcher (built once; render threads may ask at the same time)."""
+        """The numba dispatcher for calls from Python (built once; render threads may ask at the
+        same time)."""
         d = self._dispatcher
         if d is None:
             with _DISPATCHER_LOCK:
                 d = self._dispatcher
                 if d is None:
-                    opts = dict(self._options)
-                    cache = opts.pop("cache", False)
-                    d = numba.njit(cache=False, **opts)(self.py_func)
-                    if cache and hasattr(d, "_cache"):
-                        d._cache = _CacheOnFirstUse(d.py_func)
-                    d = self._dispatcher = _typed_without_literals(d)
+                    d = self._dispatcher = self._build(linked=False)
         return d
+
+    def linked(self):
+        """The numba dispatcher other kernels call (no Python entry point: never call it from
+        Python)."""
+        d = self._linked
+        if d is None:
+            with _DISPATCHER_LOCK:
+                d = self._linked
+                if d is None:
+                    d = self._linked = self._build(linked=True)
+        return d
+
+    def _build(self, linked: bool):
+        opts = dict(self._options)
+        cache = opts.pop("cache", False)
+        if linked:
+            opts.update(no_cpython_wrapper=True, no_cfunc_wrapper=True)
+        d = numba.njit(cache=False, **opts)(self.py_func)
+        if cache and hasattr(d, "_cache"):
+            d._cache = _CacheOnFirstUse(d.py_func, linked)
+        return _typed_without_literals(d)
+
+    @property
+    def _numba_type_(self):
+        """How numba types this kernel where another kernel refers to it: the linked form."""
+        return self.linked()._numba_type_
+
+    @property
+    def targetoptions(self):
+        """The options numba's compiler reads off a callee (its inlining pass): the linked form's."""
+        return self.linked().targetoptions
 
     def __call__(self, *args, **kwargs):
         return self.dispatcher()(*args, **kwargs)
 
     def __getattr__(self, name):
-        if name.startswith("__") or name in ("_dispatcher", "_options"):
+        if name.startswith("__") or name in ("_dispatcher", "_linked", "_options", "name", "_name"):
+            # (numba's call-name lookup asks every global for "name" and "_name", which its
+            # dispatcher does not have: answered without building one)
             raise AttributeError(name)
         return getattr(self.dispatcher(), name)
 
@@ -548,13 +593,15 @@ class _CacheOnFirstUse:
     test it. Of DRT's ~430 kernels a render calls a few dozen from Python (the rest are compiled
     into their callers' machine code and never looked up alone), and building all 430 caches was
     ~0.13 s of every process's ~0.6 s start-up (cProfile, ``drt render`` at 1 spp). Behaviour is
-    numba's own once created; attributes are forwarded to it."""
+    numba's own once created; attributes are forwarded to it. ``linked``: the cache of a
+    kernel's linked form (`LazyKernel.linked`), in files of its own."""
 
-    __slots__ = ("_py_func", "_cache")
+    __slots__ = ("_py_func", "_cache", "_linked")
 
-    def __init__(self, py_func):
+    def __init__(self, py_func, linked=False):
         self._py_func = py_func
         self._cache = None
+        self._linked = linked
 
     def __getattr__(self, name):
         if name in _CacheOnFirstUse.__slots__:  # not initialised (a copy): no recursion
@@ -562,8 +609,30 @@ class _CacheOnFirstUse:
         if self._cache is None:
             from numba.core.caching import FunctionCache
 
-            self._cache = FunctionCache(self._py_func)
+            self._cache = (_linked_cache_class() if self._linked else FunctionCache)(self._py_func)
         return getattr(self._cache, name)
+
+
+_LINKED_CACHE_CLASS = None
+
+
+def _linked_cache_class():
+    """numba's ``FunctionCache`` with its index and data files named ``linked-<numba's name>``:
+    a kernel's two forms have the same function, signatures and source, which is all numba's
+    cache keys on, and a Python call must never load the form without a Python entry point."""
+    global _LINKED_CACHE_CLASS
+    if _LINKED_CACHE_CLASS is None:
+        from numba.core.caching import FunctionCache, IndexDataCacheFile
+
+        class LinkedKernelCache(FunctionCache):
+            def __init__(self, py_func):
+                super().__init__(py_func)
+                self._cache_file = IndexDataCacheFile(
+                    cache_path=self._cache_path, filename_base="linked-" + self._impl.filename_base,
+                    source_stamp=self._impl.locator.get_source_stamp())
+
+        _LINKED_CACHE_CLASS = LinkedKernelCache
+    return _LINKED_CACHE_CLASS
 
 
 def _typed_without_literals(dispatcher):
