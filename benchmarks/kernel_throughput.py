@@ -18,7 +18,11 @@ thread scaling in one process (the CLI's core, and inside Blender through the ad
    (their own Embree calls included), and the rest (render loop, film).
 4. Unless --no-blender: in a bpy subprocess with the add-on registered, F12-renders the .blend
    beside the scene with Performance > Threads fixed at 1 and at 2 (after a warm-up render) and
-   prints the speed-up inside Blender.
+   prints the speed-up inside Blender; then renders it with Cycles on one thread at the same
+   samples (no adaptive sampling, denoising or clamping) and prints its time beside DRT's, and
+   DRT's ray count at Cycles's pace as a share of Embree's rate (Cycles does not report its own
+   ray count; both engines trace about one ray and one shadow ray per vertex with the scene's
+   bounce limits, but their roulette differs: a figure for scale, not a measurement of Cycles).
 Nothing is asserted: it prints figures.
 """
 
@@ -54,6 +58,21 @@ for threads in (1, 2) * int(sys.argv[6]):
     bpy.ops.render.render()
     best[threads] = min(best.get(threads, 1e9), time.perf_counter() - t0)
 print("BLENDER_THREADS", best[1], best[2], flush=True)
+# Cycles on the same file, samples and thread count, as the benchmarks set it up (no adaptive
+# sampling, no denoising, no clamping): its pace on this scene, for scale
+sc.render.engine = "CYCLES"
+cy = sc.cycles
+cy.device, cy.samples = "CPU", int(sys.argv[5])
+cy.use_adaptive_sampling = cy.use_denoising = False
+cy.sample_clamp_direct = cy.sample_clamp_indirect = cy.blur_glossy = 0.0
+sc.render.threads = 1
+bpy.ops.render.render()  # warm-up: Cycles's device and kernels
+cycles = 1e9
+for _ in range(int(sys.argv[6])):
+    t0 = time.perf_counter()
+    bpy.ops.render.render()
+    cycles = min(cycles, time.perf_counter() - t0)
+print("BLENDER_CYCLES", cycles, flush=True)
 """
 
 
@@ -139,6 +158,13 @@ def main(argv=None) -> int:
         else:
             one, two = (float(v) for v in line[-1].split()[1:])
             print(f"  inside Blender (bpy, F12): 1 thread {one:.3f} s, 2 threads {two:.3f} s: {one / two:.2f}x")
+            cyc = [ln for ln in p.stdout.splitlines() if ln.startswith("BLENDER_CYCLES")]
+            if cyc:
+                cycles = float(cyc[-1].split()[1])
+                # Cycles traces its own rays (its own roulette, light tree): how many is not
+                # reported, so its pace is put as DRT's ray count in Cycles's time
+                print(f"  Cycles (bpy, F12, 1 thread, same samples): {cycles:.3f} s against DRT's {one:.3f} s; "
+                      f"DRT's rays at Cycles's pace: {100 * drt_rate * one / cycles / raw_rate:.0f}% of Embree's rate")
     return 0
 
 
