@@ -198,8 +198,10 @@ deferred = len(kernels._UNPARSED)
 def twice(x, ys):  # a new compile that links the loaded kernel in: the bitcode is parsed now
     return 2.0 * pf.lerp_table(x, ys)
 
+lib = next(iter(linked.overloads.values())).library
 print(sum(pf.lerp_table.stats.cache_hits.values()) + sum(linked.stats.cache_hits.values()), deferred,
-      first, twice(0.25, ys), len(kernels._UNPARSED), len(linked.overloads))
+      first, twice(0.25, ys), len(kernels._UNPARSED), len(linked.overloads),
+      lib.__dict__.get("_drt_linked", False) and getattr(lib, "_compiled_object", None) is None)
 """
 
 _COMPILE_LINKED_FORM = """
@@ -212,7 +214,8 @@ pf.lerp_table.linked().compile((numba.float64, numba.float64[::1]))
 def test_a_loaded_kernel_links_into_a_later_compile(tmp_path):
     """A cached kernel loads without parsing the LLVM bitcode stored for linking it elsewhere
     (``drt.kernels._defer_linking_bitcode``, ~0.2 s of a warm render's start-up); a kernel
-    compiled afterwards that calls it still links it, and computes the same value."""
+    compiled afterwards that calls it links its linked form — cached as LLVM bitcode, no machine
+    code (``_no_machine_code_for_linked_kernels``) — and computes the same value."""
     env = dict(os.environ, DRT_CACHE_DIR=str(tmp_path / "cache"))
     env.pop("NUMBA_CACHE_DIR", None)
     for code in (_COMPILE_ONE_KERNEL, _COMPILE_LINKED_FORM):
@@ -222,12 +225,12 @@ def test_a_loaded_kernel_links_into_a_later_compile(tmp_path):
     out = subprocess.run([sys.executable, "-c", _LOAD_THEN_LINK], env=env, cwd=tmp_path,
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    hit, deferred, first, twice, left, overloads = out.stdout.split()
-    # both forms loaded (the Python-called one and the linked one), neither parsed; the linked
-    # one, typed inside `twice`, is the one linked
-    assert hit == "2" and int(deferred) >= 2 and overloads == "1"
+    hit, deferred, first, twice, left, overloads, bitcode_only = out.stdout.split()
+    # both forms loaded from the cache: the Python-called one as machine code, its bitcode not
+    # parsed; the linked one, typed inside `twice`, as bitcode only, and it is the one linked
+    assert hit == "2" and int(deferred) >= 1 and overloads == "1" and bitcode_only == "True"
     assert float(first) == 0.5 and float(twice) == 1.0
-    assert int(left) < int(deferred)  # the linked library's bitcode was parsed on demand
+    assert int(left) == int(deferred)  # linking never needed the Python form's bitcode
 
 
 def test_a_scene_without_media_or_programs_runs_shade_without_their_code():
@@ -347,5 +350,8 @@ def test_kernels_are_built_on_first_use():
     assert twice_plus_one(3.0) == 7.0  # typing the callee through the proxy builds its linked form
     assert twice._linked is not None and len(twice.linked().overloads) == 1
     assert twice._dispatcher is None  # no Python entry point compiled for a kernel only kernels call
+    linked_lib = next(iter(twice.linked().overloads.values())).library
+    assert linked_lib._drt_linked and getattr(linked_lib, "_compiled_object", None) is None  # nor machine code
     assert twice(3.0) == 6.0 and len(twice.overloads) == 1
+    assert not next(iter(twice.overloads.values())).library.__dict__.get("_drt_linked", False)
     assert twice.__name__ == "twice" and "LazyKernel" not in repr(twice)

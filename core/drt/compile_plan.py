@@ -18,7 +18,8 @@ Measured (first render into an empty cache, whole process, 2 vCPUs, 2026-12-04):
 53.6 → 40.6 s, textured 128.2 → 72.4 s, volume_fog 166.6 → 124.1 s; the render's own part after
 the helpers is mostly `shade`, whose body with every callee inlined LLVM optimises as one
 function (docs/kernels.md). Since 2026-12-07 kernels only other kernels call compile without
-entry points (`drt.kernels.LazyKernel.linked`): 24.5 s, 47.7 s and 64.0 s on a faster machine.
+entry points or machine code (`drt.kernels.LazyKernel.linked`): 22.8 s, 42.2 s and 53.4 s on a
+faster machine.
 
 The plan is data, regenerated with ``python -m drt.compile_plan`` after kernel signatures change
 (~5 min). A stale plan is harmless: an entry that no longer resolves or types is skipped, a

@@ -379,6 +379,83 @@ def _internalize_linked_kernels() -> None:
 _internalize_linked_kernels()
 
 
+def _no_machine_code_for_linked_kernels() -> None:
+    """Compile a kernel's linked form (`LazyKernel.linked`) to LLVM code only.
+
+    numba finalises every compiled function the same way: it hands the optimised module to its
+    execution engine, which compiles it to machine code, and caches that object code. A linked
+    form has no entry point: its machine code is never run — every caller links the LLVM code
+    in and compiles it again as part of its own module. Here a linked form's module is kept out
+    of the engine and cached as its LLVM bitcode (kind ``"drt-linked"``), which is what linking
+    reads. A library is a linked form when it is one of DRT's kernels (``_KERNEL_NAMES``), was
+    compiled here (not loaded from object code) and its module defines no entry point (numba
+    names them ``_ZN7cpython…`` and ``cfunc.…``). numba writes the function's environment
+    pointer into the engine's copy of its global after compiling; a linked form has none there
+    (nothing reads it), so that write is skipped when the engine does not know the global. Private numba API (pinned range in pyproject.toml); if
+    it changes shape, numba's own finalisation is kept."""
+    from numba.core import codegen
+
+    lib_cls = getattr(codegen, "CPUCodeLibrary", None)
+    gen_cls = getattr(codegen, "JITCPUCodegen", None)
+    if lib_cls is None or gen_cls is None \
+            or getattr(lib_cls._finalize_final_module, "_drt", False) \
+            or not all(hasattr(lib_cls, a) for a in ("_finalize_dynamic_globals", "_verify_declare_only_symbols",
+                                                     "serialize_using_object_code", "_unserialize")) \
+            or not hasattr(gen_cls, "set_env"):
+        return
+    original_finalize = lib_cls._finalize_final_module
+    original_serialize = lib_cls.serialize_using_object_code
+    original_unserialize = lib_cls._unserialize.__func__
+    original_set_env = gen_cls.set_env
+    ll = codegen.ll
+
+    def is_linked_form(lib):
+        if lib.name not in _KERNEL_NAMES or getattr(lib, "_compiled_object", None) is not None:
+            return False  # (a library loaded from cached object code: its module is empty)
+        # (nor a C entry point: a numba ``cfunc`` of the same name elsewhere in the process is
+        # called through its address)
+        return not any(fn.name.startswith(("_ZN7cpython", "cfunc.")) and not fn.is_declaration
+                       for fn in lib._final_module.functions)
+
+    def _finalize_final_module(self):
+        if not self.__dict__.get("_drt_linked", False) and not is_linked_form(self):
+            return original_finalize(self)
+        self._drt_linked = True
+        self._finalize_dynamic_globals()
+        self._verify_declare_only_symbols()
+        self._finalized = True
+
+    def serialize_using_object_code(self):
+        if not self.__dict__.get("_drt_linked", False):
+            return original_serialize(self)
+        self._ensure_finalized()
+        return (self.name, "drt-linked", self._final_module.as_bitcode())
+
+    def _unserialize(cls, codegen_, state):
+        name, kind, data = state
+        if kind != "drt-linked":
+            return original_unserialize(cls, codegen_, state)
+        self = codegen_.create_library(name)
+        self._final_module = ll.parse_bitcode(data)
+        self._drt_linked = True
+        self._finalize_final_module()
+        return self
+
+    def set_env(self, env_name, env):
+        if self._engine.get_global_value_address(env_name):
+            original_set_env(self, env_name, env)
+
+    for f in (_finalize_final_module, serialize_using_object_code, _unserialize, set_env):
+        f._drt = True
+    lib_cls._finalize_final_module = _finalize_final_module
+    lib_cls.serialize_using_object_code = serialize_using_object_code
+    lib_cls._unserialize = classmethod(_unserialize)
+    gen_cls.set_env = set_env
+
+
+_no_machine_code_for_linked_kernels()
+
+
 def _share_the_cache_between_copies_of_drt() -> None:
     """Let every copy of these sources imported under the same name use one compiled cache: a
     git clone and the pip install (``drt``), each legacy add-on folder or test install of the
@@ -430,7 +507,7 @@ _share_the_cache_between_copies_of_drt()
 
 _READY_MARK = "compiled"
 #: what a user is told before the first render of a version (measured 2026-12-07 on the 2-vCPU
-#: development machine: 25 s for a plain scene, 48 s with textures, 64 s with volumes,
+#: development machine: 23 s for a plain scene, 42 s with textures, 53 s with volumes,
 #: docs/kernels.md)
 COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this version takes "
                     "half a minute to a minute longer (once per version and machine, and again the first "
@@ -520,7 +597,9 @@ class LazyKernel:
     through a second dispatcher (`linked`, compiled with ``no_cpython_wrapper`` and
     ``no_cfunc_wrapper``, cached apart under a ``linked-`` file name): numba asks a global for
     ``_numba_type_``, which this object answers with the linked dispatcher's type. Its entry
-    point must never be called from Python (it has none); nothing hands it out but `linked`."""
+    point must never be called from Python (it has none); nothing hands it out but `linked`.
+    Nor is a linked form compiled to machine code (``_no_machine_code_for_linked_kernels``):
+    31.9 s of one core in all."""
 
     def __init__(self, py_func, options):
         functools.update_wrapper(self, py_func)
