@@ -612,22 +612,20 @@ class LazyKernel:
         """The numba dispatcher for calls from Python (built once; render threads may ask at the
         same time)."""
         d = self._dispatcher
-        if d is None:
-            with _DISPATCHER_LOCK:
-                d = self._dispatcher
-                if d is None:
-                    d = self._dispatcher = self._build(linked=False)
-        return d
+        return d if d is not None else self._build_once("_dispatcher", linked=False)
 
     def linked(self):
         """The numba dispatcher other kernels call (no Python entry point: never call it from
         Python)."""
         d = self._linked
-        if d is None:
-            with _DISPATCHER_LOCK:
-                d = self._linked
-                if d is None:
-                    d = self._linked = self._build(linked=True)
+        return d if d is not None else self._build_once("_linked", linked=True)
+
+    def _build_once(self, attr: str, linked: bool):
+        with _DISPATCHER_LOCK:
+            d = self.__dict__[attr]
+            if d is None:
+                d = self._build(linked)
+                self.__dict__[attr] = d
         return d
 
     def _build(self, linked: bool):
