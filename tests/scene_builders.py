@@ -161,3 +161,20 @@ def with_render(header, **changes):
     h = copy.deepcopy(header)
     h["render"].update(changes)
     return h
+
+
+def scene_error_of(change) -> str:
+    """The SceneError message of a 4×4 one-quad scene after ``change(header)`` edits its header
+    (None when the scene loads): for tests that a bad setting is named."""
+    from drt.scene import SceneError, scene_from_dict
+
+    h = base_header(4, 4, 1)
+    a = {}
+    add_material(h, "m", [{"type": "DIFFUSE", "color": [0.5] * 3}])
+    add_mesh(h, a, "q", *quad((0, 0, 0), (1, 0, 0), (0, 1, 0)))
+    change(h)
+    try:
+        scene_from_dict(h, a)
+    except SceneError as e:
+        return str(e)
+    return None
