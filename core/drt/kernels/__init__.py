@@ -244,6 +244,10 @@ def _load_cached_kernels_without_registry_refresh() -> None:
 _load_cached_kernels_without_registry_refresh()
 
 
+#: how the names of numba's entry points of a compiled function begin: the CPython wrapper
+#: (``cpython`` prepended to the mangled name) and the C-callable one
+_ENTRY_POINT_PREFIXES = ("_ZN7cpython", "cfunc.")
+
 #: cached libraries loaded without parsing their linking bitcode yet (``_defer_linking_bitcode``)
 _UNPARSED = None
 
@@ -318,7 +322,7 @@ def _defer_linking_bitcode() -> None:
         if not name.startswith(".") and self._ee.get_function_address(name):
             self._defined_symbols.add(name)
             return True
-        if name.startswith(("_ZN7cpython", "cfunc.")):
+        if name.startswith(_ENTRY_POINT_PREFIXES):
             # a wrapper is a function, which the engine would have found: a kernel's linked form
             # (`LazyKernel.linked`) has none, and numba asks for it on every load
             return False
@@ -391,8 +395,9 @@ def _no_machine_code_for_linked_kernels() -> None:
     compiled here (not loaded from object code) and its module defines no entry point (numba
     names them ``_ZN7cpython…`` and ``cfunc.…``). numba writes the function's environment
     pointer into the engine's copy of its global after compiling; a linked form has none there
-    (nothing reads it), so that write is skipped when the engine does not know the global. Private numba API (pinned range in pyproject.toml); if
-    it changes shape, numba's own finalisation is kept."""
+    (nothing reads it), so that write is skipped when the engine does not know the global.
+    Private numba API (pinned range in pyproject.toml); if it changes shape, numba's own
+    finalisation is kept."""
     from numba.core import codegen
 
     lib_cls = getattr(codegen, "CPUCodeLibrary", None)
@@ -414,7 +419,7 @@ def _no_machine_code_for_linked_kernels() -> None:
             return False  # (a library loaded from cached object code: its module is empty)
         # (nor a C entry point: a numba ``cfunc`` of the same name elsewhere in the process is
         # called through its address)
-        return not any(fn.name.startswith(("_ZN7cpython", "cfunc.")) and not fn.is_declaration
+        return not any(fn.name.startswith(_ENTRY_POINT_PREFIXES) and not fn.is_declaration
                        for fn in lib._final_module.functions)
 
     def _finalize_final_module(self):
