@@ -326,6 +326,37 @@ def test_a_kernel_passes_a_callee_only_the_arrays_it_reads():
     assert widest_call(others) > 200
 
 
+def test_a_kernel_reached_along_two_call_paths_is_compiled_once_in_its_caller():
+    """A kernel that two linked kernels both call is one function in the module of the kernel
+    Python calls, not one copy per path (``drt.kernels._internalize_linked_kernels`` makes the
+    linked copies private only in a module with an entry point: a linked form's own module
+    keeps them mergeable). Duplicates had made `shade` with material programs compile the
+    interpreter three times over (docs/kernels.md)."""
+    import re
+
+    source = "def shared(x):\n    s = x\n" + "".join(
+        f"    if s > {k}.5:\n        s = math.sin(s * x + {k}) + math.sqrt(abs(s) + {k})\n"
+        f"    else:\n        s = math.cos(s - x) * {k + 1}.25\n" for k in range(60)) + "    return s\n"
+    scope = {"math": math}
+    exec(source, scope)  # noqa: S102 - generated test code
+    scope["shared"] = kernels.kernel(scope["shared"], cache=False)
+    exec("def via_a(x):\n    return shared(x) + shared(x + 1.0)\n"  # noqa: S102
+         "def via_b(x):\n    return 2.0 * shared(x - 1.0) - shared(x * 0.5)\n", scope)
+    scope["via_a"] = kernels.kernel(scope["via_a"], cache=False)
+    scope["via_b"] = kernels.kernel(scope["via_b"], cache=False)
+    exec("def top(x):\n    return via_a(x) + via_b(x)\n", scope)  # noqa: S102
+    top = kernels.kernel(scope["top"], cache=False)
+
+    def plain(x):
+        s = scope["shared"].py_func
+        return s(x) + s(x + 1.0) + 2.0 * s(x - 1.0) - s(x * 0.5)
+
+    assert top(0.3) == pytest.approx(plain(0.3), rel=1e-12)
+    ir = next(iter(top.dispatcher().inspect_llvm().values()))
+    copies = [line for line in ir.splitlines() if re.match(r"define [^@]*@\S*6sharedB", line)]
+    assert len(copies) == 1, f"{len(copies)} copies of the shared callee"
+
+
 def test_kernels_are_built_on_first_use():
     """`kernel` returns a LazyKernel: importing the renderer builds no numba dispatcher (they
     cost ~0.15 ms each at start-up), and a kernel is typed, called and compiled into another

@@ -248,6 +248,11 @@ _load_cached_kernels_without_registry_refresh()
 #: (``cpython`` prepended to the mangled name) and the C-callable one
 _ENTRY_POINT_PREFIXES = ("_ZN7cpython", "cfunc.")
 
+def _defines_entry_point(module) -> bool:
+    """Whether an LLVM module defines a CPython or C entry point (a kernel Python calls)."""
+    return any(fn.name.startswith(_ENTRY_POINT_PREFIXES) and not fn.is_declaration for fn in module.functions)
+
+
 #: cached libraries loaded without parsing their linking bitcode yet (``_defer_linking_bitcode``)
 _UNPARSED = None
 
@@ -370,7 +375,7 @@ def _internalize_linked_kernels() -> None:
     weak = codegen.ll.Linkage.linkonce_odr
 
     def _optimize_final_module(self):
-        if self.name in _KERNEL_NAMES:
+        if self.name in _KERNEL_NAMES and _defines_entry_point(self._final_module):
             for fn in self._final_module.functions:
                 if not fn.is_declaration and fn.linkage == weak:
                     fn.linkage = "internal"
@@ -419,8 +424,7 @@ def _no_machine_code_for_linked_kernels() -> None:
             return False  # (a library loaded from cached object code: its module is empty)
         # (nor a C entry point: a numba ``cfunc`` of the same name elsewhere in the process is
         # called through its address)
-        return not any(fn.name.startswith(_ENTRY_POINT_PREFIXES) and not fn.is_declaration
-                       for fn in lib._final_module.functions)
+        return not _defines_entry_point(lib._final_module)
 
     def _finalize_final_module(self):
         if not self.__dict__.get("_drt_linked", False) and not is_linked_form(self):
