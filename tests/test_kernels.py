@@ -263,8 +263,33 @@ def test_a_scene_without_media_or_programs_runs_shade_without_their_code():
     assert lean[..., :3].mean() > 0.01
 
 
+def test_a_scene_with_homogeneous_media_and_no_programs_runs_shade_without_the_interpreter():
+    """The same for the program interpreter alone: a scene whose media are all homogeneous and
+    whose materials have no program (the shipped fog box) runs the media variant with ``pd``
+    None — the heterogeneous-density code, which runs programs, is resolved away with it — and
+    renders exactly what the variant with the interpreter renders."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from drt.render import prepare, render
+    from drt.scene_file import load_scene
+
+    scene = load_scene(os.path.join(REPO, "blend_scenes", "volume_fog.npz"))
+    scene = replace(scene, render=replace(scene.render, width=24, height=16, border=None))
+    ctx = prepare(scene)
+    integ = ctx.integrator
+    assert integ.media_arg is not None and integ.programs_arg is None
+    assert integ.kernel_variant == "media"
+    lean = render(scene, spp=4, context=ctx, threads=1).combined
+    integ.programs_arg = integ.programs  # the variant with media and programs
+    full = render(scene, spp=4, context=ctx, threads=1).combined
+    assert np.array_equal(lean, full)
+    assert lean[..., :3].mean() > 0.01
+
+
 @pytest.mark.parametrize("name, variant", [("cornell_box", ""), ("textured", "programs"), ("hdri", "programs"),
-                                           ("volume_fog", "media"), ("volume_noise", "media")])
+                                           ("volume_fog", "media"), ("volume_noise", "media-programs")])
 def test_the_notice_and_the_render_agree_on_a_scenes_kernel_variant(name, variant):
     """The CLI and the add-on decide from the scene whether its first render will compile
     (``scene_kernel_variant``); the render marks the variant its ``Integrator`` ran."""

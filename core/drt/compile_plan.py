@@ -266,6 +266,7 @@ PLAN_SCENES = {
     "": ("cornell_box",),
     "programs": ("textured",),
     "media": ("volume_fog",),
+    "media-programs": ("volume_noise",),
 }
 
 #: features whose kernels a render compiles only when its scene uses them (`scene_features`),

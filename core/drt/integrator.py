@@ -41,6 +41,7 @@ from .sampling.sequences import Sampler
 from .scene import VIS_ALL, VIS_HOLDOUT, VIS_SHADOW, RenderSettings
 from .terminator import shading_multipliers, terminator_arrays
 from .trace import Tracer
+from .kernels import kernel_variant
 from .volumes.media import STACK_SIZE, MediumData, build_medium_data
 from .volumes.stack import camera_stack
 from .materials.transparency import transparent_materials
@@ -221,12 +222,12 @@ class Integrator:
         # what the kernels get: None without media, so they run (and compile) a variant with
         # no media code at all (path_stages.shade)
         self.media_arg = media if media.enabled else None
-        # likewise None for the programs when there is none and no media (the media code
-        # reads them, and a scene with media compiles the full variant anyway)
+        # likewise None for the programs when there is none: no interpreter in that variant (a
+        # heterogeneous medium's density is a program, so only homogeneous media go without)
         no_programs = len(self.programs.op_start) <= 1
-        self.programs_arg = None if no_programs and not media.enabled else self.programs
+        self.programs_arg = None if no_programs else self.programs
         #: which variant of the kernels this scene runs (drt.kernels.scene_kernel_variant)
-        self.kernel_variant = "media" if media.enabled else ("" if self.programs_arg is None else "programs")
+        self.kernel_variant = kernel_variant(media.enabled, self.programs_arg is not None)
         self.loop_limit = self.max_depth + 1 + (stages.VOLUME_BOUNDS_MAX if media.enabled else 0)
         if self.sss is not None:  # an SSS exit takes a loop pass of its own, no bounce
             self.loop_limit += self.max_depth + 1

@@ -847,7 +847,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
                 light, le, lpdf = shape_emission(ld, k, o, d, t, prev_p, prev_hint)
                 if camera and ld.li[light, I_VISIBLE_CAMERA] == 0:
                     continue
-                if vd is not None and v_mode == MODE_HETERO:
+                if vd is not None and pd is not None and v_mode == MODE_HETERO:
                     tr_k, _ = ratio_tracking(vd, pd, regs, point, paths.vstack, i, o, d, t,
                                              seed_of(pixel, idx, 1000003 + 64 * paths.vseg[i] + k))
                     le = mul(le, tr_k)

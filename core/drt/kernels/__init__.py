@@ -525,20 +525,24 @@ COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this ve
 
 
 #: the variants of the stage kernels a scene compiles (``drt.path_stages.shade``): a scene
-#: without media and programs compiles neither the media code nor the program interpreter
-KERNEL_VARIANTS = ("", "programs", "media")
+#: compiles the media code only if it has media and the program interpreter only if it has
+#: material or world programs (a heterogeneous medium's density is one)
+KERNEL_VARIANTS = ("", "programs", "media", "media-programs")
+
+
+def kernel_variant(media: bool, programs: bool) -> str:
+    """The name of the stage kernels' variant for a scene with (or without) participating media
+    and material or world programs (`KERNEL_VARIANTS`)."""
+    return "-".join(name for name, used in (("media", media), ("programs", programs)) if used)
 
 
 def scene_kernel_variant(scene) -> str:
-    """Which variant of the stage kernels ``scene`` (a ``drt.scene.Scene``) renders with: "media"
-    (participating media: the full kernels), "programs" (material or world programs, no media)
-    or "" (neither). The same choice as the ``Integrator``'s ``kernel_variant``."""
+    """Which variant of the stage kernels ``scene`` (a ``drt.scene.Scene``) renders with
+    (`kernel_variant`). The same choice as the ``Integrator``'s ``kernel_variant``."""
     mats = getattr(scene, "materials", None) or []
-    if getattr(scene, "world_volume", None) is not None or any(m.get("volume") for m in mats):
-        return "media"
-    if getattr(scene, "world_program", None) is not None or any(m.get("program") for m in mats):
-        return "programs"
-    return ""
+    media = getattr(scene, "world_volume", None) is not None or any(m.get("volume") for m in mats)
+    programs = getattr(scene, "world_program", None) is not None or any(m.get("program") for m in mats)
+    return kernel_variant(media, programs)
 
 
 def _ready_mark(variant: str) -> str:

@@ -223,8 +223,10 @@ def volume_segment(sd, ld, vd, pd, regs, point, stack, i, o, d, length, thr, ter
     point), nee_ok, x, wi, dist, f_nee (thr·σs·T/pdf · phase · Le / light pdf, no MIS weight),
     light pdf, phase pdf, light is delta). ``nee``: next-event estimation wanted. ``pd``,
     ``regs``, ``point``: material programs, register file and point rows (heterogeneous media
-    evaluate their density there; a stack of homogeneous media never touches them)."""
-    if vd.hetero and stack_is_hetero(vd, stack, i):
+    evaluate their density there; a stack of homogeneous media never touches them). ``pd``
+    None: a scene without programs, hence without heterogeneous media, whose variant of the
+    kernels holds no density code."""
+    if pd is not None and vd.hetero and stack_is_hetero(vd, stack, i):
         return hetero_segment(sd, ld, vd, pd, regs, point, stack, i, o, d, length, thr, terminate, nee,
                               pixel, idx, seg)
     sig_s, sig_t, emis, g = stack_coefficients(vd, stack, i)
@@ -391,7 +393,7 @@ def shadow_step(vd, material, visibility, active, count, prim, t, ng, o, d, tmax
         hit = p >= 0 and t[k] < tmax[s]
         seg = t[k] if hit else tmax[s]
         if vd is not None and vd.enabled and stack[s, 0] >= 0:
-            if vd.hetero and stack_is_hetero(vd, stack, s):
+            if pd is not None and vd.hetero and stack_is_hetero(vd, stack, s):
                 oo = load(o, s)
                 tr, _ = ratio_tracking(vd, pd, regs, point, stack, s, oo, load(d, s), seg,
                                        seed_of_point(oo, s))
