@@ -225,7 +225,7 @@ class Integrator:
         # likewise None for the programs when there is none: no interpreter in that variant (a
         # heterogeneous medium's density is a program, so only homogeneous media go without)
         no_programs = len(self.programs.op_start) <= 1
-        self.programs_arg = None if no_programs else self.programs
+        self.programs_arg = None if no_programs and not media.hetero else self.programs
         #: which variant of the kernels this scene runs (drt.kernels.scene_kernel_variant)
         self.kernel_variant = kernel_variant(media.enabled, self.programs_arg is not None)
         self.loop_limit = self.max_depth + 1 + (stages.VOLUME_BOUNDS_MAX if media.enabled else 0)

@@ -248,6 +248,7 @@ _load_cached_kernels_without_registry_refresh()
 #: (``cpython`` prepended to the mangled name) and the C-callable one
 _ENTRY_POINT_PREFIXES = ("_ZN7cpython", "cfunc.")
 
+
 def _defines_entry_point(module) -> bool:
     """Whether an LLVM module defines a CPython or C entry point (a kernel Python calls)."""
     return any(fn.name.startswith(_ENTRY_POINT_PREFIXES) and not fn.is_declaration for fn in module.functions)
