@@ -516,11 +516,11 @@ def _share_the_cache_between_copies_of_drt() -> None:
 _share_the_cache_between_copies_of_drt()
 
 _READY_MARK = "compiled"
-#: what a user is told before the first render of a version (measured 2026-12-07 on the 2-vCPU
-#: development machine: 23 s for a plain scene, 42 s with textures, 53 s with volumes,
-#: docs/kernels.md)
+#: what a user is told before the first render of a version (measured 2026-12-07, twenty-fifth
+#: session, on the 2-vCPU development machine, CLI: 20 s for a plain scene, 23 s with homogeneous
+#: volumes, 32 s with textures, 40 s with both, docs/kernels.md)
 COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this version takes "
-                    "half a minute to a minute longer (once per version and machine, and again the first "
+                    "about half a minute longer (once per version and machine, and again the first "
                     "time a scene with textures or volumes renders); later renders start in "
                     "about a second")
 
