@@ -301,6 +301,13 @@ def test_the_notice_and_the_render_agree_on_a_scenes_kernel_variant(name, varian
     assert prepare(scene).integrator.kernel_variant == variant
 
 
+#: the body of a generated function too large for LLVM to inline on size alone (60 branches of
+#: transcendental maths on ``s`` and ``x``, returning ``s``)
+_BRANCHY_BODY = "".join(
+    f"    if s > {k}.5:\n        s = math.sin(s * x + {k}) + math.sqrt(abs(s) + {k})\n"
+    f"    else:\n        s = math.cos(s - x) * {k + 1}.25\n" for k in range(60)) + "    return s\n"
+
+
 def test_a_kernel_passes_a_callee_only_the_arrays_it_reads():
     """numba passes each array of a namedtuple argument as ~7 scalars; a callee taking a scene
     table of 40 arrays but reading one must not cost a ~280-word call in its caller's machine
@@ -316,10 +323,8 @@ def test_a_kernel_passes_a_callee_only_the_arrays_it_reads():
 
     Table = namedtuple("Table", [f"a{i}" for i in range(40)])
     table = Table(*(np.full(4, float(i)) for i in range(40)))
-    # a callee too large for LLVM to inline on size alone: 60 branches of transcendental maths
-    source = "def callee(t, i, x):\n    s = t.a7[i % 4]\n" + "".join(
-        f"    if s > {k}.5:\n        s = math.sin(s * x + {k}) + math.sqrt(abs(s) + {k})\n"
-        f"    else:\n        s = math.cos(s - x) * {k + 1}.25\n" for k in range(60)) + "    return s\n"
+    # a callee too large for LLVM to inline on size alone
+    source = "def callee(t, i, x):\n    s = t.a7[i % 4]\n" + _BRANCHY_BODY
     namespace = {"math": math}
     exec(source, namespace)  # noqa: S102 - generated test code
 
@@ -359,9 +364,7 @@ def test_a_kernel_reached_along_two_call_paths_is_compiled_once_in_its_caller():
     interpreter three times over (docs/kernels.md)."""
     import re
 
-    source = "def shared(x):\n    s = x\n" + "".join(
-        f"    if s > {k}.5:\n        s = math.sin(s * x + {k}) + math.sqrt(abs(s) + {k})\n"
-        f"    else:\n        s = math.cos(s - x) * {k + 1}.25\n" for k in range(60)) + "    return s\n"
+    source = "def shared(x):\n    s = x\n" + _BRANCHY_BODY
     scope = {"math": math}
     exec(source, scope)  # noqa: S102 - generated test code
     scope["shared"] = kernels.kernel(scope["shared"], cache=False)

@@ -359,8 +359,10 @@ def _internalize_linked_kernels() -> None:
     (``shade`` of the Cornell box made ~10 such calls a path vertex). Made ``internal`` before
     the module is optimised, the copies are this module's own: LLVM drops the arguments a
     callee never reads, passes the rest in registers where it can and inlines single-call
-    callees. Correct for any module: nothing outside it refers to these copies (callers link
-    their own), and a module linked later carries its private copies along. Same arithmetic,
+    callees. Only in a module with an entry point (one Python calls, where machine code is
+    made): nothing outside it refers to these copies. A linked form's module (never machine
+    code) keeps them ``linkonce_odr``, so that a kernel reached along several call paths merges
+    into one copy in its caller instead of arriving privately once per path. Same arithmetic,
     same images (no fast-math; inlining does not reorder floating-point operations); `shade`
     ~15–30 % cheaper (docs/kernels.md). Only modules of DRT's own kernels (``_KERNEL_NAMES``:
     numba names a kernel's module by its qualified name) — numba in a shared process (Blender,
