@@ -209,7 +209,13 @@ def _use_prebuilt_kernels(key: str, cache: str) -> None:
 
 _configure_numba_cache()
 
-import numba  # noqa: E402  (after the cache location is set)
+from . import typing_overheads  # noqa: E402
+
+typing_overheads.plain_error_messages()
+
+import numba  # noqa: E402  (after the cache location and the error messages are set)
+
+typing_overheads.skip_typing_overheads()
 
 
 def _load_cached_kernels_without_registry_refresh() -> None:
