@@ -16,9 +16,9 @@ found three costs that change no compiled code:
   holds the current compile's ``Flags``; looking one up hashes and compares the flags' values,
   which numba builds as a dict through a property per option (~40), ~330 000 times. The hash
   (numba's: of the sorted option names) is the same for every instance of a class, and two
-  flags with the same stored values are equal: both are answered without building the dicts,
-  and ``values()`` reads the stored values and the options' defaults directly (what each
-  property's getter returns).
+  flags of a class differ only where one of them stores a value: both are answered without
+  building the dicts, and ``values()`` reads the stored values and the options' defaults
+  directly (what each property's getter returns).
 - **NumPy's ufunc rules on scalar operators.** numba types ``a + b`` of two floats also through
   the array-operator template, which looks up NumPy's ufunc loop for the argument types and only
   then returns "not mine" because no argument is an array (~35 000 times). The template now
@@ -61,10 +61,15 @@ def _flags_compare_without_properties() -> None:
         return hash(tuple(sorted(self.options)))
 
     def __eq__(self, other):
-        # the same stored values are the same values; otherwise compare them with defaults
-        if self is other or (type(self) is type(other) and self._values == other._values):
-            return True
-        return original_eq(self, other)
+        if type(self) is not type(other):
+            return original_eq(self, other)
+        # an option neither stored is at its default in both: compare only the stored ones
+        mine, theirs, options = self._values, other._values, self.options
+        for name in mine.keys() | theirs.keys():
+            default = options[name].default
+            if mine.get(name, default) != theirs.get(name, default):
+                return False
+        return True
 
     for f in (values, __hash__, __eq__):
         f._drt = True
