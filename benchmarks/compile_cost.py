@@ -1,14 +1,18 @@
 """Cold compile and warm start of DRT's kernels, with a profile of where the compile goes.
 
-    python benchmarks/compile_cost.py [SCENE.npz] [--top 25]
+    python benchmarks/compile_cost.py [SCENE.npz] [--top 25] [--profile]
 
 Renders SCENE (default: the shipped Cornell box, 1 spp) in a child process whose kernel cache
-is an empty temporary folder (``DRT_CACHE_DIR``), so everything its render needs compiles, then
-again in a second child that loads that cache. The first child records numba's compile events
-(``numba.core.event``: one start/end pair per function numba compiles, nested as the calls
-are discovered, and the LLVM lock); the script prints
+is an empty temporary folder (``DRT_CACHE_DIR``), so everything its render needs compiles (as a
+user's first render does: helper processes compile on every core, `drt.compile_plan`), then
+again in a second child that loads that cache, and prints the wall and CPU time of both
+processes (cold compile, warm start).
 
-- wall and CPU time of both processes (cold compile, warm start),
+With ``--profile`` a third child compiles into another empty cache on one core
+(``DRT_NO_PRECOMPILE``: the helpers' compile events happen in other processes) and records
+numba's compile events (``numba.core.event``: one start/end pair per function numba compiles,
+nested as the calls are discovered, and the LLVM lock); the script then also prints
+
 - the CPU time inside numba's compiler, of which LLVM, and the number of functions compiled,
 - the functions with the most *exclusive* compile time (their own typing, lowering and LLVM
   work, without the callees compiled while they were typed) and their *inclusive* time.
@@ -29,9 +33,11 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 
-#: the child: installs a listener on numba's compile events, runs the CLI, dumps the events
+#: the child: runs the CLI; given a file to write them to, records numba's compile events
+#: (drt.kernels first: it sets up numba before numba's first import, as the CLI does)
 _CHILD = r"""
-import json, sys, time
+import json, os, sys, time
+import drt.kernels
 from numba.core import event
 events = []
 
@@ -47,20 +53,25 @@ class Recorder(event.Listener):
     def on_end(self, ev):
         self._add("E", ev)
 
-rec = Recorder()
-event.register("numba:compile", rec)
-event.register("numba:llvm_lock", rec)
+if sys.argv[1] != os.devnull:
+    rec = Recorder()
+    event.register("numba:compile", rec)
+    event.register("numba:llvm_lock", rec)
 from drt.cli import main
 code = main(sys.argv[2:])
-with open(sys.argv[1], "w") as f:
-    json.dump(events, f)
+if sys.argv[1] != os.devnull:
+    with open(sys.argv[1], "w") as f:
+        json.dump(events, f)
 sys.exit(code)
 """
 
 
-def _child(args, cache, events=None):
-    """Run the CLI in a child process with the kernel cache ``cache``; (wall s, CPU s)."""
+def _child(args, cache, events=None, serial=False):
+    """Run the CLI in a child process with the kernel cache ``cache`` (``serial``: compiling on
+    one core, without helpers); (wall s, CPU s)."""
     env = dict(os.environ, DRT_CACHE_DIR=cache)
+    if serial:
+        env["DRT_NO_PRECOMPILE"] = "1"
     env.pop("NUMBA_CACHE_DIR", None)
     env.pop("DRT_SET_NUMBA_CACHE_DIR", None)
     cmd = [sys.executable, "-c", _CHILD, events or os.devnull, *args]
@@ -104,20 +115,28 @@ def main(argv=None) -> int:
     ap.add_argument("scene", nargs="?", default=os.path.join(REPO, "blend_scenes", "cornell_box.npz"))
     ap.add_argument("--top", type=int, default=25)
     ap.add_argument("--spp", type=int, default=1)
+    ap.add_argument("--profile", action="store_true",
+                    help="also compile on one core in a third process and print where the compile goes")
     o = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="drt_compile_") as tmp:
         cache = os.path.join(tmp, "cache")
         out = os.path.join(tmp, "out.exr")
         events_path = os.path.join(tmp, "events.json")
         args = ["render", o.scene, "-o", out, "--spp", str(o.spp), "--threads", "1"]
-        cold_wall, cold_cpu = _child(args, cache, events_path)
+        cold_wall, cold_cpu = _child(args, cache)
         warm_wall, warm_cpu = _child(args, cache)
-        with open(events_path) as f:
-            events = json.load(f)
-    total, llvm, n, table = profile(events)
+        if o.profile:
+            serial_wall, serial_cpu = _child(args, os.path.join(tmp, "serial"), events_path, serial=True)
+            with open(events_path) as f:
+                events = json.load(f)
     print(f"scene {os.path.basename(o.scene)}, {o.spp} spp, one thread, empty kernel cache")
-    print(f"  cold process : {cold_wall:7.1f} s wall, {cold_cpu:7.1f} s CPU")
+    print(f"  cold process : {cold_wall:7.1f} s wall, {cold_cpu:7.1f} s CPU (helpers on every core)")
     print(f"  warm process : {warm_wall:7.1f} s wall, {warm_cpu:7.1f} s CPU (same cache, loaded)")
+    if not o.profile:
+        print("  (--profile: where the compile goes, from a serial compile in a third process)")
+        return 0
+    total, llvm, n, table = profile(events)
+    print(f"  serial process: {serial_wall:6.1f} s wall, {serial_cpu:7.1f} s CPU (one core, numba's events recorded)")
     print(f"  numba compiler: {total:.1f} s CPU, of which LLVM {llvm:.1f} s; {n} functions compiled")
     print(f"  top {o.top} by exclusive compile time (s CPU: exclusive, inclusive, compiles):")
     for name, (excl, incl, count) in sorted(table.items(), key=lambda kv: -kv[1][0])[:o.top]:
