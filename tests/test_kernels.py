@@ -288,8 +288,46 @@ def test_a_scene_with_homogeneous_media_and_no_programs_runs_shade_without_the_i
     assert lean[..., :3].mean() > 0.01
 
 
+def test_a_scene_with_programs_but_no_procedural_texture_compiles_shade_without_them():
+    """The same for the procedural textures: the shipped textured scene (images, checker,
+    gradient, ramp) has programs but no procedural opcode, so its ``ProgramData.procedural`` is
+    None and ``procedural_op`` compiles to nothing in its variant; it renders exactly what the
+    variant with the procedural textures renders."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from drt.render import prepare, render
+    from drt.scene_file import load_scene
+
+    scene = load_scene(os.path.join(REPO, "blend_scenes", "textured.npz"))
+    scene = replace(scene, render=replace(scene.render, width=24, height=16, border=None))
+    ctx = prepare(scene)
+    integ = ctx.integrator
+    assert integ.programs_arg is not None and integ.programs_arg.procedural is None
+    assert integ.kernel_variant == "programs"
+    lean = render(scene, spp=2, context=ctx, threads=1).combined
+    integ.programs_arg = integ.programs_arg._replace(procedural=True)
+    full = render(scene, spp=2, context=ctx, threads=1).combined
+    assert np.array_equal(lean, full)
+    assert lean[..., :3].mean() > 0.01
+
+
+def test_kernel_variant_names():
+    """Media with programs always take the procedural textures (one planned variant)."""
+    assert kernels.kernel_variant(False, False) == ""
+    assert kernels.kernel_variant(False, False, True) == ""  # no programs: nothing procedural
+    assert kernels.kernel_variant(False, True) == "programs"
+    assert kernels.kernel_variant(False, True, True) == "programs-procedural"
+    assert kernels.kernel_variant(True, False, True) == "media"
+    assert kernels.kernel_variant(True, True) == kernels.kernel_variant(True, True, True) == "media-programs-procedural"
+    names = {kernels.kernel_variant(m, p, q) for m in (False, True) for p in (False, True) for q in (False, True)}
+    assert names == set(kernels.KERNEL_VARIANTS)
+
+
 @pytest.mark.parametrize("name, variant", [("cornell_box", ""), ("textured", "programs"), ("hdri", "programs"),
-                                           ("volume_fog", "media"), ("volume_noise", "media-programs")])
+                                           ("procedural", "programs-procedural"), ("cutout", "programs-procedural"),
+                                           ("volume_fog", "media"), ("volume_noise", "media-programs-procedural")])
 def test_the_notice_and_the_render_agree_on_a_scenes_kernel_variant(name, variant):
     """The CLI and the add-on decide from the scene whether its first render will compile
     (``scene_kernel_variant``); the render marks the variant its ``Integrator`` ran."""

@@ -89,6 +89,34 @@ def test_scene_without_programs_has_empty_program_data():
     assert pd.prog_of.shape == (0,) and pd.ops.shape == (0, F.OP_WIDTH)
 
 
+def test_program_data_says_whether_a_program_uses_a_procedural_texture():
+    """``ProgramData.procedural`` is True exactly when some program (a material's or the
+    world's) has a procedural opcode: the kernels compile those textures only then."""
+    assert not F.uses_procedural(np.zeros((0, F.OP_WIDTH), np.int64))
+    combine = [F.OP_COMBINE, 0, 1, -1, 0, 0, 0, -1, -1, -1, 0]
+    assert not F.uses_procedural([combine])
+    for op in sorted(F.PROCEDURAL_OPCODES):
+        assert F.uses_procedural([combine, [op] + combine[1:]]), op
+    assert F.empty_program_data().procedural is None
+
+    class Table:  # what build_program_data reads of a MaterialTable
+        lobe_type = np.zeros((2, 1), np.int64)
+        lobe_slot_of = [{}, {}]
+
+    def program(op):
+        return {"registers": 2, "constants": np.zeros((0, 4)), "data": np.zeros(0),
+                "ops": np.array([[op, 3, 1, -1, 0, 0, -1, -1, -1, -1, 0]], np.int64)}
+
+    plain = {"name": "a", "lobes": []}
+    textured = dict(plain, program=program(F.OP_COMBINE))
+    noisy = dict(plain, program=program(F.OP_WHITE_NOISE))
+    assert F.build_program_data([plain, plain], Table, [], None, None, None) is None
+    assert F.build_program_data([textured, plain], Table, [], None, None, None).procedural is None
+    assert F.build_program_data([textured, noisy], Table, [], None, None, None).procedural is True
+    assert F.build_program_data([textured, plain], Table, [], None, None, None,
+                                world=program(F.OP_NOISE)).procedural is True
+
+
 def _lit_plane(material):
     """A UV-mapped quad under a soft sun, seen at an angle (glossy highlights vary over it)."""
     h = B.base_header(width=16, height=16, spp=16, filter={"type": "BOX", "width": 0.01},

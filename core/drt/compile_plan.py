@@ -1,7 +1,7 @@
 """Compiling the kernels on every core: a shipped plan of what a render compiles.
 
 The kernel compiler works on one function at a time under a process-wide lock, so the first
-render of an install compiled its ~220 kernels (the plain variant; ~400 with textures or media)
+render of an install compiled its ~240 kernels (the plain variant; 270–410 with textures or media)
 on one core: ~55 s on the 2-vCPU development machine. Most of them are callees of `shade` that
 the compiler would compile anyway when it types `shade`; compiled first, each lands in the
 on-disk cache, where `shade`'s compilation finds it. ``compile_plan.pkl`` beside this file lists
@@ -265,8 +265,9 @@ def precompile(variant: str, cancel=None, features=()) -> bool:
 PLAN_SCENES = {
     "": ("cornell_box",),
     "programs": ("textured",),
+    "programs-procedural": ("procedural",),
     "media": ("volume_fog",),
-    "media-programs": ("volume_noise",),
+    "media-programs-procedural": ("volume_noise",),
 }
 
 #: features whose kernels a render compiles only when its scene uses them (`scene_features`),

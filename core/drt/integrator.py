@@ -212,6 +212,10 @@ class Integrator:
         # participating media (drt.volumes): a disabled MediumData costs the kernels one flag test
         if media is None:
             media = build_medium_data([], None)
+        if media.enabled and self.programs.procedural is None:
+            # with media, programs run in the one variant that has the procedural textures too
+            # (drt.kernels.kernel_variant): a scene adds no compiled variant of its own for that
+            self.programs = self.programs._replace(procedural=True)
         if media.hetero:  # density programs: coordinate maps and majorants (drt.volumes.hetero)
             from .volumes.hetero import prepare
 
@@ -227,7 +231,8 @@ class Integrator:
         no_programs = len(self.programs.op_start) <= 1
         self.programs_arg = None if no_programs and not media.hetero else self.programs
         #: which variant of the kernels this scene runs (drt.kernels.scene_kernel_variant)
-        self.kernel_variant = kernel_variant(media.enabled, self.programs_arg is not None)
+        self.kernel_variant = kernel_variant(media.enabled, self.programs_arg is not None,
+                                             self.programs.procedural is not None)
         self.loop_limit = self.max_depth + 1 + (stages.VOLUME_BOUNDS_MAX if media.enabled else 0)
         if self.sss is not None:  # an SSS exit takes a loop pass of its own, no bounce
             self.loop_limit += self.max_depth + 1

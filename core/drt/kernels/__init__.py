@@ -524,9 +524,10 @@ def _share_the_cache_between_copies_of_drt() -> None:
 _share_the_cache_between_copies_of_drt()
 
 _READY_MARK = "compiled"
-#: what a user is told before the first render of a version (measured 2026-12-07, twenty-fifth
+#: what a user is told before the first render of a version (measured 2026-12-07, twenty-seventh
 #: session, on the 2-vCPU development machine, CLI: 20 s for a plain scene, 23 s with homogeneous
-#: volumes, 32 s with textures, 40 s with both, docs/kernels.md)
+#: volumes, 27 s with image textures, ~30 s with procedural ones, ~38 s with textured volumes,
+#: docs/kernels.md)
 COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this version takes "
                     "about half a minute longer (once per version and machine, and again the first "
                     "time a scene with textures or volumes renders); later renders start in "
@@ -534,24 +535,32 @@ COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this ve
 
 
 #: the variants of the stage kernels a scene compiles (``drt.path_stages.shade``): a scene
-#: compiles the media code only if it has media and the program interpreter only if it has
-#: material or world programs (a heterogeneous medium's density is one)
-KERNEL_VARIANTS = ("", "programs", "media", "media-programs")
+#: compiles the media code only if it has media, the program interpreter only if it has
+#: material or world programs (a heterogeneous medium's density is one), and the procedural
+#: textures (Noise, Voronoi, Wave, Magic, Brick, White Noise, curves) only if a program uses one
+#: (``ProgramData.procedural``). With media, programs always bring the procedural textures: one
+#: variant, whose compile plan is recorded from the shipped volume_noise scene.
+KERNEL_VARIANTS = ("", "programs", "programs-procedural", "media", "media-programs-procedural")
 
 
-def kernel_variant(media: bool, programs: bool) -> str:
-    """The name of the stage kernels' variant for a scene with (or without) participating media
-    and material or world programs (`KERNEL_VARIANTS`)."""
-    return "-".join(name for name, used in (("media", media), ("programs", programs)) if used)
+def kernel_variant(media: bool, programs: bool, procedural: bool = False) -> str:
+    """The name of the stage kernels' variant for a scene with (or without) participating media,
+    material or world programs, and procedural textures in them (`KERNEL_VARIANTS`)."""
+    procedural = programs and (procedural or media)
+    return "-".join(name for name, used in (("media", media), ("programs", programs),
+                                             ("procedural", procedural)) if used)
 
 
 def scene_kernel_variant(scene) -> str:
     """Which variant of the stage kernels ``scene`` (a ``drt.scene.Scene``) renders with
     (`kernel_variant`). The same choice as the ``Integrator``'s ``kernel_variant``."""
+    from ..materials.program_format import uses_procedural
+
     mats = getattr(scene, "materials", None) or []
+    world = getattr(scene, "world_program", None)
+    programs = [m["program"] for m in mats if m.get("program")] + ([world] if world is not None else [])
     media = getattr(scene, "world_volume", None) is not None or any(m.get("volume") for m in mats)
-    programs = getattr(scene, "world_program", None) is not None or any(m.get("program") for m in mats)
-    return kernel_variant(media, programs)
+    return kernel_variant(media, bool(programs), any(uses_procedural(p["ops"]) for p in programs))
 
 
 def _ready_mark(variant: str) -> str:

@@ -1114,10 +1114,16 @@ def curve_lookup(data, off, ch, f, extrapolate):
 # --- the program operations ---------------------------------------------------------------------
 
 @kernel
-def procedural_op(regs, data, op, mode, o0, o1, i0, i1, i2, i3, i4, i5, param):
+def procedural_op(procedural, regs, data, op, mode, o0, o1, i0, i1, i2, i3, i4, i5, param):
     """One procedural operation of ``run_program`` (opcodes 50–56 of program_format), reading
     and writing the register file ``regs`` (R, 3). Packed inputs are registers holding three
-    scalars (see docs/materials.md, "Procedural textures")."""
+    scalars (see docs/materials.md, "Procedural textures"). ``procedural``: the scene's
+    ``ProgramData.procedural``; None (no program has a procedural opcode) compiles this kernel
+    to nothing."""
+    if procedural is None:
+        # numba prunes the rest on the argument's type before typing it: the variant of the
+        # kernels without procedural nodes neither compiles nor links the textures below
+        return
     vx, vy, vz = regs[i0, 0], regs[i0, 1], regs[i0, 2]
     if op == 50:  # Noise: mode = dim−1 | type << 2 | normalize << 5 | colour << 6
         dim = (mode & 3) + 1

@@ -142,6 +142,9 @@ ProgramData = namedtuple("ProgramData", [
                         # registers (DIELECTRIC_SPECULAR: all three or none; METALLIC: tint =
                         # its F82 tint; GLASS / REFRACTION: IOR), −1: constant (lobe_ior,
                         # lobe_fresnel[..., :3]; docs/materials.md "Textured IOR and tint")
+    "procedural",       # True when a program has a procedural opcode (PROCEDURAL_OPCODES), else
+                        # None: the kernels then compile without the procedural textures (a
+                        # variant; `uses_procedural`, drt.kernels.kernel_variant)
 ])
 
 
@@ -228,6 +231,13 @@ def _reg(v, n, where):
 POINT_OPS = frozenset({OP_POINT, OP_FRESNEL, OP_LAYER_WEIGHT, OP_NORMAL_MAP, OP_BUMP_OFFSET, OP_BUMP,
                        OP_CAMERA_COORDS, OP_TEXCO_NORMAL, OP_DISPLACEMENT, OP_VECTOR_DISPLACEMENT,
                        OP_SET_NORMAL, OP_IMAGE_BOX})
+
+
+def uses_procedural(ops) -> bool:
+    """Does a program with these ops rows ((N, OP_WIDTH) or a list of rows) use a procedural
+    texture or curve (``PROCEDURAL_OPCODES``, drt.materials.procedural)?"""
+    ops = np.asarray(ops)
+    return bool(ops.size) and bool(np.isin(ops.reshape(-1, OP_WIDTH)[:, 0], list(PROCEDURAL_OPCODES)).any())
 
 
 def build_program_data(materials: list[dict], table, images: list[tuple[dict, np.ndarray]],
@@ -334,7 +344,8 @@ def build_program_data(materials: list[dict], table, images: list[tuple[dict, np
         object_of=arr(object_of, np.int32, (0,)), object_info=arr(object_info, np.float64, (0, 9)),
         positions=arr(positions, np.float32, (0, 3)), triangles=arr(triangles, np.int32, (0, 3)),
         footprint=arr(footprint, np.float64, (0, 3)), camera=arr(camera, np.float64, (0, 4)),
-        lobe_weight_reg=weight_reg, lobe_layer_reg=layer_reg, lobe_ior_reg=ior_reg)
+        lobe_weight_reg=weight_reg, lobe_layer_reg=layer_reg, lobe_ior_reg=ior_reg,
+        procedural=True if any(uses_procedural(rows) for rows in op_rows) else None)
 
 
 def world_program_index(pd: ProgramData) -> int:
@@ -361,4 +372,4 @@ def empty_program_data() -> ProgramData:
                        footprint=np.zeros((0, 3)), camera=np.zeros((0, 4)),
                        lobe_weight_reg=np.zeros((0, 0), np.int64),
                        lobe_layer_reg=np.zeros((0, 0, 2), np.int64),
-                       lobe_ior_reg=np.zeros((0, 0, 3), np.int64))
+                       lobe_ior_reg=np.zeros((0, 0, 3), np.int64), procedural=None)

@@ -1228,7 +1228,7 @@ def run_program(pd, regs, prog, prim, b1, b2, point):
             _set(point, POINT_N, nm)
             _set(regs, o0, nm)
         elif 50 <= op < 70:  # procedural textures and curves (drt.materials.procedural)
-            procedural_op(regs, pd.data, op, mode, o0, o1, i0, i1, i2, i3, i4, i5, param)
+            procedural_op(pd.procedural, regs, pd.data, op, mode, o0, o1, i0, i1, i2, i3, i4, i5, param)
 
 
 @inline_kernel
