@@ -932,7 +932,7 @@ def shade(sd, md, pd, regs, point, ld, surf, settings, depth_i, live, paths, hit
             continue
 
         # --- the surface hit: its emission (also for paths stopping here at a bounce limit)
-        mat = surf.material[prim]
+        mat = np.int64(surf.material[prim])  # int64, as every material index: one compile per kernel
         if vd is not None and vd.enabled and vd.pass_through[mat] and not exiting:
             # a volume-only mesh has no surface: cross it (update the stack), no bounce
             add_light(out, slot, acc, camera)

@@ -962,8 +962,9 @@ def wave(kind, bands_dir, rings_dir, profile, x, y, z, distortion, detail, dscal
         n = math.sqrt(rx * rx + ry * ry + rz * rz) * 20.0
     n += phase
     if distortion != 0.0:
-        n += distortion * (noise_fbm(3, f32(x * dscale), f32(y * dscale), f32(z * dscale), 0.0, detail,
-                                     droughness, 2.0, True) * 2.0 - 1.0)
+        # w and normalize typed as noise_select passes them (float32, int): one compiled noise_fbm
+        n += distortion * (noise_fbm(3, f32(x * dscale), f32(y * dscale), f32(z * dscale), f32(0.0), detail,
+                                     droughness, 2.0, 1) * 2.0 - 1.0)
     if profile == 0:
         return 0.5 + 0.5 * math.sin(n - math.pi / 2.0)
     n /= 2.0 * math.pi

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..kernels import inline_kernel, kernel
 from ..kernels.vec3 import load, store
 from ..kernels.vec3 import load_col3
@@ -404,7 +406,7 @@ def shadow_step(vd, material, visibility, active, count, prim, t, ng, o, d, tmax
                 trans[s, c] *= tr[c]
         if not hit:
             continue
-        mat = material[p]
+        mat = np.int64(material[p])  # int64, as every material index: one compile per kernel
         dd = load(d, s)
         n = load(ng, k)
         unseen = check_visibility and not (visibility[p] & VIS_SHADOW)
