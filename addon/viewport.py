@@ -474,7 +474,7 @@ m = np.eye(4)
 m[:3, 3] = (0.0, 0.0, 5.0)
 # every variant of the stage kernels (drt.kernels.KERNEL_VARIANTS), so that adding a texture or
 # a volume in the viewport later never compiles inside Blender: plain, a material program, one
-# with a procedural texture, a medium, a medium with a program
+# with a procedural texture, a medium, and a medium with each kind of program
 fmt = compat.core_module("materials.program_format")
 program = fmt.validate_program({{"registers": 2, "constants": [[0, 0.5, 0.4, 0.3]], "data": [],
                                 "ops": [[fmt.OP_COMBINE, 0, 1, -1, 0, 0, 0, -1, -1, -1, 0]]}}, 0, "warm-up")
@@ -484,7 +484,8 @@ white_noise = fmt.validate_program({{"registers": 2, "constants": [[0, 0.5, 0.4,
 textured = dict(mats[0], program=program, lobes=[dict(mats[0]["lobes"][0], color_reg=1), mats[0]["lobes"][1]])
 fog = dict(mats[0], volume=compat.core_module("volumes.media").validate_medium({{"absorption": [0.1, 0.1, 0.1]}},
                                                                                "warm-up"))
-for first in (mats[0], textured, dict(textured, program=white_noise), fog, dict(textured, volume=fog["volume"])):
+noisy = dict(textured, program=white_noise)
+for first in (mats[0], textured, noisy, fog, dict(textured, volume=fog["volume"]), dict(noisy, volume=fog["volume"])):
     live = interactive.LiveScene(scene_mod.RenderSettings(width=8, height=8), [first, mats[1]], lights,
                                  (0.1, 0.1, 0.1))
     live.set_object("grid", "grid", mesh, np.eye(4))
@@ -499,7 +500,7 @@ _warmup = None  # the warm-up process (one per Blender session)
 def kernels_cached() -> bool:
     """Are all the render kernels of *this copy* of the core compiled: every variant of the stage
     kernels marked compiled (``drt.kernels.KERNEL_VARIANTS``: plain, textures, procedural
-    textures, volumes, volumes with textures) in this copy's cache folder, and numba's index of
+    textures, volumes, volumes with either kind of texture) in this copy's cache folder, and numba's index of
     ``shade`` there? (The folder is keyed by the sources and their import name, so a development
     checkout and an installed add-on each have their own marks.)"""
     import os

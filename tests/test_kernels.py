@@ -314,20 +314,22 @@ def test_a_scene_with_programs_but_no_procedural_texture_compiles_shade_without_
 
 
 def test_kernel_variant_names():
-    """Media with programs always take the procedural textures (one planned variant)."""
+    """Three switches; the procedural textures only with programs."""
     assert kernels.kernel_variant(False, False) == ""
     assert kernels.kernel_variant(False, False, True) == ""  # no programs: nothing procedural
     assert kernels.kernel_variant(False, True) == "programs"
     assert kernels.kernel_variant(False, True, True) == "programs-procedural"
     assert kernels.kernel_variant(True, False, True) == "media"
-    assert kernels.kernel_variant(True, True) == kernels.kernel_variant(True, True, True) == "media-programs-procedural"
+    assert kernels.kernel_variant(True, True) == "media-programs"
+    assert kernels.kernel_variant(True, True, True) == "media-programs-procedural"
     names = {kernels.kernel_variant(m, p, q) for m in (False, True) for p in (False, True) for q in (False, True)}
     assert names == set(kernels.KERNEL_VARIANTS)
 
 
 @pytest.mark.parametrize("name, variant", [("cornell_box", ""), ("textured", "programs"), ("hdri", "programs"),
                                            ("procedural", "programs-procedural"), ("cutout", "programs-procedural"),
-                                           ("volume_fog", "media"), ("volume_noise", "media-programs-procedural")])
+                                           ("volume_fog", "media"), ("volume_liquid", "media-programs"),
+                                           ("volume_noise", "media-programs-procedural")])
 def test_the_notice_and_the_render_agree_on_a_scenes_kernel_variant(name, variant):
     """The CLI and the add-on decide from the scene whether its first render will compile
     (``scene_kernel_variant``); the render marks the variant its ``Integrator`` ran."""

@@ -267,6 +267,7 @@ PLAN_SCENES = {
     "programs": ("textured",),
     "programs-procedural": ("procedural",),
     "media": ("volume_fog",),
+    "media-programs": ("volume_liquid",),
     "media-programs-procedural": ("volume_noise",),
 }
 

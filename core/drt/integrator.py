@@ -212,10 +212,6 @@ class Integrator:
         # participating media (drt.volumes): a disabled MediumData costs the kernels one flag test
         if media is None:
             media = build_medium_data([], None)
-        if media.enabled and self.programs.procedural is None:
-            # with media, programs run in the one variant that has the procedural textures too
-            # (drt.kernels.kernel_variant): a scene adds no compiled variant of its own for that
-            self.programs = self.programs._replace(procedural=True)
         if media.hetero:  # density programs: coordinate maps and majorants (drt.volumes.hetero)
             from .volumes.hetero import prepare
 

@@ -526,8 +526,8 @@ _share_the_cache_between_copies_of_drt()
 _READY_MARK = "compiled"
 #: what a user is told before the first render of a version (measured 2026-12-07, twenty-seventh
 #: session, on the 2-vCPU development machine, CLI: 20 s for a plain scene, 23 s with homogeneous
-#: volumes, 27 s with image textures, ~30 s with procedural ones, ~38 s with textured volumes,
-#: docs/kernels.md)
+#: volumes, 27 s with image textures, ~30 s with procedural ones or with homogeneous volumes and
+#: textures, ~40 s with heterogeneous volumes, docs/kernels.md)
 COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this version takes "
                     "about half a minute longer (once per version and machine, and again the first "
                     "time a scene with textures or volumes renders); later renders start in "
@@ -538,15 +538,15 @@ COMPILING_NOTICE = ("compiling DRT's render kernels: the first render of this ve
 #: compiles the media code only if it has media, the program interpreter only if it has
 #: material or world programs (a heterogeneous medium's density is one), and the procedural
 #: textures (Noise, Voronoi, Wave, Magic, Brick, White Noise, curves) only if a program uses one
-#: (``ProgramData.procedural``). With media, programs always bring the procedural textures: one
-#: variant, whose compile plan is recorded from the shipped volume_noise scene.
-KERNEL_VARIANTS = ("", "programs", "programs-procedural", "media", "media-programs-procedural")
+#: (``ProgramData.procedural``). Each variant's compile plan is recorded from a shipped scene
+#: (``drt.compile_plan.PLAN_SCENES``).
+KERNEL_VARIANTS = ("", "programs", "programs-procedural", "media", "media-programs", "media-programs-procedural")
 
 
 def kernel_variant(media: bool, programs: bool, procedural: bool = False) -> str:
     """The name of the stage kernels' variant for a scene with (or without) participating media,
     material or world programs, and procedural textures in them (`KERNEL_VARIANTS`)."""
-    procedural = programs and (procedural or media)
+    procedural = programs and procedural
     return "-".join(name for name, used in (("media", media), ("programs", programs),
                                              ("procedural", procedural)) if used)
 
