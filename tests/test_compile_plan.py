@@ -63,6 +63,50 @@ def test_plan_entries_are_the_variant_s_then_each_feature_s():
                       [("a", "f", [1], True)]) == [("a", "f", [2], True), ("b", "w", [3], True), ("a", "f", [1], False)]
 
 
+def test_after_the_critical_kernel_its_helper_gets_nothing_and_the_others_take_turns():
+    for parts in (1, 2, 3, 8):
+        for split in (None, 0, 5, 6, 19):
+            owners = [CP.helper_of(k, split, parts) for k in range(20)]
+            assert all(0 <= h < parts for h in owners)
+            if split is None or parts == 1:
+                assert owners == [k % parts for k in range(20)]
+                continue
+            # the callees and the critical kernel: turns, as before
+            assert owners[:split + 1] == [k % parts for k in range(split + 1)]
+            tail = owners[split + 1:]
+            assert owners[split] not in tail
+            # the others share the rest evenly
+            counts = [tail.count(h) for h in range(parts) if h != owners[split]]
+            assert max(counts) - min(counts) <= 1, (parts, split, owners)
+
+
+def test_the_critical_kernel_comes_after_its_callees_and_before_the_rest():
+    shade = ("path_stages", "shade", ["s"], False)
+    entries = [("a", "cam", ["c"], False), ("a", "f", ["1"], True), ("b", "g", ["2"], True),
+               ("a", "f", ["1"], False), shade, ("b", "h", ["3"], False)]
+    callees = {("a", "f", True), ("b", "g", True), ("path_stages", "shade", False)}
+    assert CP.critical_first(entries, callees) == [entries[1], entries[2], shade, entries[0], entries[3], entries[5]]
+    assert CP.critical_index(CP.critical_first(entries, callees)) == 2
+    # a plan without it (a feature's) keeps its order
+    assert CP.critical_first(entries[:4], callees) == entries[:4]
+    assert CP.critical_index(entries[:4]) is None
+
+
+def test_the_shipped_plans_list_shade_after_its_callees_and_its_helper_then_rests():
+    """The Python-called kernels `shade` does not call (the camera stage, the film) come after
+    it, where the helpers not compiling `shade` take them; its own callees come before it."""
+    plan = CP.load_plan()
+    for variant in K.KERNEL_VARIANTS:
+        entries = plan[variant]
+        split = CP.critical_index(entries)
+        assert split is not None, variant
+        before = {(m, a) for m, a, _, linked in entries[:split]}
+        after = {(m, a) for m, a, _, linked in entries[split + 1:] if not linked}
+        assert {("path_stages", "camera_stage"), ("film", "_accumulate")} <= after, variant
+        assert {("materials.table", "bsdf_sample_bump"), ("lights.area", "_sample_spherical_rect")} <= before, variant
+        assert ("path_stages", "camera_stage") not in before, variant
+
+
 def test_plan_classes_map_to_this_copys_package(monkeypatch):
     """Types recorded under ``drt`` load from the add-on's copy (another package name)."""
     import drt.kernels.vec3 as vec3

@@ -7,9 +7,11 @@ the compiler would compile anyway when it types `shade`; compiled first, each la
 on-disk cache, where `shade`'s compilation finds it. ``compile_plan.pkl`` beside this file lists
 every kernel the render of one shipped scene per variant compiles, with the argument types
 (compiler signatures) it compiles them for, in the order the compiler finished them (callees
-first). On a first render (`drt.render.render`, before the scene is prepared) `precompile`
-starts one helper process per core, each compiling every k-th entry into the shared cache, and
-waits for them; the render then loads what they compiled and compiles only what the plan lacks.
+first; `shade`'s own callees before it and the kernels it does not call after it). On a first
+render (`drt.render.render`, before the scene is prepared) `precompile` starts one helper
+process per core, which take turns at the entries up to `shade` and leave the rest to the
+helpers not compiling `shade` (`helper_of`), compiling into the shared cache, and waits for
+them; the render then loads what they compiled and compiles only what the plan lacks.
 Kernels outside `shade` that only some scenes need are planned per feature (``PLAN_FEATURES``:
 the subsurface walk, moving objects) and compiled by the helpers when the scene uses them
 (`scene_features`); others (transparent shadows) the render compiles itself.
@@ -22,7 +24,7 @@ entry points or machine code (`drt.kernels.LazyKernel.linked`): 22.8 s, 42.2 s a
 faster machine.
 
 The plan is data, regenerated with ``python -m drt.compile_plan`` after kernel signatures change
-(~5 min). A stale plan is harmless: an entry that no longer resolves or types is skipped, a
+(~8 min: each variant is recorded, then `shade` is compiled alone for its call graph). A stale plan is harmless: an entry that no longer resolves or types is skipped, a
 missing one is compiled by the render as before. The pickled signature types name DRT's classes
 (namedtuple records) under the import name ``drt``; `load_plan` maps them to this copy's package
 name (the Blender add-on imports the core as ``drt_blender.drt`` or
@@ -128,15 +130,64 @@ def scene_features(scene) -> tuple:
     return tuple(features)
 
 
+#: the kernel whose compile is a first render's critical path: `shade`, called from Python, whose
+#: module LLVM optimises with every callee inlined (~12 of a media scene's ~55 s of compile work
+#: on one core), and which cannot start before its callees are in the cache. A variant's plan
+#: lists its callees first, then it, then the kernels it does not call (`critical_first`);
+#: `helper_of` gives those to the helpers that are not compiling it.
+CRITICAL_KERNEL = ("path_stages", "shade")
+
+
+def critical_index(entries: list) -> int | None:
+    """The index of the entry of `CRITICAL_KERNEL`'s Python-called form in ``entries`` (plan
+    entries), None when there is none (a feature's plan alone)."""
+    for k, (module, attr, _, linked) in enumerate(entries):
+        if (module, attr) == CRITICAL_KERNEL and not linked:
+            return k
+    return None
+
+
+def helper_of(k: int, split: int | None, parts: int) -> int:
+    """The helper (0 … ``parts`` − 1) that compiles entry ``k`` of a plan whose critical entry
+    is at ``split`` (`critical_index`). Up to and including it the helpers take turns (the
+    entries before it are its callees, which all helpers compile together so that it can start
+    early); after it the helper compiling it gets nothing, the others take turns: on two cores
+    the kernels `shade` does not call (the camera stage, the tracer's glue, a volume scene's
+    shadow rounds, the subsurface walk) compile beside it instead of after it (media scenes
+    ~4 s sooner)."""
+    if split is None or parts < 2 or k <= split:
+        return k % parts
+    owner = split % parts
+    h = (k - split - 1) % (parts - 1)
+    return h + (h >= owner)
+
+
+def critical_first(entries: list, callees: set) -> list:
+    """``entries`` (a variant's plan, in the order the compiler finished them) reordered for
+    `helper_of`: the kernels in ``callees`` ((module, attr, linked) triples: what compiling
+    `CRITICAL_KERNEL` alone compiles) first, then the critical entry, then the rest, each
+    group in its old order. Unchanged when there is no critical entry."""
+    split = critical_index(entries)
+    if split is None:
+        return list(entries)
+    inside, outside = [], []
+    for k, entry in enumerate(entries):
+        if k != split:
+            (inside if (entry[0], entry[1], entry[3]) in callees else outside).append(entry)
+    return inside + [entries[split]] + outside
+
+
 def compile_part(variant: str | None, part: int, parts: int, plan: dict | None = None, features=()) -> int:
-    """Compile every ``parts``-th entry of the plan of ``variant`` and ``features``
-    (`plan_entries`) from ``part`` on into the cache (what a helper process runs). Entries that
-    do not resolve or compile are skipped. Returns the number of signatures compiled (or loaded
-    from the cache)."""
+    """Compile the entries of the plan of ``variant`` and ``features`` (`plan_entries`) that
+    `helper_of` gives helper ``part`` of ``parts`` into the cache (what a helper process
+    runs). Entries that do not resolve or compile are skipped. Returns the number of signatures
+    compiled (or loaded from the cache)."""
     plan = load_plan() if plan is None else plan
     done = 0
-    for k, (module, attr, sigs, linked) in enumerate(plan_entries(plan, variant, features)):
-        if k % parts != part:
+    entries = plan_entries(plan, variant, features)
+    split = critical_index(entries)
+    for k, (module, attr, sigs, linked) in enumerate(entries):
+        if helper_of(k, split, parts) != part:
             continue
         kern = _resolve(module, attr)
         if kern is None:
@@ -300,7 +351,6 @@ def record_variant(variant: str, scenes: list[str]) -> list:
     form (linked into other kernels or called from Python), in the order the compiler finished
     them (by their cache index files' times: callees before callers)."""
     from . import render as render_mod
-    from .kernels import LazyKernel
     from .loaders import load_scene
 
     for path in scenes:
@@ -308,6 +358,21 @@ def record_variant(variant: str, scenes: list[str]) -> list:
         scene = replace(scene, render=replace(scene.render, width=16, height=12, border=None))
         render_mod.render(scene, spp=1, threads=1)
     entries = []
+    for module, attr, linked, dispatcher in _compiled_kernels():
+        try:
+            finished = os.path.getmtime(dispatcher._cache._cache_file._index_path)
+        except (AttributeError, OSError):
+            finished = float("inf")
+        entries.append((finished, module, attr, list(dispatcher.signatures), linked))
+    entries.sort(key=lambda e: e[0])
+    return [(m, a, s, linked) for _, m, a, s, linked in entries]
+
+
+def _compiled_kernels():
+    """(module relative to the package, attr, linked, dispatcher) of every form of every DRT
+    kernel this process has compiled (or loaded) at least one signature of."""
+    from .kernels import LazyKernel
+
     for name, module in list(sys.modules.items()):
         if not (name == PACKAGE or name.startswith(PACKAGE + ".")):
             continue
@@ -315,16 +380,22 @@ def record_variant(variant: str, scenes: list[str]) -> list:
             if not isinstance(obj, LazyKernel) or obj.__module__ != name:
                 continue
             for linked, dispatcher in ((False, obj._dispatcher), (True, obj._linked)):
-                sigs = list(dispatcher.signatures) if dispatcher is not None else []
-                if not sigs:
-                    continue
-                try:
-                    finished = os.path.getmtime(dispatcher._cache._cache_file._index_path)
-                except (AttributeError, OSError):
-                    finished = float("inf")
-                entries.append((finished, name[len(PACKAGE) + 1:], attr, sigs, linked))
-    entries.sort(key=lambda e: e[0])
-    return [(m, a, s, linked) for _, m, a, s, linked in entries]
+                if dispatcher is not None and dispatcher.signatures:
+                    yield name[len(PACKAGE) + 1:], attr, linked, dispatcher
+
+
+def record_callees(entries: list) -> set:
+    """Compile the critical entry of ``entries`` (`critical_index`) alone, into the current
+    empty NUMBA_CACHE_DIR, and return its call graph: the (module, attr, linked) of every
+    kernel form that compiled on the way, itself included."""
+    split = critical_index(entries)
+    if split is not None:
+        module, attr, sigs, linked = entries[split]
+        kern = _resolve(module, attr)
+        dispatcher = kern.linked() if linked else kern.dispatcher()
+        for sig in sigs:
+            dispatcher.compile(sig)
+    return {(module, attr, linked) for module, attr, linked, _ in _compiled_kernels()}
 
 
 def _main(argv=None) -> int:
@@ -337,7 +408,14 @@ def _main(argv=None) -> int:
     ap.add_argument("--scenes", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "blend_scenes"))
     ap.add_argument("--out", default=PLAN_FILE)
     ap.add_argument("--record", nargs=2, metavar=("VARIANT", "OUT"), help=argparse.SUPPRESS)
+    ap.add_argument("--callees", nargs=2, metavar=("ENTRIES", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.callees:  # a child: the critical kernel's call graph, into the empty cache its parent chose
+        with open(args.callees[0], "rb") as f:
+            entries = pickle.load(f)
+        with open(args.callees[1], "wb") as f:
+            pickle.dump(record_callees(entries), f)
+        return 0
     if args.record:  # a child: one variant or feature, into the empty cache its parent chose
         label = args.record[0]
         if label.startswith(FEATURE_PREFIX):
@@ -364,11 +442,19 @@ def _main(argv=None) -> int:
             t0 = time.perf_counter()
             subprocess.run([sys.executable, "-m", f"{PACKAGE}.compile_plan", "--scenes", args.scenes,
                             "--record", label, out], env=env, check=True)
+            shutil.rmtree(cache, ignore_errors=True)
             with open(out, "rb") as f:
                 variants[variant] = pickle.load(f)
             if variant.startswith(FEATURE_PREFIX):  # only what the plain plan lacks
                 variants[variant] = _beyond(variants[variant], variants[""])
-            shutil.rmtree(cache, ignore_errors=True)
+            elif critical_index(variants[variant]) is not None:  # its callees first (helper_of)
+                os.makedirs(cache)
+                graph = os.path.join(tmp, f"{label}.callees.pkl")
+                subprocess.run([sys.executable, "-m", f"{PACKAGE}.compile_plan", "--callees", out, graph],
+                               env=env, check=True)
+                with open(graph, "rb") as f:
+                    variants[variant] = critical_first(variants[variant], pickle.load(f))
+                shutil.rmtree(cache, ignore_errors=True)
             print(f"{label}: {len(variants[variant])} kernels, "
                   f"{sum(len(s) for _, _, s, _ in variants[variant])} signatures, {time.perf_counter() - t0:.0f} s")
     plan = {"compiler": compiler_version(), "variants": variants}
