@@ -1,6 +1,6 @@
 """Cold compile and warm start of DRT's kernels, with a profile of where the compile goes.
 
-    python benchmarks/compile_cost.py [SCENE.npz] [--top 25] [--profile]
+    python benchmarks/compile_cost.py [SCENE.npz] [--top 25] [--profile] [--timeline]
 
 Renders SCENE (default: the shipped Cornell box, 1 spp) in a child process whose kernel cache
 is an empty temporary folder (``DRT_CACHE_DIR``), so everything its render needs compiles (as a
@@ -16,6 +16,12 @@ nested as the calls are discovered, and the LLVM lock); the script then also pri
 - the CPU time inside numba's compiler, of which LLVM, and the number of functions compiled,
 - the functions with the most *exclusive* compile time (their own typing, lowering and LLVM
   work, without the callees compiled while they were typed) and their *inclusive* time.
+
+With ``--timeline`` it also runs the helpers a first render starts (one per core,
+`drt.compile_plan.compile_part` for the scene's variant and features) into a third empty cache,
+each logging its plan entries, and prints when each helper finished, its summed work, and when
+the critical kernel (`shade`) started and ended: the first render's compile is bounded by its
+callees shared out, plus `shade` itself (docs/kernels.md).
 
 Asserts nothing; docs/kernels.md ("Cost and cache") records the figures.
 """
@@ -64,6 +70,52 @@ if sys.argv[1] != os.devnull:
         json.dump(events, f)
 sys.exit(code)
 """
+
+
+#: a helper of the timeline: compile_part with a logger, the start of the clock from its parent
+_HELPER = r"""
+import json, sys, time
+import drt.kernels
+from drt import compile_plan as CP
+variant, part, parts, features, t0, out = json.loads(sys.argv[1])
+log = []
+def on_entry(k, entry, start, end):
+    log.append((k, entry[0] + "." + entry[1], bool(entry[3]), start, end))
+CP.compile_part(variant, part, parts, None, tuple(features), on_entry)
+with open(out, "w") as f:
+    json.dump({"log": log, "offset": time.time() - time.perf_counter() - t0}, f)
+"""
+
+
+def timeline(scene_path, cache, tmp):
+    """Run the helpers of a first render of the scene into the empty ``cache``, each logging its
+    entries; [(helper, [(k, name, linked, start s, end s), ...])], times from their start."""
+    from drt import compile_plan as CP
+    from drt.kernels import scene_kernel_variant
+    from drt.loaders import load_scene
+
+    scene = load_scene(scene_path)
+    variant, features = scene_kernel_variant(scene), CP.scene_features(scene)
+    parts = max(CP.helper_count(), 1)
+    env = dict(os.environ, DRT_CACHE_DIR=cache)
+    env.pop("NUMBA_CACHE_DIR", None)
+    env.pop("DRT_SET_NUMBA_CACHE_DIR", None)
+    t0 = time.time()
+    procs, outs = [], []
+    for part in range(parts):
+        outs.append(os.path.join(tmp, f"helper{part}.json"))
+        arg = json.dumps([variant, part, parts, list(features), t0, outs[-1]])
+        procs.append(subprocess.Popen([sys.executable, "-c", _HELPER, arg], env=env))
+    for p in procs:
+        if p.wait() != 0:
+            raise SystemExit("a timeline helper failed")
+    result = []
+    for part, out in enumerate(outs):
+        with open(out) as f:
+            data = json.load(f)
+        off = data["offset"]
+        result.append((part, [(k, n, linked, a + off, b + off) for k, n, linked, a, b in data["log"]]))
+    return variant, features, result
 
 
 def _child(args, cache, events=None, serial=False):
@@ -117,6 +169,8 @@ def main(argv=None) -> int:
     ap.add_argument("--spp", type=int, default=1)
     ap.add_argument("--profile", action="store_true",
                     help="also compile on one core in a third process and print where the compile goes")
+    ap.add_argument("--timeline", action="store_true",
+                    help="also run a first render's helpers, logging their entries, and print their timeline")
     o = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="drt_compile_") as tmp:
         cache = os.path.join(tmp, "cache")
@@ -129,9 +183,23 @@ def main(argv=None) -> int:
             serial_wall, serial_cpu = _child(args, os.path.join(tmp, "serial"), events_path, serial=True)
             with open(events_path) as f:
                 events = json.load(f)
+        if o.timeline:
+            variant, features, helpers = timeline(o.scene, os.path.join(tmp, "timeline"), tmp)
+            from drt.compile_plan import CRITICAL_KERNEL
+            critical = ".".join(CRITICAL_KERNEL)
     print(f"scene {os.path.basename(o.scene)}, {o.spp} spp, one thread, empty kernel cache")
     print(f"  cold process : {cold_wall:7.1f} s wall, {cold_cpu:7.1f} s CPU (helpers on every core)")
     print(f"  warm process : {warm_wall:7.1f} s wall, {warm_cpu:7.1f} s CPU (same cache, loaded)")
+    if o.timeline:
+        print(f"  helpers of variant {variant or 'plain'!r}, features {list(features)} (s from their start):")
+        for part, log in helpers:
+            work = sum(b - a for *_, a, b in log)
+            end = max((b for *_, b in log), default=0.0)
+            crit = [(a, b) for _, n, linked, a, b in log if not linked and n == critical]
+            line = f"    helper {part}: {len(log):4d} entries, {work:5.1f} s of work, done at {end:5.1f} s"
+            if crit:
+                line += f"; shade from {crit[0][0]:5.1f} to {crit[0][1]:5.1f} s"
+            print(line)
     if not o.profile:
         print("  (--profile: where the compile goes, from a serial compile in a third process)")
         return 0

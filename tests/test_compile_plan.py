@@ -80,6 +80,34 @@ def test_after_the_critical_kernel_its_helper_gets_nothing_and_the_others_take_t
             assert max(counts) - min(counts) <= 1, (parts, split, owners)
 
 
+def test_a_helper_compiles_the_entries_helper_of_gives_it_and_reports_each(monkeypatch):
+    compiled = []
+
+    class Fake:
+        def __init__(self, name):
+            self.name = name
+
+        def dispatcher(self):
+            return self
+
+        linked = dispatcher
+
+        def compile(self, sig):
+            compiled.append((self.name, sig))
+
+    monkeypatch.setattr(CP, "_resolve", lambda module, attr: Fake(attr))
+    entries = [("m", f"k{k}", [k], True) for k in range(6)] + [("path_stages", "shade", ["s"], False)] \
+        + [("m", f"r{k}", [k], False) for k in range(4)]
+    heard = []
+    for part in range(3):
+        done = CP.compile_part("", part, 3, {"": entries}, (), lambda k, e, a, b: heard.append((part, k, e[1], b >= a)))
+        assert done == sum(len(e[2]) for k, e in enumerate(entries) if CP.helper_of(k, 6, 3) == part)
+    assert sorted(k for _, k, _, _ in heard) == list(range(len(entries)))
+    assert all(part == CP.helper_of(k, 6, 3) and ordered for part, k, _, ordered in heard)
+    assert {part for part, _, name, _ in heard if name.startswith("r")} == {1, 2}  # shade (6th) is helper 0's
+    assert len(compiled) == len(entries)
+
+
 def test_the_critical_kernel_comes_after_its_callees_and_before_the_rest():
     shade = ("path_stages", "shade", ["s"], False)
     entries = [("a", "cam", ["c"], False), ("a", "f", ["1"], True), ("b", "g", ["2"], True),

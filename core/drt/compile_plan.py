@@ -177,11 +177,14 @@ def critical_first(entries: list, callees: set) -> list:
     return inside + [entries[split]] + outside
 
 
-def compile_part(variant: str | None, part: int, parts: int, plan: dict | None = None, features=()) -> int:
+def compile_part(variant: str | None, part: int, parts: int, plan: dict | None = None, features=(),
+                 on_entry=None) -> int:
     """Compile the entries of the plan of ``variant`` and ``features`` (`plan_entries`) that
     `helper_of` gives helper ``part`` of ``parts`` into the cache (what a helper process
-    runs). Entries that do not resolve or compile are skipped. Returns the number of signatures
-    compiled (or loaded from the cache)."""
+    runs). Entries that do not resolve or compile are skipped. ``on_entry(k, entry, start,
+    end)``, if given, hears of each entry compiled (``time.perf_counter`` seconds; for
+    ``benchmarks/compile_cost.py --timeline``). Returns the number of signatures compiled (or
+    loaded from the cache)."""
     plan = load_plan() if plan is None else plan
     done = 0
     entries = plan_entries(plan, variant, features)
@@ -192,6 +195,7 @@ def compile_part(variant: str | None, part: int, parts: int, plan: dict | None =
         kern = _resolve(module, attr)
         if kern is None:
             continue
+        start = time.perf_counter()
         dispatcher = kern.linked() if linked else kern.dispatcher()
         for sig in sigs:
             try:
@@ -199,6 +203,8 @@ def compile_part(variant: str | None, part: int, parts: int, plan: dict | None =
                 done += 1
             except Exception:  # noqa: BLE001 -- stale entry: the render compiles what it needs
                 pass
+        if on_entry is not None:
+            on_entry(k, entries[k], start, time.perf_counter())
     return done
 
 
