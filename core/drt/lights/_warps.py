@@ -10,6 +10,7 @@ import math
 from .common import scalar_kernel
 from ..kernels.vec3 import build_frame
 from ..kernels.vec3 import to_world as _to_world
+from ..sampling.trig import sincos
 from ..sampling.warps import (cosine_hemisphere, disk_concentric,  # noqa: F401 (re-exported)
                               uniform_sphere, uniform_triangle)
 
@@ -31,8 +32,8 @@ def uniform_cone(u0, u1, one_minus_cos_max):
     s = u0 * one_minus_cos_max                       # 1 − cos θ
     cos_t = 1.0 - s
     sin_t = math.sqrt(max(s * (2.0 - s), 0.0))
-    phi = _TWO_PI * u1
-    return (sin_t * math.cos(phi), sin_t * math.sin(phi), cos_t)
+    sin_phi, cos_phi = sincos(_TWO_PI * u1)
+    return (sin_t * cos_phi, sin_t * sin_phi, cos_t)
 
 
 @scalar_kernel

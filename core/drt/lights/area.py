@@ -27,6 +27,7 @@ from .common import AREA, T_EPSILON, camera_visible, light_frame, luminance, sca
 from ..kernels.vec3 import dot, sub
 from .common import I_IS_ELLIPSE, I_PLAIN, I_SOLID_ANGLE, L_AREA, L_CORNER, L_EX, L_EY, L_EZ, L_HALF_SPREAD, L_LEN_X, L_LEN_Y, L_NORMAL, L_POS, L_RADIANCE, L_SPREAD_NORM, L_TAN_HALF  # noqa: F401 (table columns)
 from ..kernels.vec3 import load_col3
+from ..sampling.trig import sincos
 
 #: Below this solid angle (sr) rectangles are sampled by area instead of solid angle.
 MIN_SOLID_ANGLE = 1e-7
@@ -206,8 +207,7 @@ def _use_solid_angle(solid_angle, z0):
 def _sample_spherical_rect(ld, i, o, u0, u1, sr):
     x0, y0, z0, x1, y1, zsign, b0, b1, cos_k, sin_k, solid_angle = sr
     # au = u0·S + k by the angle sum: one sincos instead of cos and sin of k + u0·S
-    c_u = math.cos(u0 * solid_angle)
-    s_u = math.sin(u0 * solid_angle)
+    s_u, c_u = sincos(u0 * solid_angle)
     cos_au = c_u * cos_k - s_u * sin_k
     sin_au = s_u * cos_k + c_u * sin_k
     fu = (cos_au * b0 - b1) / sin_au

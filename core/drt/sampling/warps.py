@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from ..kernels import kernel, vec3
+from .trig import sincos, sincos_quarter
 
 __all__ = [
     "square_to_disk_concentric", "square_to_disk_concentric_pdf", "disk_concentric_to_square",
@@ -110,12 +111,11 @@ def disk_concentric(u0, u1):
     if a == 0.0 and b == 0.0:
         return 0.0, 0.0
     if abs(a) > abs(b):
-        r = a
-        phi = _PI_4 * (b / a)
-    else:
-        r = b
-        phi = 0.5 * _PI - _PI_4 * (a / b)
-    return r * math.cos(phi), r * math.sin(phi)
+        s, c = sincos_quarter(_PI_4 * (b / a))    # φ = π/4·b/a
+        return a * c, a * s
+    # φ = π/2 − π/4·a/b: cos φ and sin φ are the sine and cosine of π/4·a/b
+    s, c = sincos_quarter(_PI_4 * (a / b))
+    return b * s, b * c
 
 
 @kernel
@@ -154,8 +154,8 @@ def uniform_sphere(u0, u1):
     """Uniform direction on the sphere (z = 1 − 2u0, φ = 2πu1); pdf = 1/(4π)."""
     z = 1.0 - 2.0 * u0
     r = math.sqrt(_np_max(0.0, 1.0 - z * z))
-    phi = 2.0 * _PI * u1
-    return (r * math.cos(phi), r * math.sin(phi), z)
+    s, c = sincos(2.0 * _PI * u1)
+    return (r * c, r * s, z)
 
 
 @kernel

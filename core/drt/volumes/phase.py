@@ -12,6 +12,7 @@ import math
 
 from ..kernels import kernel
 from ..kernels.vec3 import build_frame, to_world
+from ..sampling.trig import sincos
 
 INV_4PI = 0.25 / math.pi
 G_LIMIT = 1.0 - 1e-3
@@ -47,9 +48,9 @@ def hg_sample(d, g, u0, u1):
     (= the phase function's value: weight 1)."""
     c = hg_sample_cos(g, u0)
     s = math.sqrt(max(0.0, 1.0 - c * c))
-    phi = 2.0 * math.pi * u1
+    sin_phi, cos_phi = sincos(2.0 * math.pi * u1)
     t_ax, b_ax = build_frame(d)
-    wi = to_world((s * math.cos(phi), s * math.sin(phi), c), t_ax, b_ax, d)
+    wi = to_world((s * cos_phi, s * sin_phi, c), t_ax, b_ax, d)
     return wi, hg_pdf(c, g)
 
 
