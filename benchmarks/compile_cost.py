@@ -87,6 +87,14 @@ with open(out, "w") as f:
 """
 
 
+def _cache_env(cache):
+    """This environment with the kernel cache at ``cache`` (and no inherited numba cache)."""
+    env = dict(os.environ, DRT_CACHE_DIR=cache)
+    env.pop("NUMBA_CACHE_DIR", None)
+    env.pop("DRT_SET_NUMBA_CACHE_DIR", None)
+    return env
+
+
 def timeline(scene_path, cache, tmp):
     """Run the helpers of a first render of the scene into the empty ``cache``, each logging its
     entries; [(helper, [(k, name, linked, start s, end s), ...])], times from their start."""
@@ -97,9 +105,7 @@ def timeline(scene_path, cache, tmp):
     scene = load_scene(scene_path)
     variant, features = scene_kernel_variant(scene), CP.scene_features(scene)
     parts = max(CP.helper_count(), 1)
-    env = dict(os.environ, DRT_CACHE_DIR=cache)
-    env.pop("NUMBA_CACHE_DIR", None)
-    env.pop("DRT_SET_NUMBA_CACHE_DIR", None)
+    env = _cache_env(cache)
     t0 = time.time()
     procs, outs = [], []
     for part in range(parts):
@@ -121,11 +127,9 @@ def timeline(scene_path, cache, tmp):
 def _child(args, cache, events=None, serial=False):
     """Run the CLI in a child process with the kernel cache ``cache`` (``serial``: compiling on
     one core, without helpers); (wall s, CPU s)."""
-    env = dict(os.environ, DRT_CACHE_DIR=cache)
+    env = _cache_env(cache)
     if serial:
         env["DRT_NO_PRECOMPILE"] = "1"
-    env.pop("NUMBA_CACHE_DIR", None)
-    env.pop("DRT_SET_NUMBA_CACHE_DIR", None)
     cmd = [sys.executable, "-c", _CHILD, events or os.devnull, *args]
     t0 = time.perf_counter()
     r0 = os.times()
