@@ -51,9 +51,12 @@ _TWO_OVER_PI = 2.0 / math.pi
 def sincos_quarter(x):
     """(sin x, cos x) for |x| ≤ π/4 (radians)."""
     z = x * x
-    ps = _S0 + z * (_S1 + z * (_S2 + z * (_S3 + z * (_S4 + z * _S5))))
-    pc = _C0 + z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * _C5))))
-    return x + x * z * ps, 1.0 - 0.5 * z + z * z * pc
+    # Estrin's scheme (pairs of coefficients in parallel, then powers of z²), not Horner's:
+    # the samplers wait for this value, and Horner's rule chains all five multiply-adds
+    z2 = z * z
+    ps = (_S0 + z * _S1) + z2 * ((_S2 + z * _S3) + z2 * (_S4 + z * _S5))
+    pc = (_C0 + z * _C1) + z2 * ((_C2 + z * _C3) + z2 * (_C4 + z * _C5))
+    return x + x * z * ps, 1.0 - 0.5 * z + z2 * pc
 
 
 @kernel
