@@ -297,6 +297,44 @@ def test_rect_sampling_follows_the_paper():
         np.testing.assert_allclose(s.dist[i], dist, rtol=1e-9)
 
 
+@pytest.mark.parametrize("distance", [0.5, 40.0, 3000.0])
+def test_shape_tests_keep_their_edges(distance):
+    # the shape tests take no root and no division for a miss (drt.lights.point / area): rays
+    # aimed 1e-6 inside and outside a soft point light's facing disk and a rectangle's edges hit
+    # and miss, with the distance of the plane they hit, near and far
+    from drt.lights.area import AreaLight
+    r = 0.25
+    soft = dict(type="POINT", matrix_world=translate(0.3, -0.2, 1.0), power=50, radius=r,
+                soft_falloff=True)
+    rect = SHAPES["rect"]
+    rng = np.random.default_rng(3)
+    for light in (soft, rect):
+        ls = LightSet([light], (0, 0, 0), None)
+        center = np.asarray(light["matrix_world"])[:3, 3]
+        if light is rect:
+            a = AreaLight(light)
+            o = center + a.normal * distance + rng.normal(size=3) * 0.1 * distance * [1, 1, 0]
+            # points on the edges' midlines, a little inside and outside
+            edge = [a.ex * a.len_x / 2, -a.ex * a.len_x / 2, a.ey * a.len_y / 2, -a.ey * a.len_y / 2]
+            plane_n = a.normal
+        else:
+            o = center + distance * np.array([0.6, 0.0, 0.8])
+            plane_n = (o - center) / np.linalg.norm(o - center)
+            u = np.cross(plane_n, [0.0, 1.0, 0.0])
+            u /= np.linalg.norm(u)
+            v = np.cross(plane_n, u)
+            edge = [r * u, -r * u, r * v, r * (u + v) / math.sqrt(2)]
+        for e in edge:
+            for scale, expect in ((1 - 1e-6, True), (1 + 1e-6, False)):
+                q = center + scale * e
+                d = (q - o) / np.linalg.norm(q - o)
+                h = ls.intersect(o[None, :], d[None, :], np.inf)
+                assert bool(h.hit[0]) == expect, (light["type"], distance, scale)
+                if expect:
+                    t_plane = ((center - o) @ plane_n) / (d @ plane_n)
+                    assert h.t[0] == pytest.approx(t_plane, rel=1e-12)
+
+
 def test_area_back_side_is_dark_and_transparent():
     """Cycles: seen from behind an area light does not exist (a camera looking at the back of a
     visible area light sees the lit floor behind it: measured 1.036 at the centre pixel, bpy

@@ -321,22 +321,28 @@ def area_intersect(ld, i, o, d):
     if not denom < 0.0:
         return _INF
     center = load_col3(ld.lf, i, L_POS)
-    t = dot(sub(center, o), normal) / denom
-    if not (math.isfinite(t) and t > T_EPSILON):
+    oc = sub(o, center)
+    num = -dot(oc, normal)  # t = num/denom
+    if not num < 0.0:  # the plane is behind the origin (or the origin is in it)
         return _INF
-    x = ((o[0] + t * d[0]) - center[0], (o[1] + t * d[1]) - center[1],
-         (o[2] + t * d[2]) - center[2])
+    # the hit point relative to the centre, times −denom > 0: −denom·(oc + t·d), so that a
+    # miss (most rays) costs no division
+    s = -denom
+    x = (oc[0] * s - num * d[0], oc[1] * s - num * d[1], oc[2] * s - num * d[2])
     a = 2.0 * dot(x, load_col3(ld.lf, i, L_EX))
     b = 2.0 * dot(x, load_col3(ld.lf, i, L_EY))
-    len_x = ld.lf[i, L_LEN_X]
-    len_y = ld.lf[i, L_LEN_Y]
+    len_x = ld.lf[i, L_LEN_X] * s
+    len_y = ld.lf[i, L_LEN_Y] * s
     if (ld.li[i, I_IS_ELLIPSE] != 0):
         lx = a / len_x
         ly = b / len_y
         inside = lx * lx + ly * ly <= 1.0
     else:  # |a / len| <= 1 without the two divisions
         inside = abs(a) <= len_x and abs(b) <= len_y and len_x > 0.0 and len_y > 0.0
-    return t if inside else _INF
+    if not inside:
+        return _INF
+    t = num / denom
+    return t if math.isfinite(t) and t > T_EPSILON else _INF
 
 
 @scalar_kernel

@@ -187,13 +187,19 @@ def point_intersect(ld, i, o, d):
         t0, t1 = -b - root, -b + root
         tt = t0 if t0 > T_EPSILON else (t1 if t1 > T_EPSILON else _INF)
         return tt if ok and disc >= 0.0 else _INF
-    light_n, dist_c = _warps.normalize(oc)
-    denom = dot(d, light_n)
-    tt = -dist_c / denom if denom < 0.0 else _INF
-    tf = tt if math.isfinite(tt) else 0.0
-    x = ((o[0] + tf * d[0]) - pos[0], (o[1] + tf * d[1]) - pos[1], (o[2] + tf * d[2]) - pos[2])
-    inside = dot(x, x) <= r ** 2
-    return tt if ok and inside and tt > T_EPSILON else _INF
+    # the disk through pos facing o (normal oc/|oc|): a ray heading toward it (b = d·oc < 0)
+    # meets its plane at t = −|oc|²/b, at a squared distance |oc|²·|oc × d|²/b² from pos. Every
+    # shading point tests every shape this way, so the test takes no root and divides only
+    # for a hit (|oc × d|², not |oc|² − b², keeps a ray aimed at a far light accurate)
+    b = dot(d, oc)
+    if not b < 0.0:
+        return _INF
+    cx = (oc[1] * d[2] - oc[2] * d[1], oc[2] * d[0] - oc[0] * d[2], oc[0] * d[1] - oc[1] * d[0])
+    c2 = dot(oc, oc)
+    if not c2 * dot(cx, cx) <= (r * r) * (b * b):
+        return _INF
+    tt = -c2 / b
+    return tt if ok and tt > T_EPSILON else _INF
 
 
 @scalar_kernel
