@@ -454,3 +454,16 @@ def test_kernels_are_built_on_first_use():
     assert twice(3.0) == 6.0 and len(twice.overloads) == 1
     assert not next(iter(twice.overloads.values())).library.__dict__.get("_drt_linked", False)
     assert twice.__name__ == "twice" and "LazyKernel" not in repr(twice)
+
+
+def test_good_samples_drops_nan_inf_and_overflowing_radiance():
+    import numpy as np
+
+    from drt.path_stages import MAX_SAMPLE_RADIANCE, good_samples
+
+    rows = np.array([[1.0, 2.0, 3.0], [np.nan, 0.0, 0.0], [0.0, np.inf, 0.0], [0.0, 0.0, -np.inf],
+                     [MAX_SAMPLE_RADIANCE, -MAX_SAMPLE_RADIANCE, 0.0], [0.0, 2e18, 0.0], [-0.0, 0.0, 1e-300]])
+    good = np.empty(len(rows), dtype=bool)
+    assert good_samples(rows, good) == 3
+    expect = np.all(np.isfinite(rows) & (np.abs(rows) <= MAX_SAMPLE_RADIANCE), axis=1)
+    assert good.tolist() == expect.tolist() == [True, False, False, False, True, False, True]

@@ -424,14 +424,15 @@ class Integrator:
         # a NaN/Inf sample is counted, dropped (it does not enter its pixel's mean) and reported;
         # so is one beyond MAX_SAMPLE_RADIANCE, which would overflow the float32 passes
         radiance = out.radiance
-        good = np.all(np.isfinite(radiance) & (np.abs(radiance) <= MAX_SAMPLE_RADIANCE), axis=1)
+        good = np.empty(n, dtype=bool)
+        n_good = stages.good_samples(radiance, good)
         pixel = (np.asarray(row, dtype=np.int64) * self.s.width + np.asarray(x, dtype=np.int64))
         alpha, depth, normal, albedo = out.alpha, out.depth, out.normal, out.albedo
         mist = out.mist if self.mist_pass else None
         light = out.light if self.light_passes else None
         crypto = out.crypto if self.cryptomatte else None
         data, data_pixel = self._data_pass_rows(out, pixel, good)
-        nan_count = int(n - good.sum())
+        nan_count = n - n_good
         if nan_count:
             pixel, radiance, alpha, depth = pixel[good], radiance[good], alpha[good], depth[good]
             normal, albedo = normal[good], albedo[good]
