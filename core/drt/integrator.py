@@ -299,6 +299,14 @@ class Integrator:
         paths, shadow = ws
         return (stages.Paths(*(a[:n] for a in paths)), stages.ShadowRays(*(a[:n_shadow] for a in shadow)))
 
+    def _camera_samples(self, n: int) -> np.ndarray:
+        """This thread's (n, 5) scratch rows for the camera stage's samples (pixel filter, lens,
+        shutter time), reused from batch to batch as ``_workspace``."""
+        u = getattr(self._workspaces, "camera_u", None)
+        if u is None or len(u) < n:
+            u = self._workspaces.camera_u = np.empty((n, 5))
+        return u[:n]
+
     def _ao_workspace(self, n: int) -> stages.ShadowRays:
         """This thread's queue of Ambient Occlusion pass rays: n rows (one per path and bounce;
         ``path_stages.queue_ao_ray``), or zero rows for a render without the pass."""
@@ -389,7 +397,7 @@ class Integrator:
         md, regs, point = self._material_workspace()
         live = stages.camera_stage(sd, self.filter.data, self.camera.data, self.stage_settings,
                                    np.ascontiguousarray(x, dtype=np.int64), np.ascontiguousarray(row, dtype=np.int64),
-                                   np.ascontiguousarray(index, dtype=np.int64), paths, out)
+                                   np.ascontiguousarray(index, dtype=np.int64), self._camera_samples(n), paths, out)
         vd = self.media
         if vd.enabled:
             paths.vstack[:] = vd.camera_stack

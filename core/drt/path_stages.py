@@ -507,19 +507,27 @@ def glossy_blur(settings, paths, i):
 
 
 @kernel
-def camera_stage(sd, fd, cd, settings, x, row, index, paths, out):
+def camera_stage(sd, fd, cd, settings, x, row, index, u, paths, out):
     """Primary rays for camera samples (x column from the left, row from the TOP, sample index);
     initialises the outputs of every batch row and the path state of the samples that have a
     ray, compacted to the front (a panoramic camera has none outside its image: such a sample
-    carries nothing, black with alpha 1, as Cycles's). Returns how many paths there are."""
+    carries nothing, black with alpha 1, as Cycles's). Returns how many paths there are.
+    ``u``: (n, 5) float64 scratch rows for the samples (their values on return: the 5-D
+    samples, u2–u4 zero where the camera has no lens or the scene no motion)."""
     W, H = settings.width, settings.height
+    # pixel filter, lens and shutter time from one jointly stratified 5-D sample (D_PIXEL,
+    # D_LENS, D_TIME): with depth of field or motion blur the image depends on them together.
+    # All samples first, in a loop of their own: each is one long chain of integer hashes, and
+    # a short loop body lets the processor run several samples' chains at once
+    with_lens = cd.lens_radius > 0
+    for i in range(x.shape[0]):
+        u[i, 0], u[i, 1], u[i, 2], u[i, 3], u[i, 4] = sample_5d(sd, row[i] * W + x[i], index[i], D_PIXEL,
+                                                                with_lens, settings.motion)
     j = 0
     for i in range(x.shape[0]):
         pixel = row[i] * W + x[i]
         idx = index[i]
-        # pixel filter, lens and shutter time from one jointly stratified 5-D sample (D_PIXEL,
-        # D_LENS, D_TIME): with depth of field or motion blur the image depends on them together
-        u0, u1, l0, l1, tau = sample_5d(sd, pixel, idx, D_PIXEL, cd.lens_radius > 0, settings.motion)
+        u0, u1, l0, l1, tau = u[i, 0], u[i, 1], u[i, 2], u[i, 3], u[i, 4]
         dx, dy = filter_sample(fd, u0, u1)
         px = x[i] + 0.5 + dx
         py = (H - 1 - row[i]) + 0.5 + dy  # the camera wants v from the bottom
