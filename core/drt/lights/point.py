@@ -24,7 +24,7 @@ import numpy as np
 from . import _warps
 from .common import (POINT, SPOT, T_EPSILON, camera_visible, clip01, light_frame, luminance,
                      one_minus_cos_from_sin2, scalar_kernel)
-from ..kernels.vec3 import build_frame, dot, neg, sub
+from ..kernels.vec3 import build_frame, cross, dot, neg, sub
 from .common import I_IS_DELTA, I_IS_SPHERE, I_KIND, L_COS_HALF, L_INTENSITY, L_POS, L_RADIANCE, L_RADIUS, L_SPOT_DIR, L_SPOT_WIDTH  # noqa: F401 (table columns)
 from ..kernels.vec3 import load_col3
 
@@ -194,7 +194,7 @@ def point_intersect(ld, i, o, d):
     b = dot(d, oc)
     if not b < 0.0:
         return _INF
-    cx = (oc[1] * d[2] - oc[2] * d[1], oc[2] * d[0] - oc[0] * d[2], oc[0] * d[1] - oc[1] * d[0])
+    cx = cross(oc, d)
     c2 = dot(oc, oc)
     if not c2 * dot(cx, cx) <= (r * r) * (b * b):
         return _INF
