@@ -45,6 +45,9 @@ def main(argv=None) -> int:
     ap.add_argument("--bounce", type=int, default=0, help="the bounce (shade's depth_i) to capture")
     ap.add_argument("--resolution", default="256x256")
     ap.add_argument("--repeat", type=int, default=25)
+    ap.add_argument("--copy-only", type=int, default=0,
+                    help="of the repeats, how many only copy the input without calling shade "
+                         "(shade_instructions.py: equal copies in the runs it compares)")
     args = ap.parse_args(argv)
 
     import drt.integrator as integrator
@@ -74,8 +77,10 @@ def main(argv=None) -> int:
     batch = captured[0]
     live = batch[9]
     best = float("inf")
-    for _ in range(args.repeat):
+    for k in range(args.repeat):
         inputs = tuple(_fresh(x) for x in batch)
+        if k < args.copy_only:
+            continue
         t0 = time.perf_counter()
         shade(*inputs)
         best = min(best, time.perf_counter() - t0)
