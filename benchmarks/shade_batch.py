@@ -39,6 +39,26 @@ def _fresh(x):
     return x
 
 
+def _dump_code(shade, prefix: str) -> None:
+    """shade's machine code in this process: the bytes from its entry to the end of the memory
+    mapping that holds it (a little past the function: the listing's tail is other code), and
+    the entry's address, which valgrind's per-instruction counts are relative to."""
+    import ctypes
+
+    (cres,) = shade.overloads.values()
+    addr = cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
+    end = addr + 4096
+    with open("/proc/self/maps", encoding="ascii") as f:
+        for line in f:
+            lo, hi = (int(x, 16) for x in line.split()[0].split("-"))
+            if lo <= addr < hi:
+                end = hi
+    with open(prefix + ".bin", "wb") as f:
+        f.write(ctypes.string_at(addr, min(end - addr, 1 << 20)))
+    with open(prefix + ".addr", "w", encoding="ascii") as f:
+        f.write(f"{addr:#x}\n")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("scene", nargs="?", default=os.path.join(REPO, "blend_scenes", "cornell_box.npz"))
@@ -48,6 +68,9 @@ def main(argv=None) -> int:
     ap.add_argument("--copy-only", type=int, default=0,
                     help="of the repeats, how many only copy the input without calling shade "
                          "(shade_instructions.py: equal copies in the runs it compares)")
+    ap.add_argument("--dump-code", metavar="PREFIX", default=None,
+                    help="write shade's machine code (PREFIX.bin, from its first byte to the end of "
+                         "its memory mapping) and its address (PREFIX.addr) for shade_instructions.py")
     args = ap.parse_args(argv)
 
     import drt.integrator as integrator
@@ -84,6 +107,8 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         shade(*inputs)
         best = min(best, time.perf_counter() - t0)
+    if args.dump_code:
+        _dump_code(shade, args.dump_code)
     print(f"{os.path.basename(args.scene)} {w}x{h}, bounce {args.bounce}: {live} paths, shade best of "
           f"{args.repeat}: {best * 1e3:.2f} ms = {best / live * 1e9:.0f} ns a path")
     return 0
