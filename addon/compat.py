@@ -102,11 +102,41 @@ def positions(mesh) -> np.ndarray:
     return out.reshape(-1, 3)
 
 
+#: meshes with at least this many loop triangles get them from their raw arrays
+#: (``drt.mesh_tessellation``) instead of ``loop_triangles.foreach_get``, which walks Blender's RNA
+#: per triangle (~70 ms a million); below it the RNA read costs less than the first use of the
+#: compiled kernel in a fresh install
+RAW_TRIANGLES_MIN = 100_000
+
+
 def triangle_corners(mesh) -> np.ndarray:
-    """Corner (loop) indices of each loop triangle, (T, 3) int32."""
-    out = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
+    """Corner (loop) indices of each loop triangle, (T, 3) int32: Blender's own loop triangles,
+    rebuilt from the raw arrays for a large mesh of triangles and quads (exactly Blender's; see
+    ``drt.mesh_tessellation``), read through RNA otherwise."""
+    n_tri = len(mesh.loop_triangles)
+    if n_tri >= RAW_TRIANGLES_MIN:
+        fast = _triangle_corners_from_faces(mesh, n_tri)
+        if fast is not None:
+            return fast
+    out = np.empty(n_tri * 3, dtype=np.int32)
     mesh.loop_triangles.foreach_get("loops", out)
     return out.reshape(-1, 3)
+
+
+def _triangle_corners_from_faces(mesh, n_tri: int) -> np.ndarray | None:
+    """``triangle_corners`` from each triangle's face, the corners' vertices and the positions
+    (all raw copies), or None where that cannot be exact: an n-gon, a quad whose cut depends on
+    rounding, custom normals (Blender may then cut quads along a normal other than their own),
+    or a Blender without these arrays."""
+    if not hasattr(mesh, "loop_triangle_polygons") or getattr(mesh, "has_custom_normals", False):
+        return None
+    cv = _attribute(mesh, ".corner_vert", "CORNER", "value", 1)
+    pos = _attribute(mesh, "position", "POINT", "vector", 3)
+    if cv is None or pos is None:
+        return None
+    faces = np.empty(n_tri, dtype=np.int32)
+    mesh.loop_triangle_polygons.foreach_get("value", faces)
+    return core_module("mesh_tessellation").corner_triangles(faces, cv, pos)
 
 
 def corner_verts(mesh) -> np.ndarray:
@@ -139,13 +169,13 @@ def triangle_normals(mesh, tri_corners: np.ndarray, tri_verts: np.ndarray) -> np
         if mesh.normals_domain == "POINT":
             vn = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
             mesh.vertex_normals.foreach_get("vector", vn)
-            return vn.reshape(-1, 3)[tri_verts]
+            return np.take(vn.reshape(-1, 3), tri_verts, axis=0)
         cn = np.empty(len(mesh.loops) * 3, dtype=np.float32)
         mesh.corner_normals.foreach_get("vector", cn)
     else:  # <= 4.0: calc_normals_split() filled loop normals
         cn = np.empty(len(mesh.loops) * 3, dtype=np.float32)
         mesh.loops.foreach_get("normal", cn)
-    return cn.reshape(-1, 3)[tri_corners]
+    return np.take(cn.reshape(-1, 3), tri_corners, axis=0)
 
 
 def active_uvs(mesh) -> np.ndarray | None:
@@ -176,7 +206,7 @@ def triangle_tangents(mesh, uv_name: str, tri_corners: np.ndarray):
     mesh.loops.foreach_get("tangent", tangent)
     mesh.loops.foreach_get("bitangent_sign", sign)
     mesh.free_tangents()
-    return tangent.reshape(n, 3)[tri_corners], sign[tri_corners]
+    return np.take(tangent.reshape(n, 3), tri_corners, axis=0), np.take(sign, tri_corners)
 
 
 def _tangents_of_triangles(mesh, layer, tri_corners: np.ndarray):

@@ -228,6 +228,61 @@ def test_smooth_normals_and_uvs(fresh):
     assert res.arrays["mesh0.uvs"].shape == (len(n), 3, 2)
 
 
+def _rna_triangle_corners(mesh):
+    out = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+    mesh.loop_triangles.foreach_get("loops", out)
+    return out.reshape(-1, 3)
+
+
+@pytest.mark.parametrize("face_normals_cached", [False, True])
+def test_loop_triangles_from_raw_arrays_are_blenders(fresh, monkeypatch, face_normals_cached):
+    """A large mesh's loop triangles are rebuilt from its raw arrays (drt.mesh_tessellation)
+    instead of read through RNA: exactly Blender's, on convex and concave quads, a bumpy
+    subdivided grid and a sphere, whichever of its two quad tests Blender ran (it depends on
+    whether the face normals are cached); meshes it cannot be sure of fall back to Blender's."""
+    from addon import compat
+
+    monkeypatch.setattr(compat, "RAW_TRIANGLES_MIN", 1)
+    rng = np.random.default_rng(3)
+    # darts: planar quads with a reflex corner at a random position, randomly rotated
+    dart = np.array([(0, 0, 0), (0.8, 0.8, 0), (2, 0, 0), (1, 2, 0)], float)
+    verts, faces = [], []
+    for k in range(400):
+        q = np.roll(dart, rng.integers(4), axis=0) * rng.uniform(0.01, 3.0)
+        a, b = rng.uniform(0, 2 * np.pi, 2)
+        rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+        rx = np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+        verts.extend(q @ (rx @ rz).T + rng.normal(size=3) * 5)
+        faces.append([4 * k, 4 * k + 1, 4 * k + 2, 4 * k + 3])
+    darts = C.mesh_object("Darts", [tuple(v) for v in verts], faces, [C.diffuse("M", (0.5, 0.5, 0.5))])
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=60, y_subdivisions=60, size=4)
+    grid = bpy.context.object
+    co = np.empty(len(grid.data.vertices) * 3, np.float32)
+    grid.data.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    co[:, 2] += rng.normal(size=len(co)).astype(np.float32) * 0.005
+    grid.data.vertices.foreach_set("co", co.ravel())
+    grid.data.update()
+    grid.modifiers.new("Subdivision", "SUBSURF").levels = 1
+    ball = C.uv_sphere("Ball", 1.0, (0, 0, 3), C.diffuse("B", (0.5, 0.5, 0.5)), segments=48, rings=24)
+    pentagon = C.mesh_object("Pentagon", [(0, 0, 0), (1, 0, 0), (1.5, 1, 0), (0.5, 1.5, 0), (-0.5, 1, 0)],
+                             [[0, 1, 2, 3, 4]], [C.diffuse("P", (0.5, 0.5, 0.5))])
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    rebuilt = {}
+    for obj in (darts, grid, ball, pentagon):
+        mesh = obj.evaluated_get(depsgraph).to_mesh()
+        try:
+            if face_normals_cached:
+                mesh.polygons[0].normal  # noqa: B018 -- computes (and caches) every face normal
+            compat.prepare_mesh(mesh)
+            fast = compat._triangle_corners_from_faces(mesh, len(mesh.loop_triangles))
+            rebuilt[obj.name] = fast is not None
+            np.testing.assert_array_equal(compat.triangle_corners(mesh), _rna_triangle_corners(mesh))
+        finally:
+            obj.evaluated_get(depsgraph).to_mesh_clear()
+    assert rebuilt == {"Darts": True, "Grid": True, "Ball": True, "Pentagon": False}
+
+
 def test_flat_mesh_has_no_normals(fresh):
     C.box("Box", (1, 1, 1), (0, 0, 0), C.diffuse("M", (0.5, 0.5, 0.5)))
     res = export_current()
