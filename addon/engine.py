@@ -155,7 +155,7 @@ class DRTRenderEngine(bpy.types.RenderEngine):
         if not kernels.kernels_compiled(variant):  # the first render of an install compiles
             self.report({"INFO"}, f"DRT: {kernels.COMPILING_NOTICE}")
         self.update_stats("", "DRT | Building acceleration structures")
-        context = render_mod.prepare(drt_scene)
+        context = render_mod.prepare(drt_scene, threads=render_threads(scene))
         for w in getattr(context, "warnings", []):
             self.report({"WARNING"}, f"DRT: {w}")
         if not kernels.kernels_compiled(variant):

@@ -32,6 +32,7 @@ from .film import Film, luminance
 from .geometry import build_geometry
 from .integrator import Integrator
 from .kernels import mark_kernels_compiled, scene_kernel_variant
+from .kernels.row_chunks import preparation_threads
 from .compile_plan import mark_features_compiled, precompile, scene_features
 from .lights import EmissiveTriangles, LightSet
 from .materials import MaterialTable
@@ -175,11 +176,17 @@ def world_setup(wp: dict, pd):
 
 def prepare(scene: Scene, *, seed: int | None = None, sampler: str | None = None,
             direct: str | None = None, indirect: str | None = None,
-            samples: int | None = None) -> RenderContext:
+            samples: int | None = None, threads: int | None = None) -> RenderContext:
     """Build the tracer, material table, lights and camera for ``scene``. Arguments that are
     not None override the scene's render settings. ``samples``: the camera samples the
     renders will trace (default: the frame's pixels × the scene's spp), a hint for the BVH
-    build (``Tracer``): any number renders the same image."""
+    build (``Tracer``): any number renders the same image. ``threads``: how many threads the
+    per-triangle work may use (default: every core; ``drt.kernels.row_chunks``)."""
+    with preparation_threads(threads):
+        return _prepare(scene, seed, sampler, direct, indirect, samples)
+
+
+def _prepare(scene, seed, sampler, direct, indirect, samples) -> RenderContext:
     t0 = time.perf_counter()
     overrides = {k: v for k, v in (("seed", seed), ("sampler", sampler), ("direct", direct), ("indirect", indirect)) if v is not None}
     settings = replace(scene.render, **overrides)
@@ -446,7 +453,7 @@ def render(
                           "width": scene.render.width, "height": scene.render.height})
         return film
     ctx = context or prepare(scene, seed=seed, sampler=sampler, direct=direct, indirect=indirect,
-                             samples=len(xs_all) * count)
+                             samples=len(xs_all) * count, threads=threads)
     integ = ctx.integrator
     _use_sampling_arguments(integ, spp, seed, sampler, direct, indirect)
     xs, ys = xs_all, ys_all

@@ -37,6 +37,7 @@ from .embree_direct import occluded1_at, ray_buffer, trace1_at
 from .embree_mesh import deforming_scene, triangle_scene
 from .geometry import SceneGeometry
 from .kernels import inline_kernel, kernel
+from .kernels.row_chunks import over_rows
 from .kernels.vec3 import cross, dot, load, store, sub
 from .motion import apply_rows, motion_at
 
@@ -189,7 +190,8 @@ def _unit_face_normals(positions, triangles) -> np.ndarray:
     float64; zero rows for degenerate (zero-area) triangles. Float32 storage keeps a
     4M-triangle scene at 48 MB; the direction is still good to ~1e-7."""
     out = np.empty((len(triangles), 3), dtype=np.float32)
-    _face_normals_into(np.ascontiguousarray(positions), np.ascontiguousarray(triangles), out)
+    over_rows(_face_normals_into, (np.ascontiguousarray(positions), np.ascontiguousarray(triangles), out),
+              sliced=(1, 2))
     return out
 
 
