@@ -141,14 +141,15 @@ def test_terminator_arrays_only_for_smooth_faces():
 
     sphere_scene(0.1, smooth=False)
     res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
-    cut, corners = terminator_arrays(build_geometry(scene_from_dict(res.header, res.arrays)))
-    assert cut.shape == (0,) and corners.shape == (0, 3, 3)
+    cut, positions, triangles = terminator_arrays(build_geometry(scene_from_dict(res.header, res.arrays)))
+    assert cut.shape == (0,) and positions.shape == (0, 3) and triangles.shape == (0, 3)
     sphere_scene(0.1)
     res = export_depsgraph(bpy.context.evaluated_depsgraph_get())
     geom = build_geometry(scene_from_dict(res.header, res.arrays))
-    cut, corners = terminator_arrays(geom)
+    cut, positions, triangles = terminator_arrays(geom)
     assert cut.shape == (geom.triangle_count,) and np.all(cut == np.float32(0.1))
-    np.testing.assert_array_equal(corners, geom.static_positions[geom.static_triangles])
+    # the tracer's own arrays, not copies
+    assert positions is geom.static_positions and triangles is geom.static_triangles
 
 
 def test_suzanne_matches_cycles(tmp_path, monkeypatch):

@@ -189,12 +189,12 @@ class Integrator:
         self.n_registers = max(int(max((m["program"]["registers"] for m in src[0] if m.get("program")),
                                        default=0)) if src is not None else 0, int(world_registers))
         normals = geom.normals if geom.normals is not None else np.zeros((0, 3, 3), np.float32)
-        term_cut, term_corners = terminator_arrays(geom)  # shadow terminator offset (drt.terminator)
+        term_cut, term_pos, term_tri = terminator_arrays(geom)  # shadow terminator offset (drt.terminator)
         self.surfaces = stages.Surfaces(
             material=np.ascontiguousarray(geom.material, dtype=np.int32),
             normals=np.ascontiguousarray(normals, dtype=np.float32),
             has_normals=np.ascontiguousarray(geom.has_normals, dtype=bool),
-            terminator=term_cut, corners=term_corners, shading_mult=shading_multipliers(geom),
+            terminator=term_cut, positions=term_pos, triangles=term_tri, shading_mult=shading_multipliers(geom),
             visibility=(np.ascontiguousarray(geom.visibility, dtype=np.uint8) if geom.visibility is not None
                         else np.zeros(0, np.uint8)),
             pass_ids=(np.ascontiguousarray(geom.pass_ids, dtype=np.float32)

@@ -169,7 +169,9 @@ Surfaces = namedtuple("Surfaces", [
     "normals",        # (T, 3, 3) float32 per-corner shading normals ((0, 3, 3): none in the scene)
     "has_normals",    # (T,) bool
     "terminator",     # (T,) float32 shadow terminator geometry offset ((0,): none; drt.terminator)
-    "corners",        # (T, 3, 3) float32 world vertex positions, with ``terminator`` ((0, 3, 3): none)
+    "positions",      # (V, 3) float32 world (camera-shifted) vertices of the static triangles, with
+                      # ``terminator`` ((0, 3): none)
+    "triangles",      # (T_static, 3) int32 their vertex indices, with ``terminator`` ((0, 3): none)
     "shading_mult",   # (T,) float32 shadow terminator shading-offset multiplier ((0,): none)
     "visibility",     # (T,) uint8 VIS_* bits of the rays that see each triangle, with VIS_HOLDOUT
                       # on holdout objects' ((0,): all see all, no holdout)

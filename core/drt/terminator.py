@@ -13,8 +13,11 @@ blended in only for light directions near the terminator: ``offset_amount`` ramp
 light at least ``cutoff`` above the geometric plane) to 1.
 
 Data: ``Surfaces.terminator`` (T,) float32 the cutoff per global triangle (0: none; zero-size
-when no object uses it) and ``Surfaces.corners`` (T, 3, 3) float32 the triangle's world
-(camera-shifted) vertex positions. Smooth normals are ``Surfaces.normals`` (world, unit).
+when no object uses it), ``Surfaces.positions`` (V, 3) float32 the static triangles' world
+(camera-shifted) vertices and ``Surfaces.triangles`` (T_static, 3) int32 their indices (the
+tracer's own arrays, not a per-corner copy: a million triangles' corners were 37 MB and ~15 ms
+of every render's start, most of it the first touch of the new memory). Smooth normals are
+``Surfaces.normals`` (world, unit).
 Everything is in world space: Cycles works in object space for objects whose transform it does
 not apply (instances), which differs only under non-uniform scale. Moving objects get no offset.
 """
@@ -25,10 +28,11 @@ import math
 import numpy as np
 
 from .kernels import inline_kernel, kernel
+from .kernels.row_chunks import over_rows
 from .kernels.vec3 import add, dot, neg, normalize, scale, sub
 from .trace import offset_point
 
-NO_TERMINATOR = (np.zeros(0, np.float32), np.zeros((0, 3, 3), np.float32))
+NO_TERMINATOR = (np.zeros(0, np.float32), np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32))
 
 
 def shading_multipliers(geom) -> np.ndarray:
@@ -57,19 +61,20 @@ def shading_factor(surf, prim, cos_in):
     return max(math.cos(math.acos(c) * k), 0.0) / c
 
 
-def terminator_arrays(geom) -> tuple[np.ndarray, np.ndarray]:
-    """(cutoff (T,), corners (T, 3, 3)) float32 for ``Surfaces``, or zero-size arrays when no
-    triangle needs an offset. Triangles whose three corner normals are equal (flat faces of a
-    smooth mesh) get cutoff 0: their smooth surface is the facet, the offset would be 0."""
+def terminator_arrays(geom) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(cutoff (T,) float32, positions (V, 3) float32, triangles (T_static, 3) int32) for
+    ``Surfaces``, or zero-size arrays when no triangle needs an offset. Triangles whose three
+    corner normals are equal (flat faces of a smooth mesh) get cutoff 0: their smooth surface
+    is the facet, the offset would be 0. Moving triangles (after the static ones) get none."""
     cut = getattr(geom, "terminator", None)
     if cut is None or geom.normals is None:
         return NO_TERMINATOR
     out = np.empty(len(cut), np.float32)
-    if not _smooth_cutoffs(np.asarray(cut, np.float32), geom.normals, geom.has_normals, out):
+    if not any(over_rows(_smooth_cutoffs, (np.asarray(cut, np.float32), geom.normals, geom.has_normals, out),
+                         sliced=(0, 1, 2, 3))):
         return NO_TERMINATOR
-    corners = np.zeros((len(cut), 3, 3), np.float32)
-    _static_corners(geom.static_positions, geom.static_triangles, corners)  # moving: no offset
-    return out, corners
+    return (out, np.ascontiguousarray(geom.static_positions, np.float32),
+            np.ascontiguousarray(geom.static_triangles, np.int32))
 
 
 @kernel
@@ -93,27 +98,17 @@ def _smooth_cutoffs(cut, normals, has_normals, out):
     return any_cut
 
 
-@kernel
-def _static_corners(positions, triangles, corners):
-    """corners[t, c] = positions[triangles[t, c]] for the static triangles."""
-    for t in range(triangles.shape[0]):
-        for c in range(3):
-            v = triangles[t, c]
-            for k in range(3):
-                corners[t, c, k] = positions[v, k]
-
-
 @inline_kernel
 def _corner(a, k):
     return (float(a[k, 0]), float(a[k, 1]), float(a[k, 2]))
 
 
 @inline_kernel
-def smooth_surface_offset(v, nc, b0, b1, b2, ng):
+def smooth_surface_offset(v0, v1, v2, nc, b0, b1, b2, ng):
     """Cycles's ``shadow_ray_smooth_surface_offset``: the lift (a vector along the interpolated,
     unnormalised normal) from the facet point with barycentrics (b0, b1, b2) to the smooth
-    surface; ``ng`` the geometric normal on the side the shadow ray leaves from."""
-    v0, v1, v2 = _corner(v, 0), _corner(v, 1), _corner(v, 2)
+    surface; v0, v1, v2 the facet's vertices, ``nc`` (3, 3) its corner normals, ``ng`` the
+    geometric normal on the side the shadow ray leaves from."""
     n0, n1, n2 = normalize(_corner(nc, 0))[0], normalize(_corner(nc, 1))[0], normalize(_corner(nc, 2))[0]
     p = add(add(scale(v0, b0), scale(v1, b1)), scale(v2, b2))
     n = add(add(scale(n0, b0), scale(n1, b1)), scale(n2, b2))
@@ -172,8 +167,10 @@ def shadow_origin(surf, hits, i, prim, p, ng, ns, wo, wi):
         amount = min(max(1.0 - ngl / cutoff, 0.0), 1.0)
     if amount > 0.0:
         b1, b2 = hits.b1[i], hits.b2[i]
-        lift = scale(smooth_surface_offset(surf.corners[prim], surf.normals[prim], 1.0 - b1 - b2, b1, b2,
-                                           ng_c), amount)
+        pos, tri = surf.positions, surf.triangles
+        lift = scale(smooth_surface_offset(_corner(pos, tri[prim, 0]), _corner(pos, tri[prim, 1]),
+                                           _corner(pos, tri[prim, 2]), surf.normals[prim],
+                                           1.0 - b1 - b2, b1, b2, ng_c), amount)
         if dot(lift, ng_c) > 0.0:
             return offset_point(add(p, lift), ng, wi), True
     return offset_point(p, ng, wi), False
