@@ -126,9 +126,13 @@ def triangle_corners(mesh) -> np.ndarray:
 def _triangle_corners_from_faces(mesh, n_tri: int) -> np.ndarray | None:
     """``triangle_corners`` from each triangle's face, the corners' vertices and the positions
     (all raw copies), or None where that cannot be exact: an n-gon, a quad whose cut depends on
-    rounding, custom normals (Blender may then cut quads along a normal other than their own),
-    or a Blender without these arrays."""
-    if not hasattr(mesh, "loop_triangle_polygons") or getattr(mesh, "has_custom_normals", False):
+    rounding, or a Blender without these arrays. Custom normals (every imported OBJ, FBX or
+    glTF mesh has them) leave the cut alone up to Blender 5.0 (checked: flipped and random
+    custom normals, tests/test_export.py); later versions may derive cached face normals from
+    them, so there such meshes keep the RNA read."""
+    if not hasattr(mesh, "loop_triangle_polygons"):
+        return None
+    if getattr(mesh, "has_custom_normals", False) and BLENDER_VERSION >= (5, 1, 0):
         return None
     cv = _attribute(mesh, ".corner_vert", "CORNER", "value", 1)
     pos = _attribute(mesh, "position", "POINT", "vector", 3)

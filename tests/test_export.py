@@ -255,6 +255,14 @@ def test_loop_triangles_from_raw_arrays_are_blenders(fresh, monkeypatch, face_no
         verts.extend(q @ (rx @ rz).T + rng.normal(size=3) * 5)
         faces.append([4 * k, 4 * k + 1, 4 * k + 2, 4 * k + 3])
     darts = C.mesh_object("Darts", [tuple(v) for v in verts], faces, [C.diffuse("M", (0.5, 0.5, 0.5))])
+    # the same darts with custom normals pointing against their faces (an imported mesh has
+    # custom normals; Blender's cut must not follow them)
+    flipped = C.mesh_object("Flipped", [tuple(v) for v in verts], faces, [C.diffuse("M", (0.5, 0.5, 0.5))])
+    q = np.asarray(verts).reshape(-1, 4, 3)
+    face_n = np.cross(q[:, 2] - q[:, 0], q[:, 3] - q[:, 1])
+    face_n /= np.linalg.norm(face_n, axis=1, keepdims=True)
+    flipped.data.normals_split_custom_set(np.repeat(-face_n, 4, axis=0).tolist())
+    assert flipped.data.has_custom_normals
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=60, y_subdivisions=60, size=4)
     grid = bpy.context.object
     co = np.empty(len(grid.data.vertices) * 3, np.float32)
@@ -269,7 +277,7 @@ def test_loop_triangles_from_raw_arrays_are_blenders(fresh, monkeypatch, face_no
                              [[0, 1, 2, 3, 4]], [C.diffuse("P", (0.5, 0.5, 0.5))])
     depsgraph = bpy.context.evaluated_depsgraph_get()
     rebuilt = {}
-    for obj in (darts, grid, ball, pentagon):
+    for obj in (darts, flipped, grid, ball, pentagon):
         mesh = obj.evaluated_get(depsgraph).to_mesh()
         try:
             if face_normals_cached:
@@ -280,7 +288,8 @@ def test_loop_triangles_from_raw_arrays_are_blenders(fresh, monkeypatch, face_no
             np.testing.assert_array_equal(compat.triangle_corners(mesh), _rna_triangle_corners(mesh))
         finally:
             obj.evaluated_get(depsgraph).to_mesh_clear()
-    assert rebuilt == {"Darts": True, "Grid": True, "Ball": True, "Pentagon": False}
+    assert rebuilt == {"Darts": True, "Flipped": compat.BLENDER_VERSION < (5, 1, 0), "Grid": True, "Ball": True,
+                       "Pentagon": False}
 
 
 def test_flat_mesh_has_no_normals(fresh):
