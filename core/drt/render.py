@@ -51,6 +51,13 @@ MIN_BATCH_PATHS = 1 << 12
 #: how often cancel() is polled while a batch runs: a viewport edit waits at most this long
 #: (plus the batches in flight) before its new image starts; 100 wake-ups/s cost nothing
 CANCEL_POLL_SECONDS = 0.01
+#: batches submitted per worker thread beyond the one each runs (plus one more in all):
+#: collection is in submission order, so while the main thread waits for the oldest batch, a
+#: worker that finishes a shorter one needs others already queued. With one queued batch in all
+#: (threads + 1 in flight, until 2026-12-07) the two workers of a 256² all_lights render at 16
+#: spp idled 38–55 ms of its ~0.19 s with nothing submitted (head-of-line blocking); with one
+#: per thread 9–16 ms, with two 0–10 ms (render 0.187–0.189 → 0.164–0.169 s)
+BATCHES_QUEUED_PER_THREAD = 2
 #: worker threads per core at most: the kernels are CPU-bound, so threads beyond the cores only
 #: cost memory (each holds a batch's path arrays, ~18 MB: a 512² render took 272 MB with 2
 #: threads and 819 MB with 32 on 2 cores, and ran slower); a larger request (``--threads 999``)
@@ -502,14 +509,16 @@ def render(
         _collect(batch, film, stats, tick, total_paths, workers, t0, to_film)
 
     # Passes follow each other without a barrier: the next pass's batches are submitted while
-    # the last ones of this pass still run (threads + 1 batches in flight), so no thread idles
-    # at a pass's end. Batches are collected in submission order, so the film adds every
-    # pixel's samples in pass order whatever the timing (same image at any thread count), and
+    # the last ones of this pass still run (``in_flight`` batches: each thread's own and
+    # BATCHES_QUEUED_PER_THREAD more per thread), so no thread idles at a pass's end. Batches
+    # are collected in submission order, so the film adds every pixel's samples in pass order
+    # whatever the timing (same image at any thread count), and
     # when a pass's last batch is collected the film holds exactly the passes up to it: the
     # progress callback, the cancel check and adaptive sampling see it then. A pass whose
     # pixels adaptive sampling chooses from the film waits for the passes before it.
     stop = False  # cancelled, or adaptive sampling found every pixel converged
     pending: deque = deque()  # (future, samples per pixel of the pass it ends, or 0)
+    in_flight = threads * (1 + BATCHES_QUEUED_PER_THREAD) + 1
 
     def end_of_pass(k: int) -> None:
         nonlocal xs, ys, cancelled, done, stop
@@ -561,7 +570,7 @@ def render(
                     if cancel is not None and cancel():
                         raise _Cancelled
                     pending.append((workers.submit(*b), k if j == len(cut) - 1 else 0))
-                    while len(pending) >= threads + 1 and not stop:
+                    while len(pending) >= in_flight and not stop:
                         finish_one()
                     if stop:
                         break
