@@ -16,8 +16,9 @@ whether the mesh's face normals happen to be cached:
 - ``…_with_normal``: with t = (v2−v0)×n (n the face normal), flip when v3·t ≥ v0·t or
   v1·t ≤ v0·t.
 
-Both agree on every quad whose answer is clear; near the boundary (a degenerate, folded or
-nearly collinear quad) float32 rounding, and which test ran, decide. So each test is evaluated
+They agree on planar quads away from the boundary. Near it (a degenerate, folded or nearly
+collinear quad) float32 rounding decides, and on strongly twisted quads the two tests can
+disagree outright (14–25 % of random twisted quads). So each test is evaluated
 here in float64 with a bound on Blender's float32 rounding, and a quad whose two tests do not
 both clear their bounds with the same answer is *ambiguous*: the caller then reads Blender's own
 loop triangles (the result is Blender's either way; only the time differs). N-gons (five corners
