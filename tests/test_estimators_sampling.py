@@ -142,10 +142,10 @@ def test_batches_reuse_returned_output_buffers_without_changing_the_image(monkey
     original = integrator_module.Integrator._outputs
 
     def counting(self, n):
-        buffers, views = original(self, n)
+        buffers, views, pixel = original(self, n)
         if not any(buffers is b for b in allocated):  # (the list keeps them alive: no id reuse)
             allocated.append(buffers)
-        return buffers, views
+        return buffers, views, pixel
 
     monkeypatch.setattr(integrator_module.Integrator, "_outputs", counting)
     reused = render(scene, spp=16, threads=3, context=ctx, max_batch_paths=4096)

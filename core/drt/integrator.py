@@ -21,6 +21,7 @@ from __future__ import annotations
 import collections
 import functools
 import threading
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -39,6 +40,7 @@ from .path_stages import (D_BOUNCE0, D_LENS, D_PIXEL, D_TIME, DIMS_PER_BOUNCE,  
 from .sampling.pixel_filter import PixelFilter
 from .sampling.sequences import Sampler
 from .scene import VIS_ALL, VIS_HOLDOUT, VIS_SHADOW, RenderSettings
+from .scratch import Scratch
 from .terminator import shading_multipliers, terminator_arrays
 from .trace import Tracer
 from .kernels import kernel_variant
@@ -178,7 +180,12 @@ class Integrator:
         # of a scene with a microfacet lobe (drt.materials.table.filtered_alpha)
         self.filters_glossy = self.stage_settings.filter_glossy > 0.0 and bool(
             np.isin(materials.data.lobe_type, BLURRED_LOBES).any())
-        self._workspaces = threading.local()
+        # a batch's working arrays (path state, scratch, ...) are a workspace it holds while it
+        # runs (``_held``: the one of the batch this thread runs) and gives back to
+        # ``_idle_workspaces`` after; the next batch, on any thread and in any later render with
+        # this integrator, takes it up again (``_enter_workspace``)
+        self._held = threading.local()
+        self._idle_workspaces = collections.deque()
         self._returned_outputs = collections.deque()  # per-batch output buffers (``_outputs``)
         # material programs (textures): a thread rewrites its own copy of the material data
         # (``programs``: built by the caller when it also holds the world's program, see
@@ -250,20 +257,49 @@ class Integrator:
         return stages.HitArrays(prim=hits.prim, t=hits.t, b1=hits.b1, b2=hits.b2, p=hits.p,
                                 ng=hits.ng, normal_xform=xform, moving=moving)
 
+    def _ws(self) -> SimpleNamespace:
+        """The workspace of the batch this thread runs (outside a batch, e.g. a test's call:
+        one of this thread's own)."""
+        ws = getattr(self._held, "ws", None)
+        if ws is None:
+            ws = self._held.ws = SimpleNamespace()
+        return ws
+
+    def _enter_workspace(self) -> None:
+        """A batch starts on this thread: it takes an idle workspace (arrays a batch of an
+        earlier render or on another thread filled: no fresh pages) or a new one. Nested entries
+        (``render_pixels`` → ``render_batch``) keep the outer one."""
+        held = self._held
+        if getattr(held, "depth", 0):
+            held.depth += 1
+            return
+        try:
+            held.ws = self._idle_workspaces.pop()  # (deque: atomic append and pop)
+        except IndexError:
+            held.ws = SimpleNamespace()
+        held.depth = 1
+
+    def _leave_workspace(self) -> None:
+        held = self._held
+        held.depth -= 1
+        if held.depth == 0:
+            self._idle_workspaces.append(held.ws)
+            held.ws = None
+
     def _material_workspace(self):
-        """This thread's (material data, register file, shading-point rows): the shared read-only table when no
+        """The batch's (material data, register file, shading-point rows): the shared read-only table when no
         material has a program, else a private copy that ``shade`` rewrites per textured hit."""
-        ws = getattr(self._workspaces, "materials", None)
+        ws = getattr(self._ws(), "materials", None)
         if ws is None:
             md = self.materials.data
             if self.material_programs:
                 md = type(md)(*(np.array(a, copy=True) for a in md))
-            ws = self._workspaces.materials = (md, np.zeros((max(self.n_registers, 1), 3)),
-                                               point_rows())
+            ws = self._ws().materials = (md, np.zeros((max(self.n_registers, 1), 3)), point_rows())
         return ws
 
-    def _outputs(self, n: int) -> tuple[stages.Outputs, stages.Outputs]:
-        """(buffers, views of their first n rows) for a batch's per-path outputs: buffers a
+    def _outputs(self, n: int) -> tuple[tuple, stages.Outputs, np.ndarray]:
+        """(buffers, views of their first n rows, the first n of their (n,) int64 pixel ids) for
+        a batch's per-path outputs and the pixels they go to: buffers a
         consumer gave back (``SampleBatch.release``) when one is large enough, else new arrays.
         Like the path state (``_workspace``), and for the same reason: fresh arrays cost a page
         fault and a zeroed page per 4 KB every batch — measured, a camera stage writing into
@@ -274,47 +310,57 @@ class Integrator:
             try:
                 buffers = self._returned_outputs.pop()  # (deque: atomic append and pop)
             except IndexError:
-                buffers = stages.Outputs(radiance=np.empty((n, 3)), alpha=np.empty(n), depth=np.empty(n),
-                                         normal=np.empty((n, 3)), albedo=np.empty((n, 3)),
-                                         eye=np.empty((n, 3)), forward=np.empty((n, 3)),
-                                         mist=np.empty(n if self.mist_pass else 0),
-                                         data=np.empty((n if self.data_passes else 0, stages.DATA_COLUMNS)),
-                                         light=np.empty((n if self.light_passes else 0, stages.LIGHT_COLUMNS)),
-                                         crypto=np.empty((n if self.cryptomatte else 0, CRYPTO_SURFACES,
-                                                          CRYPTO_COLUMNS)))
+                buffers = (stages.Outputs(radiance=np.empty((n, 3)), alpha=np.empty(n), depth=np.empty(n),
+                                          normal=np.empty((n, 3)), albedo=np.empty((n, 3)),
+                                          eye=np.empty((n, 3)), forward=np.empty((n, 3)),
+                                          mist=np.empty(n if self.mist_pass else 0),
+                                          data=np.empty((n if self.data_passes else 0, stages.DATA_COLUMNS)),
+                                          light=np.empty((n if self.light_passes else 0, stages.LIGHT_COLUMNS)),
+                                          crypto=np.empty((n if self.cryptomatte else 0, CRYPTO_SURFACES,
+                                                           CRYPTO_COLUMNS))),
+                           np.empty(n, dtype=np.int64))
                 break
-            if buffers.alpha.shape[0] >= n:
+            if buffers[1].shape[0] >= n:
                 break  # (a smaller one is dropped; a new set of this batch's size replaces it)
-        return buffers, stages.Outputs(*(a[:n] for a in buffers))
+        return buffers, stages.Outputs(*(a[:n] for a in buffers[0])), buffers[1][:n]
 
     def _workspace(self, n: int) -> tuple[stages.Paths, stages.ShadowRays]:
-        """This thread's path and shadow-ray arrays, at least n rows (views of the first n).
-        Reused from batch to batch: fresh arrays would cost a page fault per 4 KB every batch."""
-        ws = getattr(self._workspaces, "arrays", None)
+        """The batch's path and shadow-ray arrays, at least n rows (views of the first n).
+        Reused from batch to batch (and render to render, ``_enter_workspace``): fresh arrays
+        would cost a page fault per 4 KB every batch."""
+        ws = getattr(self._ws(), "arrays", None)
         # a path in a medium may queue two shadow rays per bounce (volume + surface NEE)
         n_shadow = 2 * n if self.media.enabled else n
         if ws is None or len(ws[0].slot) < n or len(ws[1].slot) < n_shadow:
-            ws = self._workspaces.arrays = (_paths(n, self.sss is not None, self.filters_glossy),
-                                            _shadow_rays(n_shadow))
+            ws = self._ws().arrays = (_paths(n, self.sss is not None, self.filters_glossy),
+                                      _shadow_rays(n_shadow))
         paths, shadow = ws
         return (stages.Paths(*(a[:n] for a in paths)), stages.ShadowRays(*(a[:n_shadow] for a in shadow)))
 
+    def _scratch(self) -> Scratch:
+        """The batch's arrays for the tracer's queries (``drt.scratch``): the render loop's
+        hits and shadow tests are views into them, dead by the batch's next query."""
+        sc = getattr(self._ws(), "scratch", None)
+        if sc is None:
+            sc = self._ws().scratch = Scratch()
+        return sc
+
     def _camera_samples(self, n: int) -> np.ndarray:
-        """This thread's (n, 5) scratch rows for the camera stage's samples (pixel filter, lens,
+        """The batch's (n, 5) scratch rows for the camera stage's samples (pixel filter, lens,
         shutter time), reused from batch to batch as ``_workspace``."""
-        u = getattr(self._workspaces, "camera_u", None)
+        u = getattr(self._ws(), "camera_u", None)
         if u is None or len(u) < n:
-            u = self._workspaces.camera_u = np.empty((n, 5))
+            u = self._ws().camera_u = np.empty((n, 5))
         return u[:n]
 
     def _ao_workspace(self, n: int) -> stages.ShadowRays:
-        """This thread's queue of Ambient Occlusion pass rays: n rows (one per path and bounce;
+        """The batch's queue of Ambient Occlusion pass rays: n rows (one per path and bounce;
         ``path_stages.queue_ao_ray``), or zero rows for a render without the pass."""
         if self.stage_settings.ao_distance <= 0.0:
             n = 0
-        q = getattr(self._workspaces, "ao_rays", None)
+        q = getattr(self._ws(), "ao_rays", None)
         if q is None or len(q.slot) < n:
-            q = self._workspaces.ao_rays = _shadow_rays(n)
+            q = self._ws().ao_rays = _shadow_rays(n)
         return stages.ShadowRays(*(a[:n] for a in q))
 
     def _trace_ao(self, ao_rays, n_ao, out, md, regs, point) -> None:
@@ -329,7 +375,8 @@ class Integrator:
         if self.media.enabled or self.transparent.shape[0] or self.unseen_by_shadows:
             self._shadows_through(ao_rays, n_ao, target, md, regs, point)
         else:
-            blocked = self.tracer.occluded(ao_rays.o[:n_ao], ao_rays.d[:n_ao], ao_rays.tmax[:n_ao], ao_rays.tau[:n_ao])
+            blocked = self.tracer.occluded(ao_rays.o[:n_ao], ao_rays.d[:n_ao], ao_rays.tmax[:n_ao], ao_rays.tau[:n_ao],
+                                           scratch=self._scratch())
             stages.add_unoccluded(ao_rays, n_ao, blocked, target)
 
     def _skip_unseen(self, paths, live, hits) -> None:
@@ -372,13 +419,14 @@ class Integrator:
         n_active = count
         o, d, tmax = shadow.o[:count], shadow.d[:count], shadow.tmax[:count]
         rounds = stages.VOLUME_BOUNDS_MAX if self.media.enabled else int(self.s.transparent_bounces) + 1
+        scratch = self._scratch()  # (each round's hits are spent before the next round's query)
         if self.unseen_by_shadows:
             rounds += stages.VOLUME_BOUNDS_MAX
         for _ in range(rounds):
             if n_active == 0:
                 break
             rows = active[:n_active]
-            hits = self.tracer.intersect(o[rows], d[rows], shadow.tau[:count][rows], tmax[rows])
+            hits = self.tracer.intersect(o[rows], d[rows], shadow.tau[:count][rows], tmax[rows], scratch=scratch)
             n_active = shadow_step(self.media_arg, self.surfaces.material, self.surfaces.visibility, active,
                                    n_active, hits.prim, hits.t,
                                    hits.ng, o, d, tmax, shadow.vstack, trans, blocked,
@@ -386,15 +434,41 @@ class Integrator:
         blocked[active[:n_active]] = True  # still crossing boundaries: give up (as Cycles)
         add_transmitted(shadow, count, blocked, trans, radiance)
 
+    def render_pixels(self, x: np.ndarray, row: np.ndarray, first: int, k: int) -> SampleBatch:
+        """`render_batch` of samples first … first + k − 1 of each pixel (x, row) (m,), the k
+        samples of a pixel in consecutive entries. The (m·k,) columns are written into this
+        thread's scratch, not allocated by the caller: the render loop hands a batch over as a
+        slice of its pixel list."""
+        m = len(x)
+        self._enter_workspace()
+        try:
+            scratch = self._scratch()
+            xs, rows = scratch.take("batch_x", m * k, (), np.int64), scratch.take("batch_row", m * k, (), np.int64)
+            index = scratch.take("batch_index", m * k, (), np.int64)
+            xs.reshape(m, k)[:] = np.asarray(x, dtype=np.int64)[:, None]
+            rows.reshape(m, k)[:] = np.asarray(row, dtype=np.int64)[:, None]
+            index.reshape(m, k)[:] = np.arange(first, first + k, dtype=np.int64)
+            return self.render_batch(xs, rows, index)
+        finally:
+            self._leave_workspace()
+
     def render_batch(self, x: np.ndarray, row: np.ndarray, index: np.ndarray) -> SampleBatch:
         """Trace one camera path per entry. x: (n,) pixel column from the left; row: (n,) pixel
         row from the TOP; index: (n,) sample number within the pixel. Returns per-path results."""
+        self._enter_workspace()
+        try:
+            return self._trace_batch(x, row, index)
+        finally:
+            self._leave_workspace()
+
+    def _trace_batch(self, x, row, index) -> SampleBatch:
         n = len(x)
         paths, shadow = self._workspace(n)
         ao_rays = self._ao_workspace(n)
-        buffers, out = self._outputs(n)
+        buffers, out, pixel = self._outputs(n)
         sd, ld = self.sampler.data, self.lights.data
         md, regs, point = self._material_workspace()
+        scratch = self._scratch()
         live = stages.camera_stage(sd, self.filter.data, self.camera.data, self.stage_settings,
                                    np.ascontiguousarray(x, dtype=np.int64), np.ascontiguousarray(row, dtype=np.int64),
                                    np.ascontiguousarray(index, dtype=np.int64), self._camera_samples(n), paths, out)
@@ -409,7 +483,10 @@ class Integrator:
         for depth_i in range(self.loop_limit):
             if live == 0:
                 break
-            hits = self.tracer.intersect(paths.o[:live], paths.d[:live], paths.tau[:live], paths.tmax[:live])
+            # (this bounce's hits are spent by `shade`; the shadow and AO queries after it reuse
+            # the scratch)
+            hits = self.tracer.intersect(paths.o[:live], paths.d[:live], paths.tau[:live], paths.tmax[:live],
+                                         scratch=scratch)
             hit_arrays = self._hit_arrays(hits)
             if self.unseen_by_paths:
                 self._skip_unseen(paths, live, hit_arrays)
@@ -424,7 +501,7 @@ class Integrator:
                 self._shadows_through(shadow, n_shadow, out.radiance, md, regs, point)
             elif n_shadow:
                 blocked = self.tracer.occluded(shadow.o[:n_shadow], shadow.d[:n_shadow],
-                                               shadow.tmax[:n_shadow], shadow.tau[:n_shadow])
+                                               shadow.tmax[:n_shadow], shadow.tau[:n_shadow], scratch=scratch)
                 stages.add_unoccluded(shadow, n_shadow, blocked, out.radiance)
             if self.sss is not None and live:
                 self.sss.run(paths, live, depth_i, sd)
@@ -432,9 +509,10 @@ class Integrator:
         # a NaN/Inf sample is counted, dropped (it does not enter its pixel's mean) and reported;
         # so is one beyond MAX_SAMPLE_RADIANCE, which would overflow the float32 passes
         radiance = out.radiance
-        good = np.empty(n, dtype=bool)
+        good = scratch.take("good", n, dtype=bool)
         n_good = stages.good_samples(radiance, good)
-        pixel = (np.asarray(row, dtype=np.int64) * self.s.width + np.asarray(x, dtype=np.int64))
+        np.multiply(row, self.s.width, out=pixel)
+        pixel += x
         alpha, depth, normal, albedo = out.alpha, out.depth, out.normal, out.albedo
         mist = out.mist if self.mist_pass else None
         light = out.light if self.light_passes else None

@@ -307,8 +307,9 @@ class _ThreadWorkers:
         self.emb0 = ctx.tracer.embree_seconds
         self.in_flight: list = []
 
-    def submit(self, x, row, idx):
-        future = self.pool.submit(self.ctx.integrator.render_batch, x, row, idx)
+    def submit(self, x, row, first, k):
+        """Samples first … first + k − 1 of pixels (x, row) (``Integrator.render_pixels``)."""
+        future = self.pool.submit(self.ctx.integrator.render_pixels, x, row, first, k)
         self.in_flight = [f for f in self.in_flight if not f.done()]
         self.in_flight.append(future)
         return future
@@ -475,7 +476,8 @@ def render(
     batch_paths = int(max_batch_paths or (BATCH_PATHS if threads == 1 else BATCH_PATHS_THREADED))
 
     def batches(first: int, k: int):
-        """(x, row, sample index) arrays of one pass, cut into batches: at most batch_paths
+        """(x, row, first, k) of one pass's batches: slices of the pixel list (the worker
+        expands them into its own arrays, ``Integrator.render_pixels``), at most batch_paths
         paths, and small enough that every thread gets work in the early, small passes (at
         least two batches per thread, of at least MIN_BATCH_PATHS paths). Each pixel's samples
         of a pass stay in one batch, so the film adds them in the same order whatever the cut:
@@ -486,9 +488,7 @@ def render(
         per = max(1, min(batch_paths // k, spread))
         for start in range(0, npix, per):
             sl = slice(start, start + per)
-            bx, by = xs[sl], ys[sl]
-            m = len(bx)
-            yield (np.repeat(bx, k), np.repeat(by, k), np.tile(np.arange(first, first + k), m))
+            yield xs[sl], ys[sl], first, k
 
     done = sample_offset
     cancelled = False

@@ -16,8 +16,8 @@ array it is given (used as tfar). So:
 
 The moving-object work around Embree (swept-box culling, per-ray transforms, merging hits, the
 deforming-mesh intersector, hit points and normals) is compiled (``@kernel``, docs/kernels.md);
-each query allocates its own scratch arrays, so concurrent queries from several threads are
-safe.
+each query takes its arrays from the caller's ``drt.scratch`` (fresh ones by default, a
+thread's own in the render loop), so concurrent queries from several threads are safe.
 
 All positions are in the shifted world frame of ``geometry.SceneGeometry``.
 """
@@ -40,6 +40,7 @@ from .kernels import inline_kernel, kernel
 from .kernels.row_chunks import over_rows
 from .kernels.vec3 import cross, dot, load, store, sub
 from .motion import apply_rows, motion_at
+from .scratch import FRESH
 
 # Spawn offset: relative part scales with |p| (float32 spacing is 6e-8·|p|, Embree's hit error
 # a small multiple of it); the absolute part covers points near the origin.
@@ -146,6 +147,18 @@ def _static_hits(r_prim, r_tfar, r_u, r_v, o, d, t, prim, b1, b2, p):
         if not _copy_embree_hits(r_prim, r_tfar, r_u, r_v, i, np.inf, t, prim, b1, b2):
             for axis in range(3):
                 p[i, axis] = o[i, axis]
+
+
+def _embree_rays(scratch, n: int):
+    """Float32 origins, directions and tfar for one Embree query (`_rays32` fills them)."""
+    return (scratch.take("o32", n, (3,), np.float32), scratch.take("d32", n, (3,), np.float32),
+            scratch.take("t32", n, (), np.float32))
+
+
+def _hit_columns(scratch, n: int):
+    """A query's t, prim, b1, b2 arrays (filled by the hit kernels)."""
+    return (scratch.take("t", n), scratch.take("prim", n, (), np.int64), scratch.take("b1", n),
+            scratch.take("b2", n))
 
 
 @dataclass
@@ -799,8 +812,8 @@ class Tracer:
     Rays: origins ``o`` (n, 3) and unit directions ``d`` (n, 3) float64 in the shifted world
     frame; ``tau`` (n,) shutter fractions (only used when something moves); ``tmax`` (n,).
     Thread-safe: the render loop calls it from several worker threads at once (Embree and the
-    kernels release the GIL; every query allocates its own scratch arrays). ``embree_seconds``
-    accumulates time spent inside Embree calls.
+    kernels release the GIL; a query's arrays are fresh or from the calling thread's own
+    ``drt.scratch.Scratch``). ``embree_seconds`` accumulates time spent inside Embree calls.
 
     expected_samples: camera samples the renders will trace (pixels × spp), or None (unknown).
     A mesh with more than ``1 / FAST_BUILD_SAMPLES_PER_TRIANGLE`` triangles per sample gets
@@ -853,16 +866,19 @@ class Tracer:
                 np.empty((n, 3), dtype=np.float32), np.empty(n, dtype=np.float32))
 
     # ------------------------------------------------------------------ queries
-    def intersect(self, o, d, tau=None, tmax=None) -> Hits:
+    def intersect(self, o, d, tau=None, tmax=None, scratch=FRESH) -> Hits:
+        """Closest hits of rays (o, d) at shutter times tau within tmax. ``scratch``: where the
+        query's arrays come from (``drt.scratch``); a thread's ``Scratch`` makes the returned
+        ``Hits`` views that its next query with that scratch overwrites."""
         n = len(o)
         if self.static is not None and n and not self.moving:
-            return self._intersect_static(o, d, tmax)
+            return self._intersect_static(o, d, tmax, scratch)
         o = np.ascontiguousarray(o, dtype=np.float64).reshape(n, 3)
         d = np.ascontiguousarray(d, dtype=np.float64).reshape(n, 3)
         tmax = _NO_TMAX if tmax is None else _column(tmax, n)
-        t, prim, b1, b2 = np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n)
+        t, prim, b1, b2 = _hit_columns(scratch, n)
         if self.static is not None and n:
-            o32, d32, t32 = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.float32)
+            o32, d32, t32 = _embree_rays(scratch, n)
             _rays32(o, d, tmax, o32, d32, t32)
             r = self._run(self.static, o32, d32, t32, scratch=True)
             _static_first(r["primID"], r["tfar"], r["u"], r["v"], tmax, t, prim, b1, b2)
@@ -872,8 +888,8 @@ class Tracer:
         merged = 0
         if self.moving and n:
             tau = np.zeros(n) if tau is None else _column(tau, n)
-            linear = np.empty((n, 3, 3))
-            translation = np.empty((n, 3))
+            linear = scratch.take("linear", n, (3, 3))
+            translation = scratch.take("translation", n, (3,))
             local = None
             words = embree_direct.scratch()
             for obj in self.moving:
@@ -898,10 +914,10 @@ class Tracer:
                                        translation)
         # hit points and normals from the triangles themselves, in float64 (more accurate than
         # Embree's float32 t; the winding is ours to define); misses end at p = o
-        p, ng = np.empty((n, 3)), np.empty((n, 3))
+        p, ng = scratch.take("p", n, (3,)), scratch.take("ng", n, (3,))
         if linear is None:
-            linear = np.empty((n, 3, 3))
-        moving = np.empty(n, dtype=bool)
+            linear = scratch.take("linear", n, (3, 3))
+        moving = scratch.take("moving", n, dtype=bool)
         g = self.geom
         any_moving = _finish_moving_hits(prim, g.static_count, o, d, t, p, ng, linear, moving) if n else False
         if g.static_count:
@@ -909,43 +925,45 @@ class Tracer:
                            d, prim, b1, b2, p, ng)
         if not (merged and any_moving):
             return Hits(t, prim, b1, b2, ng, None, p)
-        xform = np.empty((n, 3, 3))
+        xform = scratch.take("xform", n, (3, 3))
         for obj in self.moving:
             _moving_surface(obj.positions, obj.positions_close, obj.deforming is not None,
                             obj.triangles, obj.prim_offset, tau, d, prim, b1, b2, linear,
                             translation, p, ng, xform)
         return Hits(t, prim, b1, b2, ng, linear, p, xform, moving)
 
-    def _intersect_static(self, o, d, tmax) -> Hits:
+    def _intersect_static(self, o, d, tmax, scratch) -> Hits:
         """`intersect` for scenes where nothing moves: two kernels around one Embree call, no
         per-bounce numpy passes."""
         n = len(o)
         o = np.ascontiguousarray(o, dtype=np.float64)
         d = np.ascontiguousarray(d, dtype=np.float64)
         tmax = _NO_TMAX if tmax is None else np.ascontiguousarray(tmax, dtype=np.float64)
-        o32, d32, t32 = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.float32)
+        o32, d32, t32 = _embree_rays(scratch, n)
         _rays32(o, d, tmax, o32, d32, t32)
         r = self._run(self.static, o32, d32, t32, scratch=True)
-        t, prim, b1, b2 = np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n)
-        p, ng = np.empty((n, 3)), np.empty((n, 3))
+        t, prim, b1, b2 = _hit_columns(scratch, n)
+        p, ng = scratch.take("p", n, (3,)), scratch.take("ng", n, (3,))
         _static_hits(r["primID"], r["tfar"], r["u"], r["v"], o, d, t, prim, b1, b2, p)
         g = self.geom
         static_surface(g.static_positions, g.static_triangles, self._static_ng, g.static_count,
                        d, prim, b1, b2, p, ng)
         return Hits(t, prim, b1, b2, ng, None, p)
 
-    def occluded(self, o, d, tmax, tau=None) -> np.ndarray:
-        """(n,) bool: is anything hit in (0, tmax)?"""
+    def occluded(self, o, d, tmax, tau=None, scratch=FRESH) -> np.ndarray:
+        """(n,) bool: is anything hit in (0, tmax)? ``scratch`` as in `intersect`."""
         n = len(o)
         o = np.ascontiguousarray(o, dtype=np.float64).reshape(n, 3)
         d = np.ascontiguousarray(d, dtype=np.float64).reshape(n, 3)
         tmax = _column(tmax, n)
+        blocked = scratch.take("blocked", n, dtype=bool)
         if self.static is not None and n:
-            o32, d32, t32 = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.float32)
+            o32, d32, t32 = _embree_rays(scratch, n)
             _rays32(o, d, tmax, o32, d32, t32)
-            blocked = self._run(self.static, o32, d32, t32, occluded=True, scratch=True) >= 0
+            np.greater_equal(self._run(self.static, o32, d32, t32, occluded=True, scratch=True), 0,
+                             out=blocked)
         else:
-            blocked = np.zeros(n, dtype=bool)
+            blocked[:] = False
         if self.moving and n:
             tau = np.zeros(n) if tau is None else _column(tau, n)
             tmax = np.minimum(tmax, 3.0e38)
