@@ -96,3 +96,25 @@ def test_a_renders_transient_memory_does_not_grow_with_its_samples():
             finally:
                 tracemalloc.stop()
     assert min(peaks[64]) < 1.5 * min(peaks[16]), peaks
+
+
+def test_a_new_films_sums_are_disjoint_views_of_one_block_that_start_empty():
+    """The film's six per-pixel sums share one allocation (a render's new film then reuses the
+    last one's memory instead of faulting in six fresh ones): each must start empty and be
+    written independently of the others."""
+    from drt.film import Film
+
+    f = Film(5, 3)
+    n = 15
+    sums = {"sum_rgba": (n, 4), "sum_lum2": (n,), "sum_normal": (n, 3), "sum_albedo": (n, 3),
+            "min_depth": (n,), "count": (n,)}
+    for name, shape in sums.items():
+        a = getattr(f, name)
+        assert a.shape == shape and a.flags.c_contiguous, name
+    assert f.count.dtype == np.int64 and np.all(f.count == 0)
+    assert np.all(f.min_depth == np.inf)
+    assert not any(np.any(getattr(f, k)) for k in ("sum_rgba", "sum_lum2", "sum_normal", "sum_albedo"))
+    for k, name in enumerate(sums):
+        getattr(f, name)[...] = k + 1
+    for k, name in enumerate(sums):
+        assert np.all(getattr(f, name) == k + 1), name

@@ -161,12 +161,17 @@ class Film:
     def __post_init__(self):
         n = self.width * self.height
         if self.sum_rgba is None:
-            self.sum_rgba = np.zeros((n, 4))
-            self.sum_lum2 = np.zeros(n)
-            self.sum_normal = np.zeros((n, 3))
-            self.sum_albedo = np.zeros((n, 3))
-            self.min_depth = np.full(n, np.inf)
-            self.count = np.zeros(n, dtype=np.int64)
+            # one allocation for the six sums: the allocator then hands the next render's film
+            # the memory this one frees, where six arrays came back as fresh pages (at 256²,
+            # 7-20 ms of page faults in the first batches the main thread adds; docs/kernels.md)
+            block = np.zeros(13 * n)
+            self.sum_rgba = block[:4 * n].reshape(n, 4)
+            self.sum_lum2 = block[4 * n:5 * n]
+            self.sum_normal = block[5 * n:8 * n].reshape(n, 3)
+            self.sum_albedo = block[8 * n:11 * n].reshape(n, 3)
+            self.min_depth = block[11 * n:12 * n]
+            self.min_depth[:] = np.inf
+            self.count = block[12 * n:].view(np.int64)
 
     def add(self, b: SampleBatch) -> None:
         radiance = b.radiance if self.exposure == 1.0 else np.asarray(b.radiance) * self.exposure
