@@ -42,10 +42,14 @@ from .scene import VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_VOLUME_SCATTER
 from .trace import Tracer
 from .volumes.media import lights_reaching, media_for_scene, world_blocks_infinity
 
-#: camera paths per batch: on one thread, 65 536 (fewer batches, less Python per path); on
-#: several, 32 768 — threads share the last-level cache and the tail of a render, and two
-#: threads were 1–12 % faster with it on all ten scenes measured (docs/kernels.md)
-BATCH_PATHS = 1 << 16
+#: camera paths per batch: on one thread, 16 384 — since the render loop reuses its arrays
+#: (2026-12-07) smaller batches keep a thread's path state in cache and a new context's arrays
+#: small: one thread 2–11 % faster than with 65 536 at 256², the same or 4 % faster at 512²
+#: (docs/decisions.md); on several, 32 768 — threads share the last-level cache and the tail
+#: of a render, and two threads were 1–12 % faster with it than with 65 536 on all ten scenes
+#: measured (docs/kernels.md), while each batch costs some Python under the GIL, a cost that
+#: grows with the thread count
+BATCH_PATHS = 1 << 14
 BATCH_PATHS_THREADED = 1 << 15
 MIN_BATCH_PATHS = 1 << 12
 #: how often cancel() is polled while a batch runs: a viewport edit waits at most this long
