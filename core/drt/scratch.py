@@ -6,9 +6,9 @@ arrays of that size are not free: glibc serves them from memory it has just give
 kernel (a worker thread's arena is trimmed with ``madvise(MADV_DONTNEED)`` once its free top
 passes the trim threshold, the main arena with ``brk``), so every 4 KB page costs a fault and a
 zeroed page when it is written again, and each trim interrupts the other cores to flush their
-TLBs. Measured on the Cornell box (256² × 16 spp): ~4 000 page faults a render on one thread,
-~7 400 on two, 7–10 % of the render's time (docs/kernels.md, "The render loop's queries reuse
-their arrays").
+TLBs. Measured on dof (256²): ~12 000 page faults a render at 16 spp and ~33 000 at 64 spp on
+one thread, 2–8 % of the render's time (docs/kernels.md, "The render loop stops re-faulting its
+memory").
 
 A ``Scratch`` belongs to one thread (it is not locked). ``take`` hands out a view of the first
 n rows of a buffer kept under a name; the buffer grows when a longer view is asked for. A view
