@@ -436,8 +436,8 @@ class Integrator:
 
     def render_pixels(self, x: np.ndarray, row: np.ndarray, first: int, k: int) -> SampleBatch:
         """`render_batch` of samples first … first + k − 1 of each pixel (x, row) (m,), the k
-        samples of a pixel in consecutive entries. The (m·k,) columns are written into this
-        thread's scratch, not allocated by the caller: the render loop hands a batch over as a
+        samples of a pixel in consecutive entries. The (m·k,) columns are written into the
+        batch's scratch, not allocated by the caller: the render loop hands a batch over as a
         slice of its pixel list."""
         m = len(x)
         self._enter_workspace()
