@@ -13,7 +13,7 @@ from drt.scene import scene_from_dict
 from drt.scratch import FRESH, Scratch
 from drt.trace import Tracer
 from scene_builders import cornell_box
-from test_trace import _random_rays, _spinning_scene
+from test_trace import _random_rays, _spinning_scene, _without_direct
 
 
 def test_take_reuses_a_buffer_and_grows_it_when_asked_for_more():
@@ -56,9 +56,11 @@ def test_queries_into_a_scratch_answer_what_fresh_arrays_answer():
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     tmax = rng.uniform(0.1, 3.0, 3000)
     _check_same_hits(static, o, d, None, tmax)
-    for deforming in (False, True):  # moving objects (rigid, and a deforming mesh)
-        o, d, tau = _random_rays(rng, 3000)
-        _check_same_hits(_spinning_scene(deforming), o, d, tau, np.full(3000, 20.0))
+    for deforming in (False, True):  # moving objects (rigid, and a deforming mesh), through
+        o, d, tau = _random_rays(rng, 3000)  # Embree from kernels and through embreex's batches
+        tr = _spinning_scene(deforming)
+        for tracer in (tr, _without_direct(tr)):
+            _check_same_hits(tracer, o, d, tau, np.full(3000, 20.0))
 
 
 def test_batches_take_up_the_workspaces_earlier_batches_gave_back():

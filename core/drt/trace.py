@@ -859,11 +859,11 @@ class Tracer:
         return out
 
     @staticmethod
-    def _local_rays(n):
+    def _local_rays(scratch, n):
         """Scratch for the candidate rays of a rigid object: indices, local origins and
         directions, tfar (float32 for Embree)."""
-        return (np.empty(n, dtype=np.int64), np.empty((n, 3), dtype=np.float32),
-                np.empty((n, 3), dtype=np.float32), np.empty(n, dtype=np.float32))
+        return (scratch.take("local_idx", n, (), np.int64), scratch.take("local_o", n, (3,), np.float32),
+                scratch.take("local_d", n, (3,), np.float32), scratch.take("local_t", n, (), np.float32))
 
     # ------------------------------------------------------------------ queries
     def intersect(self, o, d, tau=None, tmax=None, scratch=FRESH) -> Hits:
@@ -902,7 +902,7 @@ class Tracer:
                     self.rays_traced += traced
                     continue
                 if local is None:
-                    local = self._local_rays(n)
+                    local = self._local_rays(scratch, n)
                 idx, o_l, d_l, tfar = local
                 count = _rigid_candidates(obj.motion, obj.box_lo, obj.box_hi, o, d, tau, t,
                                           _NO_SKIP, idx, o_l, d_l, tfar)
@@ -978,7 +978,7 @@ class Tracer:
                                                         blocked)
                     continue
                 if local is None:
-                    local = self._local_rays(n)
+                    local = self._local_rays(scratch, n)
                 idx, o_l, d_l, tfar = local
                 count = _rigid_candidates(obj.motion, obj.box_lo, obj.box_hi, o, d, tau, tmax,
                                           blocked, idx, o_l, d_l, tfar)
