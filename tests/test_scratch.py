@@ -3,9 +3,11 @@ scratch answer what fresh arrays answer, batches take up the workspaces earlier 
 back, and a render's transient memory does not grow with its samples."""
 
 import gc
+import sys
 import tracemalloc
 
 import numpy as np
+import pytest
 
 from drt.geometry import build_geometry
 from drt.render import prepare, render
@@ -120,3 +122,30 @@ def test_a_new_films_sums_are_disjoint_views_of_one_block_that_start_empty():
         getattr(f, name)[...] = k + 1
     for k, name in enumerate(sums):
         assert np.all(getattr(f, name) == k + 1), name
+
+
+def _minor_faults() -> int:
+    import resource
+
+    return resource.getrusage(getattr(resource, "RUSAGE_THREAD", resource.RUSAGE_SELF)).ru_minflt
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="counts the kernel's page faults (Linux)")
+def test_a_new_films_sums_are_written_when_it_is_made_not_when_the_first_batches_land():
+    """A render's film is made before its threads start; its pages must be written then, not
+    faulted in page by page by the first batches the main thread adds while every core runs
+    (docs/kernels.md: ~4x the CPU per fault there). So are the passes a render reserves."""
+    from drt.film import Film, zeroed
+
+    z = zeroed((1000, 3), np.float32)
+    assert z.shape == (1000, 3) and z.dtype == np.float32 and not np.any(z)
+    f = Film(512, 512)  # 13 × 2 MB of sums: fresh pages from any allocator
+    f.reserve(mist=True, light=True, data=True)
+    before = _minor_faults()
+    for name in ("sum_rgba", "sum_lum2", "sum_normal", "sum_albedo", "min_depth", "count", "sum_mist",
+                 "sum_light", "sum_data"):
+        getattr(f, name)[...] += 1
+    faults = _minor_faults() - before
+    pages = 512 * 512 * (13 + 1 + 12 + 9) * 8 // 4096
+    assert faults < pages // 20, (faults, pages)
+    assert f.sum_crypto is None  # (no Cryptomatte layers: nothing to reserve)

@@ -44,25 +44,29 @@ def film_channels(film: Film, denoised: np.ndarray | None = None) -> dict[str, n
             ch[f"Noisy.{c}"] = rgba[..., i]
         for i, c in enumerate("RGB"):
             ch[c] = denoised[..., i]
+    # (each pass is a property computed from the sums on every access: read each one once)
+    normal, albedo = film.normal, film.albedo
     for i, axis in enumerate("XYZ"):
-        ch[f"Normal.{axis}"] = film.normal[..., i]
+        ch[f"Normal.{axis}"] = normal[..., i]
     for i, c in enumerate("RGB"):
-        ch[f"Albedo.{c}"] = film.albedo[..., i]
-    if film.mist is not None:
-        ch["Mist.Y"] = film.mist
+        ch[f"Albedo.{c}"] = albedo[..., i]
+    mist = film.mist
+    if mist is not None:
+        ch["Mist.Y"] = mist
     if film.sum_light is not None:
+        light = (("Emit", film.emission), ("Env", film.environment), ("DiffCol", film.diffuse_color),
+                 ("AO", film.ao))
         for i, c in enumerate("RGB"):
-            ch[f"Emit.{c}"] = film.emission[..., i]
-            ch[f"Env.{c}"] = film.environment[..., i]
-            ch[f"DiffCol.{c}"] = film.diffuse_color[..., i]
-            ch[f"AO.{c}"] = film.ao[..., i]
+            for name, image in light:
+                ch[f"{name}.{c}"] = image[..., i]
     if film.sum_data is not None:
         ch["IndexOB.X"] = film.object_index
         ch["IndexMA.X"] = film.material_index
+        position, uv = film.position, film.uv
         for i, axis in enumerate("XYZ"):
-            ch[f"Position.{axis}"] = film.position[..., i]
+            ch[f"Position.{axis}"] = position[..., i]
         for i, c in enumerate("UVA"):
-            ch[f"UV.{c}"] = film.uv[..., i]
+            ch[f"UV.{c}"] = uv[..., i]
     for layer in film.crypto_layers:  # Cryptomatte: CryptoObject00.RGBA = id, coverage, id, coverage
         for j, img in enumerate(cryptomatte.pass_images(film.cryptomatte(layer).reshape(-1, film.crypto_slots, 2),
                                                         film.height, film.width)):

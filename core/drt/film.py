@@ -78,6 +78,17 @@ LIGHT_EMISSION, LIGHT_ENVIRONMENT, LIGHT_DIFFUSE_COLOR, LIGHT_AO = 0, 3, 6, 9
 LIGHT_WIDTH = 12
 
 
+def zeroed(shape, dtype=np.float64) -> np.ndarray:
+    """``np.zeros`` whose pages are written now. A large ``np.zeros`` is fresh memory that the
+    kernel maps page by page on first touch; a film's sums are first touched when the main
+    thread adds the first pass's batches, while the render threads run on every core, and
+    there each fault cost ~6 µs of CPU taken from them against ~1.4 µs here, before the
+    threads start (2 vCPUs, 256² film: ~17 ms against 2 ms; docs/kernels.md)."""
+    out = np.empty(shape, dtype)
+    out.fill(0)
+    return out
+
+
 def _rows3(a) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
 
@@ -163,8 +174,9 @@ class Film:
         if self.sum_rgba is None:
             # one allocation for the six sums: the allocator then hands the next render's film
             # the memory this one frees, where six arrays came back as fresh pages (at 256²,
-            # 7-20 ms of page faults in the first batches the main thread adds; docs/kernels.md)
-            block = np.zeros(13 * n)
+            # 7-20 ms of page faults in the first batches the main thread adds; docs/kernels.md),
+            # and its pages written now, before the render threads start (`zeroed`)
+            block = zeroed(13 * n)
             self.sum_rgba = block[:4 * n].reshape(n, 4)
             self.sum_lum2 = block[4 * n:5 * n]
             self.sum_normal = block[5 * n:8 * n].reshape(n, 3)
@@ -172,6 +184,20 @@ class Film:
             self.min_depth = block[11 * n:12 * n]
             self.min_depth[:] = np.inf
             self.count = block[12 * n:].view(np.int64)
+
+    def reserve(self, mist: bool = False, light: bool = False, data: bool = False, crypto: bool = False) -> None:
+        """Create now the sums of the passes a render's batches will carry (Mist, the light
+        passes, the data passes, Cryptomatte), which `add` would otherwise create at the first
+        batch that carries them: a render calls this before its threads start (`zeroed`)."""
+        n = self.width * self.height
+        if mist and self.sum_mist is None:
+            self.sum_mist = zeroed(n)
+        if light and self.sum_light is None:
+            self.sum_light = zeroed((n, LIGHT_WIDTH))
+        if data and self.sum_data is None:
+            self.sum_data = zeroed((n, DATA_WIDTH))
+        if crypto and self.crypto_layers and self.sum_crypto is None:
+            self.sum_crypto = zeroed((n, len(self.crypto_layers) * self.crypto_slots, 2), np.float32)
 
     def add(self, b: SampleBatch) -> None:
         radiance = b.radiance if self.exposure == 1.0 else np.asarray(b.radiance) * self.exposure
@@ -183,12 +209,12 @@ class Film:
         self.nan_samples += b.nan_count
         if b.mist is not None:
             if self.sum_mist is None:
-                self.sum_mist = np.zeros(self.width * self.height)
+                self.sum_mist = zeroed(self.width * self.height)
             _accumulate_mist(np.ascontiguousarray(b.pixel, dtype=np.int64),
                              np.ascontiguousarray(b.mist, dtype=np.float64), self.sum_mist)
         if b.light is not None:
             if self.sum_light is None:
-                self.sum_light = np.zeros((self.width * self.height, LIGHT_WIDTH))
+                self.sum_light = zeroed((self.width * self.height, LIGHT_WIDTH))
             light = b.light
             if self.exposure != 1.0:
                 light = np.array(light, dtype=np.float64)
@@ -197,14 +223,14 @@ class Film:
                              np.ascontiguousarray(light, dtype=np.float64), self.sum_light)
         if b.crypto is not None and self.crypto_layers:
             if self.sum_crypto is None:
-                self.sum_crypto = np.zeros((self.width * self.height, len(self.crypto_layers) * self.crypto_slots, 2),
-                                           np.float32)
+                self.sum_crypto = zeroed((self.width * self.height, len(self.crypto_layers) * self.crypto_slots, 2),
+                                         np.float32)
             cryptomatte.accumulate(np.ascontiguousarray(b.pixel, dtype=np.int64),
                                    np.ascontiguousarray(b.crypto, dtype=np.float64), self._crypto_columns(),
                                    self.crypto_slots, self.sum_crypto)
         if b.data is not None:
             if self.sum_data is None:
-                self.sum_data = np.zeros((self.width * self.height, DATA_WIDTH))
+                self.sum_data = zeroed((self.width * self.height, DATA_WIDTH))
             _accumulate_data(np.ascontiguousarray(b.data_pixel, dtype=np.int64),
                              np.ascontiguousarray(b.data, dtype=np.float64), self.sum_data)
 

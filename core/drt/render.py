@@ -470,6 +470,8 @@ def render(
     _use_sampling_arguments(integ, spp, seed, sampler, direct, indirect)
     xs, ys = xs_all, ys_all
     film, to_film = _film_for(scene, xs, ys, tile)
+    film.reserve(mist=integ.mist_pass, light=integ.light_passes, data=bool(integ.data_passes),
+                 crypto=integ.cryptomatte)
     stats = RenderStats(samples_total=count, threads=threads)
     threshold = scene.render.adaptive_threshold if adaptive_threshold is None else float(adaptive_threshold)
     min_samples = scene.render.adaptive_min_samples if adaptive_min_samples is None else int(adaptive_min_samples)
