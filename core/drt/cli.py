@@ -334,7 +334,7 @@ def cmd_render(args) -> int:
         bar.done()
     st = film.stats
     denoised, dn_note, dn_meta = _denoise(args, film) if not st.cancelled else (None, ", not denoised", {})
-    write_exr(args.output, film, dn_meta, denoised=denoised)
+    write_exr(args.output, film, dn_meta, denoised=denoised, threads=args.threads)
     if args.png:
         from .preview import write_png
 

@@ -77,10 +77,23 @@ def film_channels(film: Film, denoised: np.ndarray | None = None) -> dict[str, n
     return {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in ch.items()}
 
 
+def use_threads(threads: int | None = None) -> None:
+    """Let OpenEXR compress and decompress on ``threads`` threads (default: every core).
+
+    The Python binding starts with none (``global_thread_count()`` is 0): a 1920 × 1080 file of
+    DRT's 14 channels then took ~0.9 s to ZIP on one core, ~0.5 s on two (2 vCPUs; Blender's
+    own EXR writer uses every core too). The setting is process-wide; only a different count
+    changes it."""
+    n = max(1, int(threads or os.cpu_count() or 1))
+    if OpenEXR.global_thread_count() != n:
+        OpenEXR.set_global_thread_count(n)
+
+
 def write_exr(path: str | os.PathLike, film: Film, metadata: dict | None = None,
-              denoised: np.ndarray | None = None) -> None:
+              denoised: np.ndarray | None = None, threads: int | None = None) -> None:
     """Write ``film`` to ``path`` (ZIP-compressed scanline EXR). Metadata values become strings.
-    ``denoised``: see ``film_channels``."""
+    ``denoised``: see ``film_channels``. ``threads``: OpenEXR's compression threads (`use_threads`)."""
+    use_threads(threads)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for k, v in {**film.meta, **(metadata or {})}.items():
         header[f"drt:{k}"] = str(v)
@@ -95,6 +108,7 @@ def write_exr(path: str | os.PathLike, film: Film, metadata: dict | None = None,
 def read_exr(path: str | os.PathLike, with_header: bool = False):
     """Channels by name (each (H, W) float32) and the header's ``drt:`` metadata (strings);
     ``with_header``: also the whole header."""
+    use_threads()
     with OpenEXR.File(os.fspath(path), separate_channels=True) as f:
         channels = {k: np.array(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
         header = dict(f.header())
