@@ -245,7 +245,8 @@ def fill_layer(layer, film, crop, wanted, cryptomatte=True) -> None:
     """Copy the film's passes into a render layer (``cryptomatte`` False: not its layers, whose
     sort per pixel a progressive redraw of a large frame need not pay)."""
     rows, cols = crop
-    _set_pass(layer, "Combined", np.nan_to_num(film.combined[rows, cols], nan=0.0))
+    # (in place: `combined` is a new array on every access; 8 against 17 ms at 1080p)
+    _set_pass(layer, "Combined", np.nan_to_num(film.combined[rows, cols], nan=0.0, copy=False))
     for name, channels, _cid, _kind, attr, _flag in wanted:
         img = getattr(film, attr)
         if img is None:  # (a film without the pass: film.mist of a render that did not ask for it)

@@ -867,7 +867,7 @@ class ProgressiveSession:
             self._done = True
 
     def _publish(self, film, samples: int, divider: int, gen: int, t0: float) -> None:
-        combined = np.nan_to_num(film.combined, nan=0.0, posinf=0.0)
+        combined = np.nan_to_num(film.combined, nan=0.0, posinf=0.0, copy=False)  # (a new array)
         denoiser, denoised = self.denoiser, False
         if denoiser is not None and divider == 1 and samples >= max(1, self.denoise_start_sample):
             try:
