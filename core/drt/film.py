@@ -10,6 +10,7 @@ Arrays are stored **top row first** (row 0 is the top of the image, as in EXR).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -78,6 +79,48 @@ LIGHT_EMISSION, LIGHT_ENVIRONMENT, LIGHT_DIFFUSE_COLOR, LIGHT_AO = 0, 3, 6, 9
 LIGHT_WIDTH = 12
 
 
+@kernel
+def _mean_image(sums, count, out, clamp_last):
+    """out[i, c] = sums[i, c] / max(count[i], 1) as float32: a pass's per-pixel mean (the
+    combined pass clamps its last column, alpha, to [0, 1]). The same float64 division and
+    rounding to float32 as NumPy's ``(sums / c).astype(np.float32)``, in one pass over the
+    film instead of three (18-23 ms against ~3 at 1920 × 1080)."""
+    last = sums.shape[1] - 1
+    for i in range(sums.shape[0]):
+        c = float(max(count[i], 1))
+        for k in range(sums.shape[1]):
+            v = sums[i, k] / c
+            if clamp_last and k == last:
+                v = min(max(v, 0.0), 1.0)
+            out[i, k] = v
+
+
+@kernel
+def _unit_mean_image(sums, count, out):
+    """The mean of (n, 3) vector sums scaled to unit length, as float32 (0 where it is 0): the
+    Normal pass. Same operations, in the same order, as ``mean / np.linalg.norm(mean)``."""
+    for i in range(sums.shape[0]):
+        c = float(max(count[i], 1))
+        x, y, z = sums[i, 0] / c, sums[i, 1] / c, sums[i, 2] / c
+        length = math.sqrt(x * x + y * y + z * z)
+        if length > 0.0:
+            out[i, 0], out[i, 1], out[i, 2] = x / length, y / length, z / length
+        else:
+            out[i, 0], out[i, 1], out[i, 2] = 0.0, 0.0, 0.0
+
+
+@kernel
+def _variance_image(sum_rgba, sum_lum2, count, out):
+    """Variance of each pixel's mean luminance, (E[L²] − E[L]²)/(N − 1), as float32 (`Film.variance`)."""
+    wr, wg, wb = LUMINANCE_WEIGHTS
+    for i in range(sum_rgba.shape[0]):
+        n = float(count[i])
+        c = max(n, 1.0)
+        mean = wr * (sum_rgba[i, 0] / c) + wg * (sum_rgba[i, 1] / c) + wb * (sum_rgba[i, 2] / c)
+        m2 = sum_lum2[i] / c
+        out[i] = max(m2 - mean * mean, 0.0) * n / max(n - 1.0, 1.0) / c
+
+
 def zeroed(shape, dtype=np.float64) -> np.ndarray:
     """``np.zeros`` whose pages are written now. A large ``np.zeros`` is fresh memory that the
     kernel maps page by page on first touch; a film's sums are first touched when the main
@@ -87,6 +130,10 @@ def zeroed(shape, dtype=np.float64) -> np.ndarray:
     out = np.empty(shape, dtype)
     out.fill(0)
     return out
+
+
+def _f64_rows(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 def _rows3(a) -> np.ndarray:
@@ -282,6 +329,16 @@ class Film:
         c = np.maximum(self.count, 1).reshape((-1,) + (1,) * (s.ndim - 1))
         return s / c
 
+    def _counts(self) -> np.ndarray:
+        return np.ascontiguousarray(self.count, dtype=np.int64)
+
+    def _mean_image(self, sums: np.ndarray, clamp_last: bool = False) -> np.ndarray:
+        """(H, W, c) float32 per-pixel means of (n, c) sums (`_mean_image`)."""
+        sums = _f64_rows(sums)
+        out = np.empty(sums.shape, np.float32)
+        _mean_image(sums, self._counts(), out, clamp_last)
+        return out.reshape(self.height, self.width, sums.shape[1])
+
     def _image(self, flat: np.ndarray) -> np.ndarray:
         return flat.reshape((self.height, self.width) + flat.shape[1:]).astype(np.float32)
 
@@ -290,9 +347,7 @@ class Film:
         """(H, W, 4) float32: mean radiance and alpha. A sample's alpha is 1 less what the world
         and holdouts took (more than 1 where a transparent lobe's sampled weight exceeds 1);
         the pixel's mean is clamped to [0, 1], as Cycles's film_transparency_to_alpha."""
-        rgba = self._mean(self.sum_rgba)
-        rgba[:, 3] = np.clip(rgba[:, 3], 0.0, 1.0)
-        return self._image(rgba)
+        return self._mean_image(self.sum_rgba, clamp_last=True)
 
     @property
     def depth(self) -> np.ndarray:
@@ -303,13 +358,15 @@ class Film:
 
     @property
     def normal(self) -> np.ndarray:
-        nrm = self._mean(self.sum_normal)
-        length = np.linalg.norm(nrm, axis=1, keepdims=True)
-        return self._image(np.where(length > 0, nrm / np.where(length > 0, length, 1), 0.0))
+        """(H, W, 3) float32: the mean world-space shading normal of first hits, unit length (0
+        where no sample hit anything)."""
+        out = np.empty((self.width * self.height, 3), np.float32)
+        _unit_mean_image(_f64_rows(self.sum_normal), self._counts(), out)
+        return out.reshape(self.height, self.width, 3)
 
     @property
     def albedo(self) -> np.ndarray:
-        return self._image(self._mean(self.sum_albedo))
+        return self._mean_image(self.sum_albedo)
 
     @property
     def mist(self) -> np.ndarray | None:
@@ -378,8 +435,7 @@ class Film:
     @property
     def variance(self) -> np.ndarray:
         """Variance of each pixel's mean luminance: (E[L²] − E[L]²)/(N − 1)."""
-        n = self.count.astype(np.float64)
-        mean = luminance(self._mean(self.sum_rgba)[:, :3])
-        m2 = self.sum_lum2 / np.maximum(n, 1)
-        var = np.maximum(m2 - mean**2, 0.0) * n / np.maximum(n - 1, 1) / np.maximum(n, 1)
-        return self._image(var)
+        out = np.empty(self.width * self.height, np.float32)
+        _variance_image(_f64_rows(self.sum_rgba), np.ascontiguousarray(self.sum_lum2, dtype=np.float64),
+                        self._counts(), out)
+        return out.reshape(self.height, self.width)
