@@ -130,12 +130,13 @@ def fill_passes(layer, set_pass, film, crop, passes, denoised, camera_matrix) ->
     """Write the denoised Combined (RGB denoised, alpha the film's) and the denoising passes
     in ``passes`` into a render layer. ``set_pass(layer, name, (h, w, c) top-row-first image)``."""
     rows, cols = crop
-    noisy = np.nan_to_num(film.combined[rows, cols], nan=0.0)
-    if denoised is not None:
-        set_pass(layer, "Combined", np.concatenate([denoised[rows, cols], noisy[..., 3:]], axis=-1))
     names = {p[0] for p in passes}
-    if NOISY_PASS[0] in names:
-        set_pass(layer, NOISY_PASS[0], noisy)
+    if denoised is not None or NOISY_PASS[0] in names:  # (not read again by every plain F12)
+        noisy = np.nan_to_num(film.combined[rows, cols], nan=0.0, copy=False)  # (a new array)
+        if denoised is not None:
+            set_pass(layer, "Combined", np.concatenate([denoised[rows, cols], noisy[..., 3:]], axis=-1))
+        if NOISY_PASS[0] in names:
+            set_pass(layer, NOISY_PASS[0], noisy)
     if "Denoising Normal" in names:
         set_pass(layer, "Denoising Normal", camera_space(film.normal[rows, cols], camera_matrix))
     if "Denoising Albedo" in names:
