@@ -84,7 +84,7 @@ def _mean_image(sums, count, out, clamp_last):
     """out[i, c] = sums[i, c] / max(count[i], 1) as float32: a pass's per-pixel mean (the
     combined pass clamps its last column, alpha, to [0, 1]). The same float64 division and
     rounding to float32 as NumPy's ``(sums / c).astype(np.float32)``, in one pass over the
-    film instead of three (18-23 ms against ~3 at 1920 × 1080)."""
+    film instead of three (the combined pass at 1920 × 1080: 9.5 ms against 23-50 ms)."""
     last = sums.shape[1] - 1
     for i in range(sums.shape[0]):
         c = float(max(count[i], 1))
