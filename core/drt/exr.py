@@ -81,7 +81,7 @@ def use_threads(threads: int | None = None) -> None:
     """Let OpenEXR compress and decompress on ``threads`` threads (default: every core).
 
     The Python binding starts with none (``global_thread_count()`` is 0): a 1920 × 1080 file of
-    DRT's 14 channels then took ~0.9 s to ZIP on one core, ~0.5 s on two (2 vCPUs; Blender's
+    DRT's 13 channels then took ~0.9 s to ZIP on one core, ~0.5 s on two (2 vCPUs; Blender's
     own EXR writer uses every core too). The setting is process-wide; only a different count
     changes it."""
     n = max(1, int(threads or os.cpu_count() or 1))
