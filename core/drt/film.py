@@ -137,7 +137,7 @@ def _f64_rows(a) -> np.ndarray:
 
 
 def _rows3(a) -> np.ndarray:
-    return np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3)
+    return _f64_rows(a).reshape(-1, 3)
 
 
 @dataclass
