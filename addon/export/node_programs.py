@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import compat
+
 # --- opcodes: keep in sync with core/drt/materials/programs.py ----------------------------------
 OP_UV, OP_GENERATED, OP_OBJECT, OP_ATTRIBUTE = 1, 2, 3, 4
 OP_VMATH, OP_MATH, OP_MIX, OP_MAPPING = 10, 11, 12, 13
@@ -635,8 +637,11 @@ class ProgramBuilder:
         """Texture Coordinate outputs (Cycles's ``svm_node_tex_coord``)."""
         other = getattr(node, "object", None)
         if oname == "Object" and other is not None:
-            # another object's local space: its inverse world matrix on the world position
-            m = np.linalg.inv(np.array(other.matrix_world, np.float64))
+            # another object's local space: its inverse world matrix on the world position (not
+            # np.linalg.inv: OpenBLAS runs that on threads that spin on beside the render's);
+            # an object scaled to zero maps every point to its origin's 0
+            m = compat.core_module("motion").invert_affine(np.array(other.matrix_world, np.float64))
+            m = np.zeros((4, 4)) if m is None else m
             p = self.point(POINT_P, -1)
             comps = [self.emit(OP_COMPONENT, j, [p]) for j in range(3)]
             out = Value(self, const=m[:3, 3])

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kernels import inline_kernel, kernel
-from .motion import RigidMotion, apply_rows, motion_at, static_motion_data
+from .motion import RigidMotion, apply_rows, invert_affine, motion_at, static_motion_data
 from .panorama import PANO_SIZE, PANORAMA_TYPES, panorama_direction, panorama_lens, pano_parameters, to_blender_camera
 from .sampling.warps import disk_concentric, polygon
 from .scene import CameraSpec, RenderSettings
@@ -289,11 +289,8 @@ class Camera:
         for j in range(3):
             m[:3, j] /= max(np.linalg.norm(m[:3, j]), 1e-300)
         m[:3, 3] += self.origin_shift  # the tracer's frame is shifted; programs see Blender's
-        try:
-            inv = np.linalg.inv(m)
-        except np.linalg.LinAlgError:  # a degenerate camera matrix: no camera coordinates
-            return np.zeros((5, 4))
-        if not np.all(np.isfinite(inv)):
+        inv = invert_affine(m)
+        if inv is None or not np.all(np.isfinite(inv)):  # degenerate: no camera coordinates
             return np.zeros((5, 4))
         out = np.zeros((5, 4))
         out[:3] = inv[:3]

@@ -26,7 +26,6 @@ from .kernels.row_chunks import over_rows
 
 from .motion import RigidMotion, invert_linear
 from .scene import VIS_ALL, VIS_HOLDOUT, Scene
-from .vecmath import transform_rows
 
 
 @dataclass
@@ -202,10 +201,11 @@ def build_geometry(scene: Scene) -> SceneGeometry:
             order_moving.append((mesh, None, False, _mirrors(m_open)))
             obj_moving.append(np.full(len(mesh.triangles), oi, np.int32))
             shade_moving.append(np.full(len(mesh.triangles), obj.terminator_shading, np.float32))
+            ends = np.empty((len(mesh.positions), 3), dtype=np.float32)  # only their bounds are kept
             for mat in (m_open, m_close):
                 for pos in (mesh.positions, mesh.positions_close if mesh.positions_close is not None else mesh.positions):
-                    w = transform_rows(pos, np.asarray(mat)[:3, :3]) + np.asarray(mat)[:3, 3] - shift
-                    lo, hi = np.minimum(lo, w.min(0)), np.maximum(hi, w.max(0))
+                    _points_to_world(np.ascontiguousarray(pos), np.ascontiguousarray(_shift_matrix(mat, shift)),
+                                     ends, lo, hi)
             continue
         m = _shift_matrix(obj.matrix, shift)
         world = np.empty((len(mesh.positions), 3), dtype=np.float32)
@@ -330,8 +330,10 @@ def corner_attribute(a: np.ndarray, kind, matrix, swapped: bool, mirrored: bool)
 
 
 def _mirrors(matrix) -> bool:
-    """Whether a 4×4 object matrix mirrors (its 3×3 part has a negative determinant)."""
-    return bool(np.linalg.det(np.asarray(matrix, np.float64)[:3, :3]) < 0.0)
+    """Whether a 4×4 object matrix mirrors (its 3×3 part has a negative determinant; the triple
+    product of its rows, not LAPACK: see `_normal_matrix`)."""
+    a = np.asarray(matrix, np.float64)[:3, :3]
+    return bool((a[0] * np.cross(a[1], a[2])).sum() < 0.0)
 
 
 def _corners(a: np.ndarray, flip: bool) -> np.ndarray:
@@ -346,11 +348,8 @@ def _corners(a: np.ndarray, flip: bool) -> np.ndarray:
 def _normal_matrix(matrix) -> np.ndarray:
     """inv(M)ᵀ of a 4×4 matrix's 3×3 part (object → world normals; the object's normal
     transform the shading inputs use, docs/materials.md); identity for a singular M."""
-    m = np.asarray(matrix, np.float64)[:3, :3]
-    try:
-        return np.linalg.inv(m).T
-    except np.linalg.LinAlgError:
-        return np.eye(3)
+    inv = invert_linear(np.asarray(matrix, np.float64)[:3, :3])  # not np.linalg.inv: OpenBLAS
+    return inv.T if inv.any() else np.eye(3)  # would run it on threads that spin on after it
 
 
 def static_triangle_vertices(geom: SceneGeometry, prims: np.ndarray) -> np.ndarray:

@@ -191,3 +191,24 @@ def invert_linear(linear: np.ndarray) -> np.ndarray:
     inv_det = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
     out = np.stack([c0, c1, c2], axis=2) * inv_det[:, None, None]
     return out.reshape(m.shape)
+
+
+def invert_affine(matrix) -> np.ndarray | None:
+    """Inverse of a 4×4 affine matrix (bottom row 0 0 0 1; Blender's object and camera
+    matrices), None when its 3×3 part is singular (`invert_linear`'s test) or the matrix is not
+    affine.
+
+    Not ``np.linalg.inv``: that is LAPACK's ``dgesv``, which OpenBLAS runs on its own threads
+    even for a 4×4 matrix; those threads then spin for ~0.1 s beside the render's (docs/
+    decisions.md, "No BLAS or LAPACK on a render's path")."""
+    m = np.asarray(matrix, dtype=np.float64).reshape(4, 4)
+    if not np.array_equal(m[3], (0.0, 0.0, 0.0, 1.0)):
+        return None
+    a_inv = invert_linear(m[:3, :3])
+    if not a_inv.any():
+        return None
+    out = np.zeros((4, 4))
+    out[:3, :3] = a_inv
+    out[:3, 3] = -(a_inv * m[:3, 3]).sum(axis=1)
+    out[3, 3] = 1.0
+    return out

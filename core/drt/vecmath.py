@@ -1,8 +1,9 @@
 """Row-wise vector helpers for (n, 3) float64 arrays, written for numpy's speed.
 
 ``np.linalg.norm(v, axis=1)`` squares into a temporary and reduces it (~3× slower than one
-``einsum`` pass), and ``v @ m.T`` with a transposed 3×3 view misses BLAS (~10× slower than with
-a C-contiguous matrix); these helpers avoid both. Values are the same to the last bit or two.
+``einsum`` pass); these helpers avoid that. Values are the same to the last bit or two. (Rows
+through a matrix are `drt.geometry`'s kernels, not ``v @ m``: BLAS would run a large product
+on OpenBLAS's threads, which spin on beside the render's.)
 """
 
 from __future__ import annotations
@@ -20,6 +21,3 @@ def row_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", a, b)
 
 
-def transform_rows(v: np.ndarray, m: np.ndarray) -> np.ndarray:
-    """(n, 3) rows times the 3×3 matrix m (column vectors: m @ v_i for each row)."""
-    return v @ np.ascontiguousarray(np.asarray(m, dtype=np.float64).T)

@@ -40,8 +40,11 @@ POINT, SPOT, AREA, SUN = 0, 1, 2, 3
 
 
 def luminance(rgb) -> np.ndarray:
-    """Luminance of linear RGB (..., 3)."""
-    return np.asarray(rgb, dtype=np.float64) @ LUMINANCE
+    """Luminance of linear RGB (..., 3). Plain arithmetic, not ``rgb @ LUMINANCE``: that is a
+    BLAS call, which OpenBLAS runs on its own threads for a large image or emissive mesh, and
+    they spin on beside the render's (docs/decisions.md)."""
+    rgb = np.asarray(rgb, dtype=np.float64)
+    return LUMINANCE[0] * rgb[..., 0] + LUMINANCE[1] * rgb[..., 1] + LUMINANCE[2] * rgb[..., 2]
 
 
 def light_frame(matrix_world, origin_shift) -> tuple[np.ndarray, np.ndarray]:
