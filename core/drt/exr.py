@@ -29,7 +29,7 @@ import numpy as np
 import OpenEXR
 
 from . import cryptomatte
-from .film import DATA_MATERIAL, DATA_OBJECT, DATA_POSITION, DATA_UV, DATA_WIDTH, LIGHT_WIDTH, Film
+from .film import DATA_MATERIAL, DATA_OBJECT, DATA_POSITION, DATA_UV, DATA_WIDTH, LIGHT_WIDTH, Film, luminance
 
 
 def film_channels(film: Film, denoised: np.ndarray | None = None) -> dict[str, np.ndarray]:
@@ -171,7 +171,7 @@ def film_from_exr(path: str | os.PathLike) -> Film:
     _crypto_from_exr(film, ch, header, count)
     film.count = np.rint(count).astype(np.int64)
     # recover Σ L² from the stored variance of the mean: var·(N−1) + mean² = E[L²]
-    lum = rgba[:, :3] @ np.array([0.2126, 0.7152, 0.0722])
+    lum = luminance(rgba[:, :3])  # (not a BLAS product: docs/decisions.md)
     var = ch["Variance.Y"].astype(np.float64).reshape(-1)
     film.sum_lum2 = (var * np.maximum(count - 1, 0) + lum**2) * count
     film.meta = {k: v for k, v in meta.items() if k != "denoised"}
