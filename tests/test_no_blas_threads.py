@@ -8,7 +8,8 @@ numpy keeps every core's BLAS thread, one ``np.linalg.inv`` while setting up a r
 faster than one thread instead of 1.8×). The CLI limits BLAS to one thread; the library and the
 add-on cannot, so their code must not call it.
 
-The check runs in a child process with numpy's default BLAS threads: it finds them by a
+The viewport's scene (``drt.interactive.LiveScene``) builds a context on every view change; it
+is checked too. The check runs in a child process with numpy's default BLAS threads: it finds them by a
 product that wakes them, waits until they sleep, renders, and reads how long they ran (Linux's
 per-thread CPU clocks). Skipped where numpy's BLAS has no threads of its own (one core, a
 BLAS limited by the environment, another BLAS library).
@@ -82,10 +83,31 @@ def big_scene():
     add_mesh(h, a, "lamp", pos, tri, material=glow, normals=nrm, matrix=translation(0.8, 0.5, 0.3))
     return scene_from_dict(h, a)
 
+def viewport(scene):
+    # the Rendered viewport's scene (drt.interactive): a new context for each of three views
+    from dataclasses import replace
+    from drt.interactive import LiveScene
+    from drt.scene import MeshData
+    live = LiveScene(scene.render, scene.materials, [], scene.world_color)
+    for k, o in enumerate(scene.objects):
+        m = scene.meshes[o.mesh]
+        live.set_object(k, m.name, MeshData(m.name, m.positions, m.triangles, m.material_index), o.matrix)
+    for x in (0.0, 0.3, 0.6):
+        matrix = np.array(scene.camera.matrix, np.float64)
+        matrix[0, 3] += x
+        s, ctx = live.context(replace(scene.camera, matrix=matrix), 24, 24, spp=1)
+        film = render(s, spp=1, threads=2, context=ctx)
+    return film
+
 report = {}
 for name in sys.argv[2:]:
-    scene = big_scene() if name == "big" else load_scene(name)
+    scene = big_scene() if name in ("big", "viewport") else load_scene(name)
     start = blas_ns(blas)
+    if name == "viewport":
+        viewport(scene)
+        time.sleep(0.15)
+        report[name] = (blas_ns(blas) - start) / 1e6
+        continue
     film = render(scene, spp=1, threads=2, context=prepare(scene, threads=2))
     time.sleep(0.15)  # a woken thread would be spinning now
     report[os.path.basename(name)] = (blas_ns(blas) - start) / 1e6
@@ -98,7 +120,7 @@ print(json.dumps({"blas_ms": report}))
 def test_a_render_leaves_openblas_threads_asleep():
     env = {k: v for k, v in os.environ.items()
            if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "GOTO_NUM_THREADS")}
-    scenes = ["big", os.path.join(REPO, "blend_scenes", "hdri.npz"),
+    scenes = ["big", "viewport", os.path.join(REPO, "blend_scenes", "hdri.npz"),
               os.path.join(REPO, "blend_scenes", "textured.npz")]
     out = subprocess.run([sys.executable, "-c", CHILD, HERE] + scenes, capture_output=True, text=True,
                          env=env, timeout=600)
