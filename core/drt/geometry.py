@@ -332,8 +332,8 @@ def corner_attribute(a: np.ndarray, kind, matrix, swapped: bool, mirrored: bool)
 def _mirrors(matrix) -> bool:
     """Whether a 4×4 object matrix mirrors (its 3×3 part has a negative determinant; the triple
     product of its rows, not LAPACK: see `_normal_matrix`)."""
-    a = np.asarray(matrix, np.float64)[:3, :3]
-    return bool((a[0] * np.cross(a[1], a[2])).sum() < 0.0)
+    (a, b, c, _), (d, e, f, _), (g, h, i, _) = np.asarray(matrix, np.float64)[:3].tolist()
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) < 0.0
 
 
 def _corners(a: np.ndarray, flip: bool) -> np.ndarray:

@@ -201,14 +201,20 @@ def invert_affine(matrix) -> np.ndarray | None:
     Not ``np.linalg.inv``: that is LAPACK's ``dgesv``, which OpenBLAS runs on its own threads
     even for a 4×4 matrix; those threads then spin for ~0.1 s beside the render's (docs/
     decisions.md, "No BLAS or LAPACK on a render's path")."""
-    m = np.asarray(matrix, dtype=np.float64).reshape(4, 4)
-    if not np.array_equal(m[3], (0.0, 0.0, 0.0, 1.0)):
+    (a, b, c, x), (d, e, f, y), (g, h, i, z), bottom = np.asarray(matrix, dtype=np.float64).reshape(4, 4).tolist()
+    if bottom != [0.0, 0.0, 0.0, 1.0]:
         return None
-    a_inv = invert_linear(m[:3, :3])
-    if not a_inv.any():
+    # cofactors of the 3×3 part, as rows of its adjugate (Python floats: one 4×4 costs
+    # microseconds, where numpy's per-call overhead would cost ~0.1 ms)
+    adj = ((e * i - f * h, c * h - b * i, b * f - c * e),
+           (f * g - d * i, a * i - c * g, c * d - a * f),
+           (d * h - e * g, b * g - a * h, a * e - b * d))
+    det = a * adj[0][0] + b * adj[1][0] + c * adj[2][0]
+    scale = max(abs(v) for v in (a, b, c, d, e, f, g, h, i))
+    if not abs(det) > 1e-12 * max(scale, 1e-300) ** 3:  # invert_linear's test
         return None
     out = np.zeros((4, 4))
-    out[:3, :3] = a_inv
-    out[:3, 3] = -(a_inv * m[:3, 3]).sum(axis=1)
+    out[:3, :3] = np.array(adj) / det
+    out[:3, 3] = -(out[:3, :3] * (x, y, z)).sum(axis=1)
     out[3, 3] = 1.0
     return out

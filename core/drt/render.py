@@ -36,7 +36,7 @@ from .kernels.row_chunks import preparation_threads
 from .compile_plan import mark_features_compiled, precompile, scene_features
 from .lights import EmissiveTriangles, LightSet
 from .materials import MaterialTable
-from .sampling.pixel_filter import PixelFilter
+from .sampling.pixel_filter import shared_pixel_filter
 from .sampling.sequences import Sampler
 from .scene import VIS_DIFFUSE, VIS_GLOSSY, VIS_TRANSMISSION, VIS_VOLUME_SCATTER, Scene, SceneError
 from .trace import Tracer
@@ -240,7 +240,7 @@ def _prepare(scene, seed, sampler, direct, indirect, samples) -> RenderContext:
     integ = Integrator(
         settings, geom, tracer, materials, lights, camera,
         Sampler(settings.sampler, settings.seed, settings.spp),
-        PixelFilter(settings.filter_type, settings.filter_width),
+        shared_pixel_filter(settings.filter_type, settings.filter_width),
         direct=settings.direct,
         indirect=settings.indirect,
         media=media,
