@@ -638,8 +638,8 @@ class ProgramBuilder:
         other = getattr(node, "object", None)
         if oname == "Object" and other is not None:
             # another object's local space: its inverse world matrix on the world position (not
-            # np.linalg.inv: OpenBLAS runs that on threads that spin on beside the render's);
-            # an object scaled to zero maps every point to its origin's 0
+            # np.linalg.inv: OpenBLAS runs that on threads that spin on beside the render's); an
+            # object scaled to zero has no local space: 0 everywhere
             m = compat.core_module("motion").invert_affine(np.array(other.matrix_world, np.float64))
             m = np.zeros((4, 4)) if m is None else m
             p = self.point(POINT_P, -1)

@@ -330,8 +330,8 @@ def corner_attribute(a: np.ndarray, kind, matrix, swapped: bool, mirrored: bool)
 
 
 def _mirrors(matrix) -> bool:
-    """Whether a 4×4 object matrix mirrors (its 3×3 part has a negative determinant; the triple
-    product of its rows, not LAPACK: see `_normal_matrix`)."""
+    """Whether a 4×4 object matrix mirrors: its 3×3 part has a negative determinant (expanded
+    here, not LAPACK's: docs/decisions.md, "No BLAS or LAPACK on a render's path")."""
     (a, b, c, _), (d, e, f, _), (g, h, i, _) = np.asarray(matrix, np.float64)[:3].tolist()
     return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) < 0.0
 
@@ -348,8 +348,9 @@ def _corners(a: np.ndarray, flip: bool) -> np.ndarray:
 def _normal_matrix(matrix) -> np.ndarray:
     """inv(M)ᵀ of a 4×4 matrix's 3×3 part (object → world normals; the object's normal
     transform the shading inputs use, docs/materials.md); identity for a singular M."""
-    inv = invert_linear(np.asarray(matrix, np.float64)[:3, :3])  # not np.linalg.inv: OpenBLAS
-    return inv.T if inv.any() else np.eye(3)  # would run it on threads that spin on after it
+    # not np.linalg.inv: OpenBLAS runs it on threads that spin on after it (docs/decisions.md)
+    inv = invert_linear(np.asarray(matrix, np.float64)[:3, :3])
+    return inv.T if inv.any() else np.eye(3)
 
 
 def static_triangle_vertices(geom: SceneGeometry, prims: np.ndarray) -> np.ndarray:

@@ -19,5 +19,3 @@ def row_norm(v: np.ndarray) -> np.ndarray:
 def row_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(n, 3), (n, 3) → (n,) row-wise dot products."""
     return np.einsum("ij,ij->i", a, b)
-
-
