@@ -97,9 +97,9 @@ def test_tracer_builds_fast_only_when_few_samples_reach_each_triangle(monkeypatc
     geom = SceneGeometry(np.zeros(3), pos.astype(np.float32), tri.astype(np.int32))
     asked = []
 
-    def spy(positions, triangles, fast_build=False):
+    def spy(positions, triangles, fast_build=False, device=None):
         asked.append(fast_build)
-        return embree_mesh.triangle_scene(positions, triangles, fast_build)
+        return embree_mesh.triangle_scene(positions, triangles, fast_build, device)
 
     monkeypatch.setattr(trace, "triangle_scene", spy)
     per_triangle = trace.FAST_BUILD_SAMPLES_PER_TRIANGLE

@@ -183,13 +183,26 @@ def test_antialiased_edge_gives_exact_filter_coverage():
     assert abs(expected[7] - 0.1186) < 5e-4 and abs(measured[7] - 0.1182) < 0.01
 
 
-def test_rigidly_moving_edge_gives_a_linear_ramp():
+@pytest.mark.parametrize("companions", [0, 2])
+def test_rigidly_moving_edge_gives_a_linear_ramp(companions):
     """The edge moves +4 px over the shutter: each pixel's value is the time average of the
-    filtered step, i.e. a linear ramp over the motion convolved with the filter."""
+    filtered step, i.e. a linear ramp over the motion convolved with the filter. With moving
+    companions out of view the scene's objects are one Embree scene of instances (drt.trace):
+    the same ramp."""
+    from drt import embree_direct
+    from drt.render import prepare
+
     motion = {"matrix_open": translation(0, 0, 0), "matrix_close": translation(4, 0, 0)}
     h, a = edge_scene(spp=256, motion=motion, shutter=[-0.25, 0.25])
     h["objects"][0]["matrix_world"] = translation(2, 0, 0)
-    img = render(scene_from_dict(h, a), threads=2).combined[..., 0]
+    for k in range(companions):
+        turn = np.array([[0.0, -1.0, 0.0, 500.0], [1.0, 0.0, 0.0, 30.0 * k], [0.0, 0.0, 1.0, 0.0], [0, 0, 0, 1]])
+        add_mesh(h, a, f"companion{k}", *quad((0, 0, 0), (1, 0, 0), (0, 1, 0)), material=0,
+                 motion={"matrix_open": translation(400, 30.0 * k, 0), "matrix_close": turn.tolist()})
+    scene = scene_from_dict(h, a)
+    ctx = prepare(scene, threads=2)
+    assert (ctx.tracer.instanced is not None) == (companions > 0 and bool(embree_direct.intersect1_address()))
+    img = render(scene, threads=2, context=ctx).combined[..., 0]
     centres = np.arange(16) + 0.5 - 8.0
     taus = (np.arange(4000) + 0.5) / 4000
     expected = np.mean([blackman_harris_step_response(4 * t - centres) for t in taus], axis=0)

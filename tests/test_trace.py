@@ -205,6 +205,7 @@ def _without_direct(tr):
 
     other = copy.copy(tr)
     other.moving = [copy.copy(obj) for obj in tr.moving]
+    other.instanced = None
     for obj in other.moving:
         obj.direct = None
     return other
@@ -274,3 +275,154 @@ def test_a_failing_probe_leaves_the_object_on_the_batch_path(monkeypatch):
         assert tr.moving[0].direct is None
         o, d, tau = _random_rays(rng, 2000)
         assert tr.intersect(o, d, tau=tau).hit.sum() > 50
+
+
+def _moving_crowd(count=12, deforming_every=4, static_floor=True):
+    """``count`` moving blobs in a row: each translates, turns (up to 170°) and scales (some
+    mirrored, every ``deforming_every``-th also deforms), over an optional static floor."""
+    from scene_builders import uv_sphere
+    h = base_header()
+    a = {}
+    m = add_material(h, "m", [{"type": "DIFFUSE", "color": [1, 1, 1]}])
+    if static_floor:
+        add_mesh(h, a, "floor", *quad((0, 0, -1.5), (8, 0, 0), (0, 8, 0)), material=m)
+    pos, tri, _ = uv_sphere(0.5, center=(0.3, 0.0, 0.0), rings=6, segments=8)
+    for k in range(count):
+        x = -5.0 + 10.0 * k / max(count - 1, 1)
+        angle = np.radians(170.0 * ((k % 5) / 4.0))
+        c, s = np.cos(angle), np.sin(angle)
+        grow = 1.0 + 0.5 * (k % 3)
+        mirror = -1.0 if k % 6 == 5 else 1.0
+        close = np.array([[grow * c, -grow * s, 0, x + 0.8], [grow * s, grow * c, 0, 0.4 * (k % 2)],
+                          [0, 0, mirror * grow, 0.3], [0, 0, 0, 1]])
+        motion = {"matrix_open": translation(x, 0, 0), "matrix_close": close.tolist()}
+        deforming = deforming_every and k % deforming_every == 0
+        add_mesh(h, a, f"blob{k}", pos, tri, material=m, motion=motion,
+                 positions_close=pos * np.array([1.0, 1.3, 0.7]) if deforming else None)
+    h["render"]["shutter"] = [0.0, 1.0]
+    h["camera"]["matrix_world"] = translation(0, 0, 0)
+    return h, a
+
+
+def _crowd_rays(rng, n):
+    target = rng.uniform([-6.5, -2.5, -1.6], [6.5, 2.5, 2.5], size=(n, 3))
+    o = rng.uniform(-9, 9, size=(n, 3))
+    d = target - o
+    d /= np.sqrt((d * d).sum(axis=1, keepdims=True))
+    return o, d, rng.random(n)
+
+
+def _per_object(tr):
+    """The same tracer answering object by object (the path before scenes of instances)."""
+    import copy
+
+    other = copy.copy(tr)
+    other.instanced = None
+    return other
+
+
+def test_many_moving_objects_are_one_scene_of_instances():
+    """With several moving objects every ray is one Embree query against a scene of instances,
+    each object under its own motion at the ray's τ. It answers as the per-object path does (the
+    oracle: DRT's float64 transforms, each object's swept box): the same triangles but for rays
+    grazing an edge (Embree evaluates the instances' motion in float32), t to float32 error,
+    the same transforms, points, normals and normal maps, and the same occlusion."""
+    from drt import embree_direct
+
+    if not embree_direct.intersect1_address():
+        pytest.skip("Embree's C handles not confirmed here")
+    rng = np.random.default_rng(21)
+    tr = Tracer(build_geometry(scene_from_dict(*_moving_crowd())))
+    assert tr.instanced is not None
+    ref = _per_object(tr)
+    o, d, tau = _crowd_rays(rng, 20000)
+    a, b = tr.intersect(o, d, tau=tau), ref.intersect(o, d, tau=tau)
+    moving_ref = b.hit & (b.prim >= tr.geom.static_count)
+    assert moving_ref.sum() > 2000 and (b.hit & ~moving_ref).sum() > 2000
+    same = a.prim == b.prim
+    assert same.mean() > 0.998, same.mean()
+    both = same & b.hit
+    np.testing.assert_allclose(a.t[both], b.t[both], rtol=2e-5, atol=1e-4)
+    np.testing.assert_allclose(a.p[both], b.p[both], atol=2e-4)
+    np.testing.assert_array_equal(a.ng[both], b.ng[both])
+    np.testing.assert_array_equal(a.moving[both], b.moving[both])
+    mv = both & b.moving
+    np.testing.assert_array_equal(a.moving_linear[both], b.moving_linear[both])
+    np.testing.assert_array_equal(a.normal_xform[mv], b.normal_xform[mv])
+    # the point is on the ray where Embree's t says, and off it by far less than the spawn
+    # offset along the normal: rays leaving a moving surface do not hit it again
+    np.testing.assert_allclose(a.p[a.hit], o[a.hit] + a.t[a.hit, None] * d[a.hit], atol=2e-4)
+    from drt.trace import OFFSET_ABSOLUTE, OFFSET_RELATIVE, offset_origin
+    h = a.hit & a.moving
+    off = np.abs(((o[h] + a.t[h, None] * d[h] - a.p[h]) * a.ng[h]).sum(axis=1))
+    assert off.max() < 0.5 * (OFFSET_ABSOLUTE + OFFSET_RELATIVE * np.abs(a.p[h]).max(axis=1)).min()
+    out = rng.normal(size=(h.sum(), 3))
+    out /= np.sqrt((out * out).sum(axis=1, keepdims=True))
+    facing = np.where(((out * a.ng[h]).sum(axis=1) * (-(d[h] * a.ng[h]).sum(axis=1)) < 0)[:, None], -out, out)
+    again = tr.intersect(offset_origin(a.p[h], a.ng[h], facing), facing, tau=tau[h])
+    assert not np.any((again.prim == a.prim[h]) & (again.t < 1e-3))
+    np.testing.assert_array_equal(a.p[~a.hit], o[~a.hit])
+    assert np.isinf(a.t[~a.hit]).all()
+    tmax = np.where(b.hit, b.t * np.where(rng.random(len(o)) < 0.5, 0.999, 1.001), 30.0)
+    agree = tr.occluded(o, d, tmax, tau) == ref.occluded(o, d, tmax, tau)
+    assert agree.mean() > 0.998, agree.mean()
+    limited = tr.intersect(o, d, tau=tau, tmax=tmax)
+    assert (limited.hit == (b.hit & (b.t < tmax))).mean() > 0.998
+
+
+def test_instances_only_for_several_moving_objects(monkeypatch):
+    """One moving object keeps the per-object path (a lone instance is not culled by Embree's
+    tree: every ray would pay its transform); so does any failure while building or checking
+    the scene of instances, and the answers stay right."""
+    import drt.trace as trace_mod
+
+    assert _spinning_scene(False).instanced is None
+    assert _spinning_scene(True).instanced is None
+    header, arrays = _moving_crowd(count=5)
+    geom = build_geometry(scene_from_dict(header, arrays))
+    rng = np.random.default_rng(22)
+    o, d, tau = _crowd_rays(rng, 3000)
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no instances here")
+
+    expect = _per_object(Tracer(geom)).intersect(o, d, tau=tau)
+    for name, patch in (("instance_scene", broken), ("instance_scene", lambda *a, **k: None),
+                        ("_instances_agree", lambda *a, **k: False)):
+        with monkeypatch.context() as mp:
+            mp.setattr(trace_mod, name, patch)
+            tr = Tracer(geom)
+            assert tr.instanced is None, name
+            got = tr.intersect(o, d, tau=tau)
+            np.testing.assert_array_equal(got.prim, expect.prim)
+            np.testing.assert_array_equal(got.t, expect.t)
+
+
+def test_instances_without_static_geometry_and_concurrent_queries():
+    """Only moving objects (no static instance): still one scene; several threads querying it
+    at once get what one thread gets."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from drt import embree_direct
+
+    if not embree_direct.intersect1_address():
+        pytest.skip("Embree's C handles not confirmed here")
+    tr = Tracer(build_geometry(scene_from_dict(*_moving_crowd(count=6, static_floor=False))))
+    assert tr.static is None and tr.instanced is not None
+    rng = np.random.default_rng(23)
+    batches = [_crowd_rays(rng, 2000) for _ in range(6)]
+    ref = _per_object(tr)
+    o, d, tau = batches[0]
+    assert (tr.intersect(o, d, tau=tau).prim == ref.intersect(o, d, tau=tau).prim).mean() > 0.998
+
+    def query(b):
+        o, d, tau = b
+        h = tr.intersect(o, d, tau=tau)
+        return h.prim, h.t, h.p, tr.occluded(o, d, np.full(len(o), np.inf), tau)
+
+    serial = [query(b) for b in batches]
+    with ThreadPoolExecutor(4) as pool:
+        parallel = list(pool.map(query, batches * 3))
+    for k, got in enumerate(parallel):
+        for x, y in zip(serial[k % len(batches)], got):
+            np.testing.assert_array_equal(x, y)

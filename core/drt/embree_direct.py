@@ -78,9 +78,7 @@ def scene_address(scene) -> int:
     api = embree_mesh._handles()
     if not api:
         return 0
-    if not scene.is_committed:
-        scene.run(np.zeros((1, 3), np.float32), np.array([[0.0, 0.0, 1.0]], np.float32),
-                  dists=np.array([1.0], np.float32), output=1)
+    embree_mesh.commit(scene)
     return int(ctypes.c_void_p.from_address(id(scene) + api[1]).value or 0)
 
 
@@ -178,6 +176,23 @@ def trace1_at(fn, scene, words, bits, base, addr, o, d, tmax, time):
         return math.inf, -1, 0.0, 0.0
     return (float(_bits_float(bits[base + _TFAR])), int(bits[base + _PRIM]),
             float(_bits_float(bits[base + _U])), float(_bits_float(bits[base + _V])))
+
+
+@inline_kernel
+def trace1_instance(fn, scene, words, bits, base, addr, o, d, tmax, time):
+    """``trace1_at`` on a scene of instances (``embree_mesh.instance_scene``): (t, prim, u, v,
+    instance), prim the triangle within the instanced scene and instance the geometry ID of the
+    instance hit in the top scene; prim = instance = −1 on a miss."""
+    _fill_ray(bits, base, o, d, tmax, time)
+    bits[base + _PRIM] = _INVALID
+    bits[base + _GEOM] = _INVALID
+    bits[base + _INST] = _INVALID
+    _call_intersect1(fn, scene, addr)
+    if bits[base + _GEOM] == _INVALID:
+        return math.inf, -1, 0.0, 0.0, -1
+    return (float(_bits_float(bits[base + _TFAR])), int(bits[base + _PRIM]),
+            float(_bits_float(bits[base + _U])), float(_bits_float(bits[base + _V])),
+            int(bits[base + _INST]))
 
 
 @inline_kernel

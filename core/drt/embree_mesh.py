@@ -23,9 +23,10 @@ from embreex.mesh_construction import TriangleMesh
 
 # Embree 4 enum values (rtcore_geometry.h, rtcore_buffer.h, rtcore_common.h, rtcore_device.h)
 _BUILD_QUALITY_LOW = 0
-_GEOMETRY_TYPE_TRIANGLE = 0
+_GEOMETRY_TYPE_TRIANGLE, _GEOMETRY_TYPE_INSTANCE = 0, 121
 _BUFFER_TYPE_INDEX, _BUFFER_TYPE_VERTEX = 0, 1
 _FORMAT_UINT3, _FORMAT_FLOAT3 = 0x5003, 0x9003
+_FORMAT_FLOAT3X4_COLUMN_MAJOR = 0x9234
 _DEVICE_PROPERTY_VERSION_MAJOR = 1
 
 _PTR = ctypes.sizeof(ctypes.c_void_p)
@@ -58,6 +59,9 @@ def _library():
                 ("rtcSetGeometryTimeStepCount", None, [vp, u]),
                 ("rtcSetGeometryBuildQuality", None, [vp, ctypes.c_int]),
                 ("rtcSetSceneBuildQuality", None, [vp, ctypes.c_int]),
+                ("rtcSetGeometryInstancedScene", None, [vp, vp]),
+                ("rtcSetGeometryTransform", None, [vp, u, ctypes.c_int, vp]),
+                ("rtcSetGeometryTransformQuaternion", None, [vp, u, vp]),
             ):
                 fn = getattr(lib, name, None)
                 if fn is None:
@@ -125,7 +129,14 @@ class _Scene(rtcs.EmbreeScene):
     as long as the scene (a Python subclass: the C layout of its EmbreeScene part is unchanged)."""
 
 
-def triangle_scene(positions: np.ndarray, triangles: np.ndarray, fast_build: bool = False) -> rtcs.EmbreeScene:
+def new_device():
+    """An Embree device (embreex ``EmbreeDevice``) for scenes that must share one: a scene of
+    instances (``instance_scene``) can only instance scenes of its own device."""
+    return _rtc.EmbreeDevice()
+
+
+def triangle_scene(positions: np.ndarray, triangles: np.ndarray, fast_build: bool = False,
+                   device=None) -> rtcs.EmbreeScene:
     """An Embree scene (embreex ``EmbreeScene``, for ``run``) of one triangle mesh.
 
     positions: (V, 3) vertex positions, stored as float32; triangles: (T, 3) vertex indices in
@@ -136,8 +147,10 @@ def triangle_scene(positions: np.ndarray, triangles: np.ndarray, fast_build: boo
     instead of its default (binned SAH). On a 1M-triangle mesh it builds in 0.04-0.13 s
     instead of 0.18-0.28 s on two cores and answers queries ~8 % slower: worth it when the
     render traces few rays per triangle (``drt.trace.Tracer``'s rule). Hits are the same:
-    only the tree differs, not the ray-triangle test."""
-    device = _rtc.EmbreeDevice()
+    only the tree differs, not the ray-triangle test.
+
+    device: the ``new_device`` to build on (default: a device of the scene's own)."""
+    device = device or _rtc.EmbreeDevice()
     scene = _Scene(device)  # the scene keeps its device alive
     api = _handles()
     if api is None or not len(triangles) or not _attach_shared(api, scene, device, positions, triangles,
@@ -146,15 +159,15 @@ def triangle_scene(positions: np.ndarray, triangles: np.ndarray, fast_build: boo
     return scene
 
 
-def deforming_scene(positions: np.ndarray, positions_close: np.ndarray, triangles: np.ndarray):
+def deforming_scene(positions: np.ndarray, positions_close: np.ndarray, triangles: np.ndarray, device=None):
     """An Embree scene of one triangle mesh whose vertices move linearly from ``positions``
     (ray time 0) to ``positions_close`` (ray time 1): Embree's motion blur with two time steps,
     queried by ``drt.embree_direct`` with each ray's shutter fraction as its time (embreex's
-    ``run`` has no ray times). None without the checked handles."""
+    ``run`` has no ray times). None without the checked handles. device: as ``triangle_scene``'s."""
     api = _handles()
     if api is None or not len(triangles):
         return None
-    device = _rtc.EmbreeDevice()
+    device = device or _rtc.EmbreeDevice()
     scene = _Scene(device)
     if not _attach_shared(api, scene, device, positions, triangles, positions_close):
         return None
@@ -198,3 +211,72 @@ def _attach_shared(api, scene, device, positions, triangles, positions_close=Non
     if ok:
         scene.shared_buffers = (*steps, index)  # read by Embree until the scene is freed
     return ok
+
+
+class _QuaternionDecomposition(ctypes.Structure):
+    """Embree's RTCQuaternionDecomposition (rtcore_quaternion.h): the transform
+    T · R(quaternion) · S, S the upper-triangular scale/skew matrix plus a shift. Embree
+    interpolates S, the shift and T linearly between time steps and the quaternion by slerp."""
+    _fields_ = [(name, ctypes.c_float) for name in (
+        "scale_x", "scale_y", "scale_z", "skew_xy", "skew_xz", "skew_yz", "shift_x", "shift_y", "shift_z",
+        "quaternion_r", "quaternion_i", "quaternion_j", "quaternion_k",
+        "translation_x", "translation_y", "translation_z")]
+
+
+def instance_scene(device, parts) -> rtcs.EmbreeScene | None:
+    """One Embree scene that instances others, so that a single query answers for all of them.
+
+    device: the ``new_device`` every instanced scene was built on. parts: (scene, motion) per
+    instance, in order (instance k gets Embree's geometry ID k, which hits report as instID):
+    motion None instances the scene as it is (identity); otherwise ((q0, scale0, trans0),
+    (q1, scale1, trans1)) — unit quaternions (w, x, y, z), per-axis scales and translations
+    at shutter open and close — makes a motion-blurred instance whose transform at ray time τ
+    is T(lerp) · R(slerp) · diag(lerp), DRT's rigid motion (``drt.motion``), evaluated by
+    Embree in float32 (its slerp uses polynomial approximations: the caller checks the answers).
+
+    Returns an embreex scene (queried through ``drt.embree_direct``) that keeps the instanced
+    scenes alive, or None without the checked handles or when Embree refuses any part."""
+    api = _handles()
+    if api is None:
+        return None
+    lib, scene_offset, device_offset = api
+    top = _Scene(device)
+    top_handle = ctypes.c_void_p.from_address(id(top) + scene_offset).value
+    device_handle = ctypes.c_void_p.from_address(id(device) + device_offset).value
+    identity = np.array([1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0], np.float32)
+    for k, (child, motion) in enumerate(parts):
+        child_handle = ctypes.c_void_p.from_address(id(child) + scene_offset).value
+        commit(child)
+        geom = lib.rtcNewGeometry(device_handle, _GEOMETRY_TYPE_INSTANCE)
+        if not geom:
+            lib.rtcGetDeviceError(device_handle)
+            return None
+        lib.rtcSetGeometryInstancedScene(geom, child_handle)
+        if motion is None:
+            lib.rtcSetGeometryTransform(geom, 0, _FORMAT_FLOAT3X4_COLUMN_MAJOR, identity.ctypes.data)
+        else:
+            lib.rtcSetGeometryTimeStepCount(geom, 2)
+            for step, (q, scale, trans) in enumerate(motion):
+                qd = _QuaternionDecomposition(scale_x=scale[0], scale_y=scale[1], scale_z=scale[2],
+                                              quaternion_r=q[0], quaternion_i=q[1], quaternion_j=q[2],
+                                              quaternion_k=q[3], translation_x=trans[0],
+                                              translation_y=trans[1], translation_z=trans[2])
+                lib.rtcSetGeometryTransformQuaternion(geom, step, ctypes.byref(qd))
+        lib.rtcCommitGeometry(geom)
+        ok = lib.rtcGetDeviceError(device_handle) == 0
+        if ok and lib.rtcAttachGeometry(top_handle, geom) != k:
+            ok = False
+        ok = ok and lib.rtcGetDeviceError(device_handle) == 0
+        lib.rtcReleaseGeometry(geom)
+        if not ok:
+            return None
+    top.instanced = [child for child, _ in parts]  # Embree reads them until the scene is freed
+    commit(top)
+    return top
+
+
+def commit(scene) -> None:
+    """Commit an embreex scene (embreex commits on a scene's first query)."""
+    if not scene.is_committed:
+        scene.run(np.zeros((1, 3), np.float32), np.array([[0.0, 0.0, 1.0]], np.float32),
+                  dists=np.array([1.0], np.float32), output=1)
