@@ -130,12 +130,35 @@ def main(argv=None) -> int:
                          np.array(tfar, dtype=np.float32), occluded))
         return original(emb_scene, o, d, tfar, occluded, scratch)
 
+    # a scene of moving objects queries one Embree scene of instances from kernels instead
+    # (drt.trace._Instances): its rays are recorded too, replayed by a plain rtcIntersect1 /
+    # rtcOccluded1 loop
+    import drt.trace as trace_mod
+    from drt import embree_direct
+
+    instanced = []
+    kernels = trace_mod._instanced_hits, trace_mod._instanced_blocked
+
+    def recording_hits(fn, handle, words, offsets, objects, motions, o, d, tau, tmax, *rest):
+        instanced.append((fn, handle, o.copy(), d.copy(), tau.copy(),
+                          tmax.copy() if len(tmax) else np.full(len(o), np.inf)))
+        return kernels[0](fn, handle, words, offsets, objects, motions, o, d, tau, tmax, *rest)
+
+    def recording_blocked(fn, handle, words, o, d, tau, tmax, blocked):
+        instanced.append((fn, handle, o.copy(), d.copy(), tau.copy(), tmax.copy()))
+        return kernels[1](fn, handle, words, o, d, tau, tmax, blocked)
+
     tracer._run = recording
+    trace_mod._instanced_hits, trace_mod._instanced_blocked = recording_hits, recording_blocked
     try:
         render(scene, spp=args.spp, threads=1, context=ctx)
     finally:
         tracer._run = original
-    n_rays = sum(len(r[1]) for r in recorded)
+        trace_mod._instanced_hits, trace_mod._instanced_blocked = kernels
+    n_rays = sum(len(r[1]) for r in recorded) + sum(len(r[2]) for r in instanced)
+    words = embree_direct.scratch()
+    answers = [tuple(np.empty(len(r[2]), dtype) for dtype in (np.float64, np.int64, np.float64, np.float64))
+               for r in instanced]
     # both rates in process CPU time, best of two, one thread: on a shared machine wall time
     # measures the neighbours; the renderer's time is that of an unrecorded run (the recording
     # render above copies every batch, which is no part of the renderer)
@@ -148,6 +171,8 @@ def main(argv=None) -> int:
                 emb_scene.run(o, d, dists=dists, query="OCCLUDED")
             else:
                 emb_scene.run(o, d, dists=dists, output=1)
+        for (fn, handle, o, d, tau, tmax), out in zip(instanced, answers):
+            embree_direct.trace_rows_at(fn, handle, words, o, d, tmax, tau, *out)
         embree_seconds = min(embree_seconds, time.process_time() - c0)
     drt_rate, raw_rate = n_rays / cpu1, n_rays / embree_seconds
     print(f"  Embree alone on the same {n_rays} rays (1 thread, CPU time): {raw_rate / 1e6:.2f} Mrays/s; "
@@ -199,10 +224,16 @@ def stage_breakdown(scene, ctx, spp, n_rays):
                 spent[name] = spent.get(name, 0.0) + time.process_time() - c0
         return wrapper
 
-    originals = dict(shade=stages.shade, camera_stage=stages.camera_stage, walk=SubsurfaceWalker.run)
+    import drt.trace as trace_mod
+
+    originals = dict(shade=stages.shade, camera_stage=stages.camera_stage, walk=SubsurfaceWalker.run,
+                     hits=trace_mod._instanced_hits, blocked=trace_mod._instanced_blocked)
     patched_tracer = ("intersect", "occluded", "_run")
     best = {}
     try:
+        # (the query kernels of a scene of instances: Embree plus writing the hits)
+        trace_mod._instanced_hits = timed("_run", originals["hits"])
+        trace_mod._instanced_blocked = timed("_run", originals["blocked"])
         stages.shade = timed("shade", originals["shade"])
         stages.camera_stage = timed("camera_stage", originals["camera_stage"])
         SubsurfaceWalker.run = timed("walk", originals["walk"])
@@ -217,12 +248,13 @@ def stage_breakdown(scene, ctx, spp, n_rays):
                 best[k] = min(best.get(k, 1e9), v)
     finally:
         stages.shade, stages.camera_stage = originals["shade"], originals["camera_stage"]
+        trace_mod._instanced_hits, trace_mod._instanced_blocked = originals["hits"], originals["blocked"]
         SubsurfaceWalker.run = originals["walk"]
         for name in patched_tracer:
             tracer.__dict__.pop(name, None)
     rows = [("shade (per-hit work: emission, MIS, NEE, BSDF sampling)", best.get("shade", 0.0)),
             ("camera_stage", best.get("camera_stage", 0.0)),
-            ("Embree itself (Tracer._run)", best.get("_run", 0.0)),
+            ("Embree itself (Tracer._run; instances: their query kernels)", best.get("_run", 0.0)),
             ("glue around Embree (intersect + occluded - Embree)",
              best.get("intersect", 0.0) + best.get("occluded", 0.0) - best.get("_run", 0.0))]
     if best.get("walk", 0.0) > 0.0:  # its Embree calls are inside, not in the rows above
