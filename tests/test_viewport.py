@@ -90,6 +90,32 @@ def test_large_object_moves_by_its_matrix_only():
     assert lum[7:19, 3:14].mean() < 0.3 * lum[7:19, 19:].mean()  # x ∈ [−1, 0], y ∈ [−0.3, 0.7]
 
 
+def test_objects_apart_from_the_static_set_are_one_scene_of_instances():
+    """Two large objects are kept apart from the static set (moving one costs a matrix): the
+    viewport's tracer queries them and the floor as one Embree scene of instances, with the
+    picture the per-object path gives, also after one of them moved."""
+    from drt import embree_direct
+
+    if not embree_direct.intersect1_address():
+        pytest.skip("Embree's C handles not confirmed here")
+    big = grid_mesh(int(np.ceil(np.sqrt(INSTANCE_MIN_TRIANGLES / 2))), 1.0)
+    big.material_index[:] = 1
+    live = live_scene()
+    live.set_materials([DIFFUSE, DARK])
+    live.set_object("a", "a", big, translate(0.6, 0, 0))
+    live.set_object("b", "b", big, translate(-0.6, 0.3, -0.5))
+    cam = top_camera()
+    for step in range(2):
+        if step:
+            live.set_matrix("a", translate(0.4, -0.5, 0.2))
+        scene, ctx = live.context(cam, 32, 32, spp=4)
+        assert live.instance_count == 2 and ctx.tracer.instanced is not None
+        instanced = render(scene, spp=4, context=ctx, threads=1).combined
+        ctx.tracer.instanced = None
+        per_object = render(scene, spp=4, context=ctx, threads=1).combined
+        np.testing.assert_allclose(instanced, per_object, rtol=1e-4, atol=1e-5)
+
+
 def test_small_object_rebuilds_only_the_static_set():
     live = live_scene()
     live.set_object("box", "box", grid_mesh(2, 0.5), translate(0, 0, 0))

@@ -26,7 +26,7 @@ _BUILD_QUALITY_LOW = 0
 _GEOMETRY_TYPE_TRIANGLE, _GEOMETRY_TYPE_INSTANCE = 0, 121
 _BUFFER_TYPE_INDEX, _BUFFER_TYPE_VERTEX = 0, 1
 _FORMAT_UINT3, _FORMAT_FLOAT3 = 0x5003, 0x9003
-_FORMAT_FLOAT3X4_COLUMN_MAJOR = 0x9234
+_FORMAT_FLOAT3X4_ROW_MAJOR, _FORMAT_FLOAT3X4_COLUMN_MAJOR = 0x9134, 0x9234
 _DEVICE_PROPERTY_VERSION_MAJOR = 1
 
 _PTR = ctypes.sizeof(ctypes.c_void_p)
@@ -228,7 +228,8 @@ def instance_scene(device, parts) -> rtcs.EmbreeScene | None:
 
     device: the ``new_device`` every instanced scene was built on. parts: (scene, motion) per
     instance, in order (instance k gets Embree's geometry ID k, which hits report as instID):
-    motion None instances the scene as it is (identity); otherwise ((q0, scale0, trans0),
+    motion None instances the scene as it is (identity); a (3, 4) array places it by that
+    local→world affine map (rows: the linear part beside the translation); otherwise ((q0, scale0, trans0),
     (q1, scale1, trans1)) — unit quaternions (w, x, y, z), per-axis scales and translations
     at shutter open and close — makes a motion-blurred instance whose transform at ray time τ
     is T(lerp) · R(slerp) · diag(lerp), DRT's rigid motion (``drt.motion``), evaluated by
@@ -254,6 +255,9 @@ def instance_scene(device, parts) -> rtcs.EmbreeScene | None:
         lib.rtcSetGeometryInstancedScene(geom, child_handle)
         if motion is None:
             lib.rtcSetGeometryTransform(geom, 0, _FORMAT_FLOAT3X4_COLUMN_MAJOR, identity.ctypes.data)
+        elif isinstance(motion, np.ndarray):
+            rows = np.ascontiguousarray(motion, dtype=np.float32).reshape(3, 4)
+            lib.rtcSetGeometryTransform(geom, 0, _FORMAT_FLOAT3X4_ROW_MAJOR, rows.ctypes.data)
         else:
             lib.rtcSetGeometryTimeStepCount(geom, 2)
             for step, (q, scale, trans) in enumerate(motion):

@@ -43,7 +43,9 @@ from typing import Callable
 
 import numpy as np
 
+from . import embree_direct
 from .camera import Camera
+from .embree_mesh import new_device
 from .geometry import MovingMesh, SceneGeometry, _points_to_world, _transform_normals
 from .volumes.media import lights_reaching, media_for_scene, world_blocks_infinity
 from .integrator import Integrator
@@ -57,11 +59,13 @@ from .scene import MAX_TRANSFORM_ENTRY, VIS_ALL, CameraSpec, MeshData, RenderSet
 # The tracer's per-object pieces: a moving object's Embree scene + transform, and its culling
 # box. LiveScene keeps them across edits (a moved object is one new transform), so it builds
 # the Tracer from parts instead of from a SceneGeometry.
-from .trace import Tracer, _MovingObject
+from .trace import Tracer, _instances, _MovingObject
 
 #: objects with at least this many triangles get their own BVH (moving them costs a matrix)
 INSTANCE_MIN_TRIANGLES = 1 << 15
-#: at most this many objects are traced through transforms: each costs a pass over the rays
+#: at most this many objects are traced through transforms. Two or more are one Embree scene
+#: of instances (``Tracer.instanced``; without Embree's C handles each costs a pass over the
+#: rays), rebuilt and checked at each edit: ~5 ms with 16
 MAX_INSTANCES = 16
 #: the first image after an edit has at most this many pixels (640 × 360 starts at 80 × 45)
 COARSE_PIXELS = 1 << 13
@@ -126,9 +130,12 @@ def _is_rigid(m: np.ndarray) -> bool:
 
 
 class _LiveTracer(Tracer):
-    """A ``Tracer`` assembled from parts LiveScene keeps between edits."""
+    """A ``Tracer`` assembled from parts LiveScene keeps between edits. With two or more
+    objects kept apart from the static set, and every Embree scene on LiveScene's one device,
+    all of them are one Embree scene of instances (``Tracer.instanced``): a ray's cost then
+    does not grow with their number."""
 
-    def __init__(self, geom: SceneGeometry, static_scene, static_ng, moving: list):
+    def __init__(self, geom: SceneGeometry, static_scene, static_ng, moving: list, device=None):
         # deliberately not Tracer.__init__: that would rebuild every BVH
         self.geom = geom
         self.static = static_scene
@@ -136,6 +143,7 @@ class _LiveTracer(Tracer):
         self.moving = moving
         self.embree_seconds = 0.0
         self.rays_traced = 0
+        self.instanced = _instances(self, device)
 
 
 class LiveScene:
@@ -164,6 +172,7 @@ class LiveScene:
         self.origin_shift = None if origin_shift is None else np.asarray(origin_shift, np.float64).reshape(3).copy()
         self.counters = BuildCounters()
         self.warnings: list[str] = []
+        self._device = None  # the Embree device of every BVH below (_embree_device)
         self._static = None  # (positions, triangles, tables, embree scene, face normals)
         self._static_dirty = True
         self._instances: dict = {}  # key -> (_MovingObject, MovingMesh) of instance objects
@@ -422,6 +431,13 @@ class LiveScene:
         if self._instances.pop(key, None) is not None:
             self._tables_dirty = True
 
+    def _embree_device(self):
+        """The one Embree device of this scene's BVHs (a scene of instances can only instance
+        scenes of its own device), or None without Embree's checked C handles."""
+        if self._device is None and embree_direct.intersect1_address():
+            self._device = new_device()
+        return self._device
+
     def _shifted(self, m: np.ndarray) -> np.ndarray:
         out = np.array(m, dtype=np.float64)
         out[:3, 3] -= self.origin_shift
@@ -447,7 +463,7 @@ class LiveScene:
             scene = ng = None
             if len(tri):
                 # Embree's fast build, as Cycles's viewport (Dynamic BVH): an edit waits for it
-                scene = triangle_scene(pos, tri, fast_build=True)
+                scene = triangle_scene(pos, tri, fast_build=True, device=self._embree_device())
                 ng = _unit_face_normals(pos, tri)
             self._static = (pos, tri, tables, scene, ng, attrs)
             self._static_dirty = False
@@ -463,7 +479,7 @@ class LiveScene:
                 mm = MovingMesh(obj.name, 0, np.ascontiguousarray(obj.mesh.positions, np.float64), None,
                                 np.ascontiguousarray(obj.mesh.triangles, np.int64),
                                 RigidMotion(self._shifted(obj.matrix), self._shifted(obj.matrix)))
-                mo = _MovingObject(mm, fast_build=True)
+                mo = _MovingObject(mm, fast_build=True, device=self._embree_device())
                 # the local bounding radius, kept so that a move need not visit the vertices
                 mo.local_radius = float(np.sqrt((mm.positions ** 2).sum(axis=1).max()))
                 self._instances[key] = (mo, mm)
@@ -524,7 +540,7 @@ class LiveScene:
             lo, hi = np.minimum(lo, mo.box_lo), np.maximum(hi, mo.box_hi)
         if np.all(np.isfinite(lo)):
             geom.scene_radius = float(max(np.linalg.norm(hi - 0.5 * (lo + hi)), 1e-3))
-        return geom, _LiveTracer(geom, static_scene, static_ng, moving_objects)
+        return geom, _LiveTracer(geom, static_scene, static_ng, moving_objects, self._device)
 
     @staticmethod
     def _mesh_tables(mesh: MeshData, normals_world, swapped: bool = False) -> tuple:

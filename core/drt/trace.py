@@ -47,7 +47,7 @@ from .geometry import SceneGeometry
 from .kernels import inline_kernel, kernel
 from .kernels.row_chunks import over_rows
 from .kernels.vec3 import cross, dot, load, store, sub
-from .motion import MotionData, apply_rows, motion_at
+from .motion import MotionData, _motion_at_rows, apply_rows, motion_at
 from .scratch import FRESH
 
 # Spawn offset: relative part scales with |p| (float32 spacing is 6e-8·|p|, Embree's hit error
@@ -946,14 +946,26 @@ def _checked_instances(tracer, device):
         return None
     parts = [(tracer.static, None)] if tracer.static is not None else []
     for obj in moving:
-        m = obj.motion
         child = obj.scene if obj.deforming is None else obj.direct[3]
-        parts.append((child, ((m.q0, m.scale0, m.trans0), (m.q1, m.scale1, m.trans1))))
+        parts.append((child, _instance_placement(obj.motion)))
     scene = instance_scene(device, parts)
     if scene is None:
         return None
     inst = _Instances(tracer, scene)
     return inst if _instances_agree(tracer, inst) else None
+
+
+def _instance_placement(m):
+    """How ``embree_mesh.instance_scene`` places an object with rigid motion ``m`` (a
+    ``MotionData``): its (3, 4) local→world map when it stands still over the shutter (a viewport
+    object kept apart from the static set, an animated object at rest: Embree's plain instance,
+    no interpolation), else its motion's two quaternion decompositions."""
+    if (np.array_equal(m.q0, m.q1) and np.array_equal(m.scale0, m.scale1)
+            and np.array_equal(m.trans0, m.trans1)):
+        linear, translation = np.empty((1, 3, 3)), np.empty((1, 3))
+        _motion_at_rows(m, np.zeros(1), linear, translation)
+        return np.concatenate([linear[0], translation[0][:, None]], axis=1)
+    return (m.q0, m.scale0, m.trans0), (m.q1, m.scale1, m.trans1)
 
 
 def _instances_agree(tracer, inst) -> bool:
