@@ -180,11 +180,15 @@ def test_occlusion_of_moving_objects_respects_tmax():
 
 def test_concurrent_queries_match_serial():
     """Several threads query one tracer at once (the render loop does): no shared scratch."""
-    from concurrent.futures import ThreadPoolExecutor
-
     rng = np.random.default_rng(9)
     tr = _spinning_scene(True)
-    batches = [_random_rays(rng, 2000) for _ in range(8)]
+    _parallel_matches_serial(tr, [_random_rays(rng, 2000) for _ in range(8)])
+
+
+def _parallel_matches_serial(tr, batches):
+    """Four threads querying ``tr`` at once with ``batches`` (three times over) get what one
+    thread gets: hits, distances, points and occlusion."""
+    from concurrent.futures import ThreadPoolExecutor
 
     def query(b):
         o, d, tau = b
@@ -401,8 +405,6 @@ def test_instances_only_for_several_moving_objects(monkeypatch):
 def test_instances_without_static_geometry_and_concurrent_queries():
     """Only moving objects (no static instance): still one scene; several threads querying it
     at once get what one thread gets."""
-    from concurrent.futures import ThreadPoolExecutor
-
     from drt import embree_direct
 
     if not embree_direct.intersect1_address():
@@ -414,15 +416,4 @@ def test_instances_without_static_geometry_and_concurrent_queries():
     ref = _per_object(tr)
     o, d, tau = batches[0]
     assert (tr.intersect(o, d, tau=tau).prim == ref.intersect(o, d, tau=tau).prim).mean() > 0.998
-
-    def query(b):
-        o, d, tau = b
-        h = tr.intersect(o, d, tau=tau)
-        return h.prim, h.t, h.p, tr.occluded(o, d, np.full(len(o), np.inf), tau)
-
-    serial = [query(b) for b in batches]
-    with ThreadPoolExecutor(4) as pool:
-        parallel = list(pool.map(query, batches * 3))
-    for k, got in enumerate(parallel):
-        for x, y in zip(serial[k % len(batches)], got):
-            np.testing.assert_array_equal(x, y)
+    _parallel_matches_serial(tr, batches)

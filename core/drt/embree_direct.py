@@ -167,22 +167,16 @@ def trace1_at(fn, scene, words, bits, base, addr, o, d, tmax, time):
     """``trace1`` at ``time`` in [0, 1] (Embree's ray time: where a geometry with time steps —
     a deforming mesh, ``embree_mesh.deforming_scene`` — is seen; others ignore it). ``words``
     and ``bits`` are ``ray_buffer``'s (the same uint32 scratch)."""
-    _fill_ray(bits, base, o, d, tmax, time)
-    bits[base + _PRIM] = _INVALID
-    bits[base + _GEOM] = _INVALID
-    bits[base + _INST] = _INVALID
-    _call_intersect1(fn, scene, addr)
-    if bits[base + _GEOM] == _INVALID:
-        return math.inf, -1, 0.0, 0.0
-    return (float(_bits_float(bits[base + _TFAR])), int(bits[base + _PRIM]),
-            float(_bits_float(bits[base + _U])), float(_bits_float(bits[base + _V])))
+    t, prim, u, v, _ = trace1_instance(fn, scene, words, bits, base, addr, o, d, tmax, time)
+    return t, prim, u, v
 
 
 @inline_kernel
 def trace1_instance(fn, scene, words, bits, base, addr, o, d, tmax, time):
-    """``trace1_at`` on a scene of instances (``embree_mesh.instance_scene``): (t, prim, u, v,
-    instance), prim the triangle within the instanced scene and instance the geometry ID of the
-    instance hit in the top scene; prim = instance = −1 on a miss."""
+    """``trace1_at`` with the instance hit: (t, prim, u, v, instance). On a scene of instances
+    (``embree_mesh.instance_scene``) prim is the triangle within the instanced scene and
+    instance the geometry ID of the instance in the top scene (on other scenes instance means
+    nothing); prim = instance = −1 on a miss."""
     _fill_ray(bits, base, o, d, tmax, time)
     bits[base + _PRIM] = _INVALID
     bits[base + _GEOM] = _INVALID
