@@ -76,6 +76,18 @@ def test_no_lights_renders_black_and_warns():
     assert np.all(film.albedo[8, 8] > 0.7)  # the floor is there, just unlit
 
 
+def test_a_moving_emitter_is_no_reason_to_warn_of_a_black_image():
+    """Moving emitters are no lights (NEE samples static triangles), but the camera sees them:
+    a scene lit only by one is not black and gets no such warning."""
+    h = base_header(8, 8, 4, shutter=[0.0, 1.0])
+    a = {}
+    glow = add_material(h, "glow", [], emission=(1, 1, 1))
+    motion = {"matrix_open": translation(0, 0, 0), "matrix_close": translation(0.2, 0, 0)}
+    add_mesh(h, a, "card", *quad((0, 0, 0), (1, 0, 0), (0, 0, 1)), material=glow, motion=motion)
+    assert not any("black" in w for w in prepare(scene_from_dict(h, a)).warnings)
+    assert render_ok(h, a, "moving_emitter").combined[..., :3].mean() > 0.1
+
+
 def test_no_lights_warning_on_the_cli(tmp_path):
     h, a = lit_floor(4, 4, 1)
     h["lights"] = []

@@ -248,7 +248,10 @@ def _prepare(scene, seed, sampler, direct, indirect, samples) -> RenderContext:
         world_registers=world_regs,
     )
     ctx = RenderContext(scene, integ, tracer, time.perf_counter() - t0)
-    if not scene.lights and not np.any(scene.world_color > 0) and emissive is None and world_map is None:
+    # (a moving emitter is no light, NEE samples static triangles only, but the camera sees it)
+    emitters = (emissive is not None or _has_textured_emission(scene)
+                or bool(len(geom.material) and np.any(materials.has_emission[geom.material])))
+    if not scene.lights and not np.any(scene.world_color > 0) and not emitters and world_map is None:
         ctx.warnings.append("the scene has no lights, no emissive materials and a black world: the image will be black")
     return ctx
 
