@@ -437,6 +437,10 @@ def render_frames(
                 try:  # fetched from the worker; Dask recomputes it if that worker just died
                     part = f.result(timeout=timeout)
                 except TimeoutError:
+                    # its worker left before the result was fetched, and Dask found no other to
+                    # compute it again on: say so when that is because every worker is gone
+                    if _cluster_size(client)[0] == 0:
+                        raise FarmError(_no_workers_message()) from None
                     raise FarmError(f"a finished task's result did not arrive within {timeout:g} s") from None
                 except CancelledError:
                     # its worker died after it finished, with the only copy of the frame's scene:
