@@ -116,6 +116,32 @@ def test_objects_apart_from_the_static_set_are_one_scene_of_instances():
         np.testing.assert_allclose(instanced, per_object, rtol=1e-4, atol=1e-5)
 
 
+def test_more_large_objects_stay_apart_when_they_share_a_scene_of_instances(monkeypatch):
+    """Objects kept apart cost a pass over the rays each on the per-object path, so at most
+    MAX_INSTANCES are; as one scene of instances they cost one query, and up to
+    MAX_SHARED_INSTANCES are (an edit of one then moves a matrix instead of rebuilding the
+    static set)."""
+    import drt.interactive as interactive
+    from drt import embree_direct
+
+    if not embree_direct.intersect1_address():
+        pytest.skip("Embree's C handles not confirmed here")
+    monkeypatch.setattr(interactive, "MAX_INSTANCES", 2)
+    monkeypatch.setattr(interactive, "MAX_SHARED_INSTANCES", 4)
+    monkeypatch.setattr(interactive, "INSTANCE_MIN_TRIANGLES", 8)
+    live = live_scene()
+    for k in range(6):
+        live.set_object(f"o{k}", f"o{k}", grid_mesh(2, 0.3), translate(-1 + 0.4 * k, 0, 0))
+    scene, ctx = live.context(top_camera(), 16, 16, spp=1)
+    assert live.instance_count == 4 and ctx.tracer.instanced is not None
+    monkeypatch.setattr(embree_direct, "intersect1_address", lambda: 0)
+    fewer = live_scene()
+    for k in range(6):
+        fewer.set_object(f"o{k}", f"o{k}", grid_mesh(2, 0.3), translate(-1 + 0.4 * k, 0, 0))
+    fewer.context(top_camera(), 16, 16, spp=1)
+    assert fewer.instance_count == 2
+
+
 def test_small_object_rebuilds_only_the_static_set():
     live = live_scene()
     live.set_object("box", "box", grid_mesh(2, 0.5), translate(0, 0, 0))
