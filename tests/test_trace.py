@@ -417,3 +417,34 @@ def test_instances_without_static_geometry_and_concurrent_queries():
     o, d, tau = batches[0]
     assert (tr.intersect(o, d, tau=tau).prim == ref.intersect(o, d, tau=tau).prim).mean() > 0.998
     _parallel_matches_serial(tr, batches)
+
+
+def test_a_moving_crowd_far_from_the_camera():
+    """Far from the camera (the frame's origin) Embree's float32 instance transforms err by more
+    than near it; the check allows that error up to half the spawn offset, so a crowd 10 km away
+    still uses the scene of instances, and rays spawned from its surfaces do not hit them again."""
+    from drt import embree_direct
+    from drt.trace import offset_origin
+
+    if not embree_direct.intersect1_address():
+        pytest.skip("Embree's C handles not confirmed here")
+    far = 1e4
+    header, arrays = _moving_crowd(count=8)
+    for obj in header["objects"]:
+        for m in [obj["matrix_world"]] + list((obj.get("motion") or {}).values()):
+            m[0][3] += far
+    geom = build_geometry(scene_from_dict(header, arrays))  # the camera stays at the origin
+    tr = Tracer(geom)
+    assert tr.instanced is not None
+    rng = np.random.default_rng(24)
+    o, d, tau = _crowd_rays(rng, 20000)
+    o = o + np.array([far, 0.0, 0.0]) - geom.origin_shift
+    a, b = tr.intersect(o, d, tau=tau), _per_object(tr).intersect(o, d, tau=tau)
+    assert (a.prim == b.prim).mean() > 0.995
+    h = a.hit & a.moving
+    assert h.sum() > 1000
+    out = rng.normal(size=(h.sum(), 3))
+    out /= np.sqrt((out * out).sum(axis=1, keepdims=True))
+    facing = np.where(((out * a.ng[h]).sum(axis=1) * (-(d[h] * a.ng[h]).sum(axis=1)) < 0)[:, None], -out, out)
+    again = tr.intersect(offset_origin(a.p[h], a.ng[h], facing), facing, tau=tau[h])
+    assert not np.any((again.prim == a.prim[h]) & (again.t < 1.0))
