@@ -78,7 +78,9 @@ def add_mesh(header, arrays, name, positions, triangles, material=0, matrix=None
         arrays[f"mesh{k}.normals"] = np.asarray(normals, np.float32)
     if positions_close is not None:
         arrays[f"mesh{k}.positions_close"] = np.asarray(positions_close, np.float32)
-    header["objects"].append({"name": name, "mesh": k, "matrix_world": matrix or IDENTITY, "motion": motion})
+    # (a copy of IDENTITY: a test that edits one object's matrix in place must not move others)
+    header["objects"].append({"name": name, "mesh": k, "matrix_world": matrix or copy.deepcopy(IDENTITY),
+                              "motion": motion})
     return k
 
 

@@ -430,9 +430,15 @@ def test_a_moving_crowd_far_from_the_camera():
         pytest.skip("Embree's C handles not confirmed here")
     far = 1e4
     header, arrays = _moving_crowd(count=8)
+    def moved(m):  # (a new list: builders may share one matrix list between objects)
+        m = np.array(m, dtype=np.float64)
+        m[0, 3] += far
+        return m.tolist()
+
     for obj in header["objects"]:
-        for m in [obj["matrix_world"]] + list((obj.get("motion") or {}).values()):
-            m[0][3] += far
+        obj["matrix_world"] = moved(obj["matrix_world"])
+        if obj.get("motion"):
+            obj["motion"] = {k: moved(m) for k, m in obj["motion"].items()}
     geom = build_geometry(scene_from_dict(header, arrays))  # the camera stays at the origin
     tr = Tracer(geom)
     assert tr.instanced is not None
