@@ -907,6 +907,10 @@ class _Instances:
                                                  dtype=np.float64)
         self.motions = MotionStack(*(rows(name) for name in MotionData._fields))
         self.first_moving = int(moving[0].prim_offset)
+        # `_instanced_surface` finds a hit's triangle at prim − first_moving in the concatenation
+        counts = np.array([len(obj.triangles) for obj in moving])
+        if not np.array_equal([obj.prim_offset for obj in moving], self.first_moving + np.cumsum(counts) - counts):
+            raise ValueError("moving objects' triangle ids are not consecutive")
         starts = np.cumsum([0] + [len(obj.positions) for obj in moving])
         self.positions = np.ascontiguousarray(np.concatenate([obj.positions for obj in moving]))
         self.positions_close = np.ascontiguousarray(np.concatenate([obj.positions_close for obj in moving]))
