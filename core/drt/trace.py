@@ -817,14 +817,18 @@ def _probe_rays(positions: np.ndarray, n: int):
     """n rays (float32-representable) from a Fibonacci sphere around the points' box to points
     of an R3 sequence inside it, with tmax inf (most meet the mesh), and a time in [0, 1) each
     (``probe_pattern``)."""
-    lo, hi = positions.min(axis=0), positions.max(axis=0)
-    centre, radius = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo)) + 1e-3
+    return _box_probe_rays(positions.min(axis=0), positions.max(axis=0), n)
+
+
+def _box_probe_rays(lo: np.ndarray, hi: np.ndarray, n: int):
+    """`_probe_rays` aimed into the box [lo, hi]: (o, d, tmax, tau)."""
+    centre, radius = 0.5 * (lo + hi), 0.5 * math.sqrt(float(((hi - lo) ** 2).sum())) + 1e-3
     k = np.arange(n) + 0.5
     inside, sphere = probe_pattern(n)
     o = centre + 2.0 * radius * sphere
     target = lo + inside * (hi - lo)
     d = target - o
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d /= np.sqrt((d * d).sum(axis=1, keepdims=True))
     tau = np.modf(0.5 + k * 0.6180339887498949)[0]
     return (o.astype(np.float32).astype(np.float64), d.astype(np.float32).astype(np.float64),
             np.full(n, np.inf), tau)
@@ -987,17 +991,11 @@ def _instances_agree(tracer, inst) -> bool:
         lo, hi = obj.box_lo, obj.box_hi
         if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
             return False
-        inside, sphere = probe_pattern(INSTANCE_PROBE_RAYS)
-        centre, radius = 0.5 * (lo + hi), 0.5 * math.sqrt(float(((hi - lo) ** 2).sum())) + 1e-3
-        start = centre + 2.0 * radius * sphere
-        dk = lo + inside * (hi - lo) - start
-        dk /= np.sqrt((dk * dk).sum(axis=1, keepdims=True))
-        o.append(start)
+        ok, dk, _, tk = _box_probe_rays(lo, hi, INSTANCE_PROBE_RAYS)
+        o.append(ok)
         d.append(dk)
-        tau.append(np.modf(0.5 + np.arange(INSTANCE_PROBE_RAYS) * 0.6180339887498949)[0])
-    o = np.concatenate(o).astype(np.float32).astype(np.float64)
-    d = np.concatenate(d).astype(np.float32).astype(np.float64)
-    tau = np.concatenate(tau)
+        tau.append(tk)
+    o, d, tau = np.concatenate(o), np.concatenate(d), np.concatenate(tau)
     a = tracer._intersect_instanced(o, d, tau, _NO_TMAX, inst, FRESH)
     b = tracer._intersect_per_object(o, d, tau, None, FRESH)
     # the distance, not the triangle: where surfaces coincide (overlapping objects) either may
